@@ -1,0 +1,44 @@
+# Two commands do all set-up on a fresh Debian machine (root, Python 3.11, no GPU):
+#   make demo   -- installs, then runs the end-to-end demo into outputs/
+#   make test   -- installs, then runs the test suite
+SHELL := /bin/bash
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.vimsim-installed
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: demo test setup sysdeps lint bench clean
+
+# Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser.
+sysdeps:
+	@if ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
+		echo "installing Debian packages libegl1 libgl1-mesa-dri (headless EGL, llvmpipe)"; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends libegl1 libgl1-mesa-dri; \
+	fi
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	# CPU build of torch from this machine's disk (optional neural-flow backend).
+	$(PY) -m pip install -q torch==2.13.0 || echo "note: torch==2.13.0 not installable here; torch tests will be skipped"
+	$(PY) -m pip install -q -e '.[dev]'
+	touch $(STAMP)
+
+setup: sysdeps $(STAMP)
+
+demo: setup
+	$(VENV)/bin/vimsim demo -o outputs/demo
+
+test: setup
+	$(PY) -m pytest -q tests
+
+lint: setup
+	$(VENV)/bin/ruff check simulator tests bench
+
+bench: setup
+	for f in bench/*.py; do echo "== $$f"; $(PY) $$f || exit 1; done
+
+clean:
+	rm -rf $(VENV) outputs/demo tests/_out bench/_out

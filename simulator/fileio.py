@@ -1,0 +1,66 @@
+"""Small file helpers shared by every writer: atomic output and input checks.
+
+Outputs are written to a temporary name beside the target and renamed into place only
+when complete, so an interrupted run never leaves a file that looks finished.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+from simulator.errors import InputError
+
+__all__ = ["atomic_output", "check_input_file", "check_output_dir"]
+
+
+@contextlib.contextmanager
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it to ``path`` on success.
+
+    The temporary name keeps the suffix (``.out.png`` -> ``.out.tmp-<pid>.png``) so that
+    libraries choosing a format from the extension (Pillow, matplotlib, PyAV) still work.
+    On any exception the temporary file is removed and the target is left untouched.
+    """
+    target = Path(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"{target}: output directory {parent} is not writable")
+    tmp = parent / f".{target.stem}.tmp-{os.getpid()}{target.suffix}"
+    try:
+        yield tmp
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+        raise
+
+
+def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
+    """Return ``path`` as a Path if it is a readable regular file, else raise InputError."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(f"{p}: {what} file not found")
+    if not p.is_file():
+        raise InputError(f"{p}: {what} is not a regular file")
+    if not os.access(p, os.R_OK):
+        raise InputError(f"{p}: {what} file is not readable")
+    if p.stat().st_size == 0:
+        raise InputError(f"{p}: {what} file is empty")
+    return p
+
+
+def check_output_dir(path: str | os.PathLike) -> Path:
+    """Create ``path`` (a directory for outputs) if needed; InputError if impossible."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{p}: cannot create output directory ({e.strerror})") from None
+    if not os.access(p, os.W_OK):
+        raise InputError(f"{p}: output directory is not writable")
+    return p

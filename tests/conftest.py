@@ -1,0 +1,36 @@
+"""Shared test fixtures.
+
+``shared_dir`` is ``../shared`` beside the checkout (CI has it there); tests needing real
+third-party data skip with a clear reason only where that folder is really absent.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED = Path(os.environ.get("VIMSIM_SHARED", REPO.parent / "shared"))
+REAL = SHARED / "data" / "real"
+OUT = REPO / "tests" / "_out"
+
+
+@pytest.fixture(scope="session")
+def shared_dir() -> Path:
+    if not SHARED.is_dir():
+        pytest.skip(f"../shared not found at {SHARED} (CI has it beside the checkout)")
+    return SHARED
+
+
+@pytest.fixture(scope="session")
+def real_dir(shared_dir: Path) -> Path:
+    return shared_dir / "data" / "real"
+
+
+@pytest.fixture(scope="session")
+def out_dir() -> Path:
+    """Folder for files tests write for a person to look at (failing frames etc.)."""
+    OUT.mkdir(parents=True, exist_ok=True)
+    return OUT
