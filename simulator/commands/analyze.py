@@ -1,0 +1,88 @@
+"""``vimsim analyze``: SSQ, MSSQ-short, flow-normalised scores and the paper's tests."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["register", "run"]
+
+_FLOW_STATS = ("mean", "median", "sum")  # = simulator.analyze.FLOW_STATS (light import)
+
+
+def _conditions(text: str) -> tuple[str, str]:
+    parts = [t.strip() for t in text.split(",")]
+    if len(parts) != 2 or not all(parts) or parts[0] == parts[1]:
+        raise argparse.ArgumentTypeError(f"expected two different labels A,B, e.g. NR,GR; got {text!r}")
+    return parts[0], parts[1]
+
+
+def _nonneg_float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, e.g. 1000; got {text!r}") from None
+    if not (0.0 <= v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, e.g. 1000; got {text!r}")
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``analyze`` parser."""
+    p = subparsers.add_parser(
+        "analyze",
+        help="study statistics: SSQ, MSSQ-short, K_OF, Shapiro-Wilk, Mann-Whitney",
+        description="Score the SSQ (Kennedy 1993) and MSSQ-short (Golding 2006) of a study, "
+        "normalise each SSQ score by the session optical flow and susceptibility (the paper's "
+        "K_OF), exclude low-flow sessions, run Shapiro-Wilk and a two-sided Mann-Whitney U "
+        "between the two conditions, and write scores, the paper's table (Markdown, CSV), "
+        "box plots and a report into REPORT_DIR. Columns: see docs/analyze.md.",
+    )
+    p.add_argument("data", metavar="DATA.csv", help="one row per participant ('#' lines are comments)")
+    p.add_argument("-o", "--output", metavar="REPORT_DIR", required=True, help="folder for the report (created)")
+    p.add_argument(
+        "--flow-stat",
+        choices=_FLOW_STATS,
+        default="mean",
+        help="session flow from an EPOF CSV: mean, median or sum of epof_dps (deg/s); "
+        "default mean. The 'flow' column, where given, is used as is",
+    )
+    p.add_argument(
+        "--exclude-below",
+        type=_nonneg_float,
+        default=None,
+        metavar="X",
+        help="exclude sessions whose flow is below X (same unit as the session flow); "
+        "reported by id. Default: none excluded (flow 0 always is)",
+    )
+    p.add_argument(
+        "--conditions",
+        type=_conditions,
+        default=None,
+        metavar="A,B",
+        help="the two condition labels in table order, e.g. NR,GR (default: order of "
+        "first appearance; required when the file has more than two)",
+    )
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the analysis; exit 0 when scores were written (notes on stderr), 2 on bad input."""
+    from simulator.analyze import analyze_study, read_study, write_report
+
+    study = read_study(args.data, flow_stat=args.flow_stat)
+    for line in study.problems:
+        print(f"vimsim analyze: warning: {line}", file=sys.stderr)
+    an = analyze_study(study, exclude_below=args.exclude_below, conditions=args.conditions)
+    for pid, why in an.excluded:
+        print(f"vimsim analyze: excluded {pid}: {why}", file=sys.stderr)
+    notes = list(an.notes) + [r["note"] for r in an.comparisons if r["note"]]
+    for note in dict.fromkeys(notes):
+        print(f"vimsim analyze: note: {note}", file=sys.stderr)
+    written = write_report(an, args.output)
+    a, b = an.conditions
+    for r in an.comparisons:
+        p = "n/a" if r["p"] != r["p"] else f"{r['p']:.3f}"
+        print(f"{r['measure']}: {a} vs. {b} means {r['mean_a']:.2f} vs. {r['mean_b']:.2f}, p = {p}")
+    print(f"wrote {len(written)} files to {args.output}")
+    return 0
