@@ -45,22 +45,22 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file, check_output_dir
 
 __all__ = [
+    "FLOW_STATS",
+    "MSSQ_TYPES",
     "SSQ_ITEMS",
     "SSQ_MEMBERSHIP",
-    "MSSQ_TYPES",
-    "FLOW_STATS",
+    "Analysis",
     "FlowStat",
-    "SSQScores",
     "MSSQScore",
-    "ssq_scores",
+    "SSQScores",
+    "Study",
+    "analyze_study",
+    "k_of",
     "mssq_section_score",
     "mssq_short_score",
-    "k_of",
-    "session_flow",
-    "Study",
-    "Analysis",
     "read_study",
-    "analyze_study",
+    "session_flow",
+    "ssq_scores",
     "write_report",
 ]
 
@@ -235,9 +235,13 @@ def mssq_section_score(answers: Sequence[int | None]) -> float:
     """
     if len(answers) != len(MSSQ_TYPES):
         raise InputError(f"MSSQ-short section: expected 9 answers; got {len(answers)}")
-    given = [_check_rating(f"MSSQ answer {i + 1}", a) for i, a in enumerate(answers) if a is not None]
+    given = [
+        _check_rating(f"MSSQ answer {i + 1}", a) for i, a in enumerate(answers) if a is not None
+    ]
     if not given:
-        raise InputError("MSSQ-short section: every answer is 't' (never experienced); cannot score")
+        raise InputError(
+            "MSSQ-short section: every answer is 't' (never experienced); cannot score"
+        )
     return sum(given) * 9.0 / len(given)
 
 
@@ -594,7 +598,9 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
                 flow = flow_cache[ep]
                 flow_src = et
             else:
-                raise InputError("flow is blank" + (" and epof_csv is blank" if "epof_csv" in idx else ""))
+                raise InputError(
+                    "flow is blank" + (" and epof_csv is blank" if "epof_csv" in idx else "")
+                )
         except InputError as e:
             errs.append(str(e))
 
@@ -707,7 +713,9 @@ def analyze_study(
     if conditions is not None:
         conds = tuple(conditions)
         if len(conds) != 2 or conds[0] == conds[1]:
-            raise InputError(f"--conditions: expected two different labels, e.g. NR,GR; got {conds}")
+            raise InputError(
+                f"--conditions: expected two different labels, e.g. NR,GR; got {conds}"
+            )
         absent = [c for c in conds if c not in study.conditions]
         if absent:
             raise InputError(
@@ -752,7 +760,9 @@ def analyze_study(
     for c in conds:
         sel = [g == c for g in groups]
         if any(sel) and float(ms[np.array(sel)].sum()) == 0.0:
-            notes.append(f"condition {c!r}: every MSSQ-short score is 0, so K_OF is 0/0 (left blank)")
+            notes.append(
+                f"condition {c!r}: every MSSQ-short score is 0, so K_OF is 0/0 (left blank)"
+            )
 
     g_arr = np.array(groups, dtype=object)
     normality: list[dict] = []
@@ -763,7 +773,14 @@ def analyze_study(
             v = vals if grp == "all" else vals[g_arr == grp]
             w, pv, note = _shapiro(v)
             normality.append(
-                {"measure": label, "group": grp, "n": int(np.isfinite(v).sum()), "W": w, "p": pv, "note": note}
+                {
+                    "measure": label,
+                    "group": grp,
+                    "n": int(np.isfinite(v).sum()),
+                    "W": w,
+                    "p": pv,
+                    "note": note,
+                }
             )
         a = vals[g_arr == conds[0]]
         b = vals[g_arr == conds[1]]
@@ -815,7 +832,7 @@ def analyze_study(
 # --------------------------------------------------------------------------- writing
 
 
-def _fmt(v: object, digits: int = 6) -> str:
+def _fmt(v: object, digits: int = 10) -> str:
     if v is None:
         return ""
     if isinstance(v, float):
@@ -824,12 +841,11 @@ def _fmt(v: object, digits: int = 6) -> str:
 
 
 def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
-    with atomic_output(path) as tmp:
-        with open(tmp, "w", newline="", encoding="utf-8") as fh:
-            w = csv.writer(fh, lineterminator="\n")
-            w.writerow(header)
-            for r in rows:
-                w.writerow([_fmt(v) for v in r])
+    with atomic_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(header)
+        for r in rows:
+            w.writerow([_fmt(v) for v in r])
 
 
 def _p_text(p: float) -> str:
@@ -865,7 +881,9 @@ def _boxplot(an: Analysis, path: Path) -> None:
             v = an.of_scores[col][groups == c] if groups.size else np.zeros(0)
             data.append(v[np.isfinite(v)])
         ax.boxplot(data, showmeans=True, showfliers=False)  # points drawn below
-        ax.set_xticks(range(1, len(data) + 1), [f"{c}\n(n={d.size})" for c, d in zip(an.conditions, data)])
+        ax.set_xticks(
+            range(1, len(data) + 1), [f"{c}\n(n={d.size})" for c, d in zip(an.conditions, data)]
+        )
         for k, d in enumerate(data, start=1):
             ax.plot(k + rng.uniform(-0.08, 0.08, d.size), d, "o", ms=3, alpha=0.6, color="k")
         ax.set_title(label)
@@ -935,12 +953,16 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     lines = [
         "# Study analysis",
         "",
-        f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
-        "an EPOF CSV is given, else the `flow` column.",
-        f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
-        f"({sum(q.condition == a for q in an.included)} {a}, "
-        f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
-        f"{len(an.study.problems)} rows with problems.",
+        (
+            f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
+            "an EPOF CSV is given, else the `flow` column."
+        ),
+        (
+            f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
+            f"({sum(q.condition == a for q in an.included)} {a}, "
+            f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
+            f"{len(an.study.problems)} rows with problems."
+        ),
         "",
         "## SSQ per unit of optical flow (Mann-Whitney U, two-sided)",
         "",
@@ -952,7 +974,9 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     ]
     for r in an.normality:
         w = "n/a" if math.isnan(r["W"]) else f"{r['W']:.3f}"
-        lines.append(f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {_p_text(r['p'])} | {r['note']} |")
+        lines.append(
+            f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {_p_text(r['p'])} | {r['note']} |"
+        )
     lines += ["", "## Excluded", ""]
     lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
     lines += ["", "## Rows with problems (not used)", ""]

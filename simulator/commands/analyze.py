@@ -13,7 +13,9 @@ _FLOW_STATS = ("mean", "median", "sum")  # = simulator.analyze.FLOW_STATS (light
 def _conditions(text: str) -> tuple[str, str]:
     parts = [t.strip() for t in text.split(",")]
     if len(parts) != 2 or not all(parts) or parts[0] == parts[1]:
-        raise argparse.ArgumentTypeError(f"expected two different labels A,B, e.g. NR,GR; got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected two different labels A,B, e.g. NR,GR; got {text!r}"
+        )
     return parts[0], parts[1]
 
 
@@ -21,7 +23,9 @@ def _nonneg_float(text: str) -> float:
     try:
         v = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, e.g. 1000; got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected a number >= 0, e.g. 1000; got {text!r}"
+        ) from None
     if not (0.0 <= v < float("inf")):
         raise argparse.ArgumentTypeError(f"expected a number >= 0, e.g. 1000; got {text!r}")
     return v
@@ -38,8 +42,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "between the two conditions, and write scores, the paper's table (Markdown, CSV), "
         "box plots and a report into REPORT_DIR. Columns: see docs/analyze.md.",
     )
-    p.add_argument("data", metavar="DATA.csv", help="one row per participant ('#' lines are comments)")
-    p.add_argument("-o", "--output", metavar="REPORT_DIR", required=True, help="folder for the report (created)")
+    p.add_argument(
+        "data", metavar="DATA.csv", help="one row per participant ('#' lines are comments)"
+    )
+    p.add_argument(
+        "-o",
+        "--output",
+        metavar="REPORT_DIR",
+        required=True,
+        help="folder for the report (created)",
+    )
     p.add_argument(
         "--flow-stat",
         choices=_FLOW_STATS,
