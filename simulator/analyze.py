@@ -525,7 +525,7 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
         try:
             item_cells = [cell(c) for c in SSQ_ITEMS] if has["items"] else []
             sub_cells = [cell(c) for c in _SSQ_SUBSCORE_COLUMNS] if has["subscores"] else []
-            if item_cells and (all(item_cells) or not all(sub_cells)):
+            if has["items"] and (all(item_cells) or not (sub_cells and all(sub_cells))):
                 blank = [c for c, t in zip(SSQ_ITEMS, item_cells) if not t]
                 if blank:
                     raise InputError(f"SSQ answers missing: {', '.join(blank)}")

@@ -1,0 +1,572 @@
+"""Sphere, equirectangular and perspective geometry: the project's conventions, once.
+
+Conventions (SPEC.md; every function here follows them and says so)
+-------------------------------------------------------------------
+World frame
+    +x right, +y up, +z forward. The direction (lon = 0, lat = 0) is +z, the centre of
+    the equirect frame. ``lon = atan2(x, z)`` (increases to the right, toward +x),
+    ``lat = asin(y)`` (+ up).
+Equirect pixels
+    Frame ``W x H`` (``W = 2H`` in display pixels). Pixel column ``x`` covers the
+    continuous interval ``[x, x + 1)``; its centre ``x + 0.5`` maps to
+    ``lon = (x + 0.5) / W * 360 deg - 180 deg``. Row ``y`` maps to
+    ``lat = 90 deg - (y + 0.5) / H * 180 deg`` (top row is up). Longitude wraps at the
+    +-180 deg seam; crossing a pole continues on the meridian 180 deg away.
+Head orientation
+    yaw (+ turns right, toward +lon), pitch (+ looks up), roll (+ tilts the head
+    clockwise as the user sees it, right ear down). ``yaw = pitch = roll = 0`` looks at
+    the frame centre. Applied yaw, then pitch, then roll (intrinsic), as ffmpeg's v360
+    filter does (``rorder=ypr``). As a rotation of head-frame vectors (head frame: +x
+    right, +y up, +z forward) into the world frame::
+
+        R = Ry(yaw) * Rx(-pitch) * Rz(-roll)        (right-handed axis rotations)
+
+    i.e. ``Rotation.from_euler("YXZ", [yaw, -pitch, -roll])``.
+Perspective (flat) views
+    ``size = (width, height)`` pixels, exact FOVs ``hfov``/``vfov`` (not the paper's
+    linear ``h_FOV = FOV * H / W``). Pixel ``(col i, row j)`` has its centre on the image
+    plane ``z = 1`` at ``u = ((i + 0.5) / width * 2 - 1) * tan(hfov / 2)`` (right) and
+    ``v = (1 - (j + 0.5) / height * 2) * tan(vfov / 2)`` (up).
+
+Angles are degrees at every public boundary (``*_deg``) and radians inside.
+Images are ``(H, W)`` or ``(H, W, C)`` arrays with the origin at the top-left.
+
+The paper's window conversion (section 3.2, eqs 3-16) is :func:`perspective_map`
+with its errata fixed (SPEC.md): ``lon = atan2(x, z)`` (eq. 14), the normalised and
+y-flipped equirect coordinates of eqs. 15/16, exact vertical FOV (eq. 6) and bicubic
+sampling with longitude wrap-around and pole crossing (:func:`sample_equirect`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from simulator.errors import InputError
+
+__all__ = [
+    "Layout",
+    "Eye",
+    "LAYOUTS",
+    "EYES",
+    "head_rotation",
+    "head_angles_deg",
+    "lonlat_to_dir",
+    "dir_to_lonlat",
+    "equirect_pixel_lonlat",
+    "lonlat_to_equirect_xy",
+    "perspective_rays",
+    "perspective_map",
+    "sample_equirect",
+    "extract_view",
+    "rotate_equirect",
+    "split_eye",
+    "check_equirect_aspect",
+    "WindowGrid",
+    "GRID_PRESETS",
+    "grid_preset",
+    "WindowExtractor",
+]
+
+Layout = Literal["mono", "top-bottom", "side-by-side"]
+Eye = Literal["left", "right"]
+LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
+EYES: tuple[str, ...] = ("left", "right")
+
+#: Extra rows/columns added around an equirect frame before bicubic sampling, so that
+#: the 4x4 kernel sees the wrapped seam and the other side of each pole.
+_PAD = 4
+
+
+# ----------------------------------------------------------------------------- rotations
+def head_rotation(yaw_deg, pitch_deg, roll_deg=0.0) -> Rotation:
+    """Rotation taking head-frame vectors to world-frame vectors.
+
+    Parameters
+    ----------
+    yaw_deg, pitch_deg, roll_deg : float or array_like, degrees
+        Head yaw (+ turns right, toward +lon), pitch (+ looks up) and roll (+ right ear
+        down, the head tilts clockwise as the user sees it). Applied yaw, then pitch,
+        then roll (intrinsic), matching ffmpeg v360's ``rorder=ypr``.
+
+    Returns
+    -------
+    scipy.spatial.transform.Rotation
+        ``R = Ry(yaw) Rx(-pitch) Rz(-roll)``; single or stacked like the inputs.
+        Head frame and world frame: +x right, +y up, +z forward.
+    """
+    yaw, pitch, roll = np.broadcast_arrays(
+        np.asarray(yaw_deg, float), np.asarray(pitch_deg, float), np.asarray(roll_deg, float)
+    )
+    angles = np.stack([yaw, -pitch, -roll], axis=-1)
+    return Rotation.from_euler("YXZ", angles, degrees=True)
+
+
+def head_angles_deg(rot: Rotation) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """Inverse of :func:`head_rotation`: ``(yaw_deg, pitch_deg, roll_deg)``.
+
+    yaw in (-180, 180], pitch in [-90, 90], roll in (-180, 180]. At pitch = +-90 deg
+    (gimbal lock) yaw and roll are not unique; scipy puts the ambiguity in roll (warns).
+    """
+    a = rot.as_euler("YXZ", degrees=True)
+    return a[..., 0], -a[..., 1], -a[..., 2]
+
+
+# ------------------------------------------------------------------- sphere <-> equirect
+def lonlat_to_dir(lon, lat) -> NDArray[np.float64]:
+    """Unit directions, shape ``(..., 3)``, from longitude/latitude in **radians**.
+
+    World frame: +x right, +y up, +z forward (lon = 0, lat = 0).
+    """
+    lon = np.asarray(lon, float)
+    lat = np.asarray(lat, float)
+    c = np.cos(lat)
+    return np.stack([c * np.sin(lon), np.sin(lat), c * np.cos(lon)], axis=-1)
+
+
+def dir_to_lonlat(d) -> tuple[NDArray, NDArray]:
+    """Longitude (-pi, pi] and latitude [-pi/2, pi/2], **radians**, of directions ``(..., 3)``.
+
+    ``lon = atan2(x, z)`` (the paper's eq. 14 with its erratum fixed), ``lat = asin(y)``
+    after normalising; world frame +x right, +y up, +z forward.
+    """
+    d = np.asarray(d)
+    x, y, z = d[..., 0], d[..., 1], d[..., 2]
+    n = np.sqrt(x * x + y * y + z * z)
+    lon = np.arctan2(x, z)
+    lat = np.arcsin(np.clip(y / n, -1.0, 1.0))
+    return lon, lat
+
+
+def equirect_pixel_lonlat(width: int, height: int) -> tuple[NDArray, NDArray]:
+    """Longitude ``(W,)`` and latitude ``(H,)`` in **radians** of equirect pixel centres.
+
+    ``lon = (x + 0.5) / W * 2 pi - pi``, ``lat = pi / 2 - (y + 0.5) / H * pi``.
+    """
+    lon = (np.arange(width) + 0.5) / width * 2 * np.pi - np.pi
+    lat = np.pi / 2 - (np.arange(height) + 0.5) / height * np.pi
+    return lon, lat
+
+
+def lonlat_to_equirect_xy(lon, lat, width: int, height: int) -> tuple[NDArray, NDArray]:
+    """Continuous equirect image coordinates of lon/lat in **radians** (eqs. 15/16, fixed).
+
+    ``x = lon / pi * W/2 + W/2`` and ``y = H/2 - lat / (pi/2) * H/2``: pixel column ``x``
+    covers ``[x, x + 1)``, so the centre of pixel ``(0, 0)`` is at ``(0.5, 0.5)``.
+    Subtract 0.5 for array-index coordinates (OpenCV's ``remap`` convention).
+    """
+    x = np.asarray(lon) / np.pi * (width / 2.0) + width / 2.0
+    y = height / 2.0 - np.asarray(lat) / (np.pi / 2.0) * (height / 2.0)
+    return x, y
+
+
+# -------------------------------------------------------------------- perspective views
+def _check_fov(hfov_deg: float, vfov_deg: float) -> None:
+    for name, v in (("hfov", hfov_deg), ("vfov", vfov_deg)):
+        if not (0.0 < float(v) < 180.0) or not math.isfinite(float(v)):
+            raise InputError(f"{name} must be degrees in (0, 180); got {v}")
+
+
+def _check_size(size: tuple[int, int]) -> tuple[int, int]:
+    try:
+        w, h = int(size[0]), int(size[1])
+    except (TypeError, ValueError, IndexError):
+        raise InputError(f"size must be (width, height) in pixels, e.g. (256, 256); got {size!r}") from None
+    if w <= 0 or h <= 0:
+        raise InputError(f"size must be positive (width, height) in pixels; got {size!r}")
+    return w, h
+
+
+@functools.lru_cache(maxsize=32)
+def _perspective_rays_cached(w: int, h: int, hfov_deg: float, vfov_deg: float):
+    tx = math.tan(math.radians(hfov_deg) / 2.0)
+    ty = math.tan(math.radians(vfov_deg) / 2.0)
+    u = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * tx
+    v = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * ty
+    uu, vv = np.meshgrid(u, v)
+    r2 = 1.0 + uu * uu + vv * vv
+    rn = np.sqrt(r2)
+    dirs = np.stack([uu / rn, vv / rn, 1.0 / rn], axis=-1).astype(np.float32)
+    # Solid angle of a pixel of the plane z = 1: du dv cos(theta) / r^2 = du dv / r^3.
+    du = 2.0 * tx / w
+    dv = 2.0 * ty / h
+    sa = (du * dv / (r2 * rn)).astype(np.float32)
+    dirs.setflags(write=False)
+    sa.setflags(write=False)
+    return dirs, sa
+
+
+def perspective_rays(size: tuple[int, int], hfov_deg: float, vfov_deg: float | None = None):
+    """Head-frame ray directions and solid angles of the pixels of a perspective view.
+
+    Parameters
+    ----------
+    size : (width, height), pixels
+    hfov_deg, vfov_deg : float, degrees in (0, 180)
+        Exact horizontal and vertical fields of view; ``vfov_deg`` defaults to
+        ``hfov_deg``.
+
+    Returns
+    -------
+    dirs : ndarray, shape (height, width, 3), float32, read-only
+        Unit ray of each pixel centre in the head frame (+x right, +y up, +z forward);
+        row 0 is the top of the image.
+    solid_angle : ndarray, shape (height, width), float32, read-only
+        Solid angle of each pixel in steradians (``du dv / (1 + u^2 + v^2)^(3/2)``); sums
+        to the view's solid angle ``4 asin(sin(hfov/2) sin(vfov/2))`` up to the midpoint rule.
+    """
+    w, h = _check_size(size)
+    vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
+    _check_fov(hfov_deg, vfov_deg)
+    return _perspective_rays_cached(w, h, float(hfov_deg), float(vfov_deg))
+
+
+def _equirect_remap_coords(dirs_world: NDArray, width: int, height: int) -> tuple[NDArray, NDArray]:
+    """Array-index coordinates (OpenCV convention, pixel centres at integers) into the
+    padded equirect frame (see :func:`_pad_equirect`) of world directions ``(..., 3)``."""
+    lon, lat = dir_to_lonlat(dirs_world)
+    x, y = lonlat_to_equirect_xy(lon, lat, width, height)
+    return (x - 0.5 + _PAD).astype(np.float32), (y - 0.5 + _PAD).astype(np.float32)
+
+
+def perspective_map(
+    equirect_size: tuple[int, int],
+    size: tuple[int, int],
+    yaw_deg: float,
+    pitch_deg: float,
+    roll_deg: float = 0.0,
+    hfov_deg: float = 107.0,
+    vfov_deg: float | None = None,
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Sampling maps of a perspective view into an equirect frame (the paper's eqs. 3-16).
+
+    Parameters
+    ----------
+    equirect_size : (W, H), pixels of the source equirect frame (one eye)
+    size : (width, height), pixels of the perspective view
+    yaw_deg, pitch_deg, roll_deg : float, degrees
+        View orientation (yaw + right, pitch + up, roll + right ear down; yaw, then
+        pitch, then roll).
+    hfov_deg, vfov_deg : float, degrees; exact FOVs, ``vfov_deg`` defaults to ``hfov_deg``
+
+    Returns
+    -------
+    map_x, map_y : ndarray, shape (height, width), float32
+        Coordinates in the frame padded by :func:`sample_equirect` (array-index
+        convention), ready for ``cv2.remap``.
+    """
+    W, H = _check_size(equirect_size)
+    dirs, _ = perspective_rays(size, hfov_deg, vfov_deg)
+    R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
+    world = dirs.astype(np.float64) @ R.T
+    return _equirect_remap_coords(world, W, H)
+
+
+def _pad_equirect(img: NDArray) -> NDArray:
+    """Pad an equirect frame by ``_PAD`` pixels: columns wrap around the seam; rows beyond
+    a pole continue on the meridian 180 deg away (rows mirrored, columns shifted by W/2)."""
+    H, W = img.shape[:2]
+    p = _PAD
+    if W % 2 or H < p:
+        raise InputError(f"equirect frame must have an even width and >= {p} rows; got {W}x{H}")
+    top = np.roll(img[p - 1 :: -1], W // 2, axis=1)
+    bottom = np.roll(img[: H - p - 1 : -1], W // 2, axis=1)
+    tall = np.concatenate([top, img, bottom], axis=0)
+    return np.concatenate([tall[:, -p:], tall, tall[:, :p]], axis=1)
+
+
+def sample_equirect(
+    img: NDArray,
+    map_x: NDArray[np.float32],
+    map_y: NDArray[np.float32],
+    *,
+    interp: Literal["cubic", "linear", "nearest"] = "cubic",
+) -> NDArray:
+    """Sample an equirect frame at maps from :func:`perspective_map` (or any like them).
+
+    Bicubic by default (the paper's 4x4 neighbourhood), with longitude wrap-around at the
+    +-180 deg seam and correct continuation across the poles. ``img`` is ``(H, W)`` or
+    ``(H, W, C)`` with C <= 4; the result has the maps' shape (+ channels), same dtype.
+    """
+    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interp]
+    padded = _pad_equirect(np.ascontiguousarray(img))
+    return cv2.remap(padded, map_x, map_y, flags, borderMode=cv2.BORDER_REPLICATE)
+
+
+def extract_view(
+    img: NDArray,
+    yaw_deg: float,
+    pitch_deg: float,
+    roll_deg: float = 0.0,
+    *,
+    hfov_deg: float = 107.0,
+    vfov_deg: float | None = None,
+    size: tuple[int, int] = (256, 256),
+    interp: Literal["cubic", "linear", "nearest"] = "cubic",
+) -> NDArray:
+    """One perspective view of an equirect frame (one eye, any dtype cv2 can remap).
+
+    Orientation and FOVs in degrees (conventions in this module's docstring);
+    ``size = (width, height)``. Returns ``(height, width[, C])`` with ``img``'s dtype.
+    """
+    H, W = img.shape[:2]
+    mx, my = perspective_map((W, H), size, yaw_deg, pitch_deg, roll_deg, hfov_deg, vfov_deg)
+    return sample_equirect(img, mx, my, interp=interp)
+
+
+def rotate_equirect(
+    img: NDArray, rot: Rotation, *, interp: Literal["cubic", "linear", "nearest"] = "cubic"
+) -> NDArray:
+    """Equirect frame of the scene rotated by ``rot`` (a world-frame rotation).
+
+    A scene point at direction ``d`` moves to ``rot.apply(d)``; output pixel with
+    direction ``d'`` therefore shows the input at ``rot.inv().apply(d')``. Used to build
+    videos with analytic motion (a point's angular speed under rotation at omega about
+    unit axis ``a`` is ``omega |a x d|``).
+    """
+    H, W = img.shape[:2]
+    lon, lat = equirect_pixel_lonlat(W, H)
+    d = lonlat_to_dir(lon[None, :], lat[:, None])
+    src = rot.inv().apply(d.reshape(-1, 3)).reshape(H, W, 3)
+    mx, my = _equirect_remap_coords(src, W, H)
+    return sample_equirect(img, mx, my, interp=interp)
+
+
+# ---------------------------------------------------------------------- stereo, aspect
+def split_eye(frame: NDArray, layout: str = "mono", eye: str = "left", *, source: str = "frame") -> NDArray:
+    """The part of a (possibly stereo) equirect frame that one eye sees (a view, no copy).
+
+    ``top-bottom``: left eye on top; ``side-by-side``: left eye on the left; ``mono``:
+    the whole frame for both eyes. ``source`` names the file in error messages.
+    """
+    if layout not in LAYOUTS:
+        raise InputError(f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    if eye not in EYES:
+        raise InputError(f"{source}: unknown eye {eye!r}; expected left or right")
+    H, W = frame.shape[:2]
+    if layout == "mono":
+        return frame
+    if layout == "top-bottom":
+        if H % 2:
+            raise InputError(f"{source}: top-bottom layout needs an even height; got {W}x{H}")
+        return frame[: H // 2] if eye == "left" else frame[H // 2 :]
+    if W % 2:
+        raise InputError(f"{source}: side-by-side layout needs an even width; got {W}x{H}")
+    return frame[:, : W // 2] if eye == "left" else frame[:, W // 2 :]
+
+
+def check_equirect_aspect(
+    width: int,
+    height: int,
+    layout: str = "mono",
+    sar: float = 1.0,
+    *,
+    source: str = "input",
+    tol: float = 0.01,
+) -> tuple[int, int]:
+    """Check that a stored ``width x height`` frame holds 2:1 equirect eye(s).
+
+    Accepted: each eye displays as 2:1, or (stereo only) the whole frame displays as
+    2:1 with each eye squeezed (half side-by-side / half top-bottom).
+
+    ``sar`` is the sample (pixel) aspect ratio (e.g. 9/8 for three.js ``pano.mp4``,
+    stored 1920x1080 and displayed 2160x1080). Returns the stored per-eye size
+    ``(w, h)``; raises InputError naming ``source`` otherwise. Sampling uses stored
+    pixels (longitude is linear in the column whatever the pixel shape).
+    """
+    if layout not in LAYOUTS:
+        raise InputError(f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+    w, h = width, height
+    if layout == "top-bottom":
+        if height % 2:
+            raise InputError(f"{source}: top-bottom stereo needs an even height; got {width}x{height}")
+        h = height // 2
+    elif layout == "side-by-side":
+        if width % 2:
+            raise InputError(f"{source}: side-by-side stereo needs an even width; got {width}x{height}")
+        w = width // 2
+    aspect = w * sar / h
+    # Stereo is also stored "half": each eye squeezed so the whole frame displays as 2:1
+    # (three.js MaryOculus.mp4: side-by-side, 1:1 per eye). Longitude and latitude are
+    # linear in stored columns and rows either way, so both forms are accepted.
+    whole = width * sar / height
+    half_ok = layout != "mono" and abs(whole / 2.0 - 1.0) <= tol
+    if abs(aspect / 2.0 - 1.0) > tol and not half_ok:
+        extra = "" if sar == 1.0 else f" (sample aspect ratio {sar:.4g})"
+        hint = ""
+        if layout == "mono" and abs(whole - 1.0) < tol:
+            hint = "; a 1:1 frame may be top-bottom stereo: try --layout top-bottom"
+        elif layout == "mono" and abs(whole - 4.0) < tol:
+            hint = "; a 4:1 frame may be side-by-side stereo: try --layout side-by-side"
+        raise InputError(
+            f"{source}: expected an equirectangular image displaying 2:1 per eye "
+            f"(or 2:1 for the whole frame with squeezed stereo eyes); got {width}x{height}"
+            f"{extra}, {aspect:.3f}:1 per eye with layout {layout}{hint}"
+        )
+    return w, h
+
+
+# ------------------------------------------------------------------ sliding-window grid
+@dataclass(frozen=True)
+class WindowGrid:
+    """The sliding-window grid of the paper (section 3.2), in degrees.
+
+    Window centres: yaw ``yaw_start_deg + k * yaw_step_deg`` for k < 360 / yaw_step_deg
+    (wrapping), pitch from ``pitch_min_deg`` to ``pitch_max_deg`` in ``pitch_step_deg``
+    steps. Each window is a perspective view with no roll, ``hfov_deg x vfov_deg``
+    (exact FOVs), sampled at ``size`` pixels.
+
+    Presets (:data:`GRID_PRESETS`): ``default`` = 15 deg yaw x 7.5 deg pitch steps, pitch
+    -37.5..37.5 (24 x 11 = 264 windows); ``paper-198`` = 20 deg yaw steps (18 x 11).
+    """
+
+    yaw_step_deg: float = 15.0
+    pitch_step_deg: float = 7.5
+    pitch_min_deg: float = -37.5
+    pitch_max_deg: float = 37.5
+    yaw_start_deg: float = -180.0
+    hfov_deg: float = 107.0
+    vfov_deg: float = 107.0
+    size: tuple[int, int] = (256, 256)
+    yaw_deg: NDArray = field(init=False, repr=False, compare=False)
+    pitch_deg: NDArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        _check_fov(self.hfov_deg, self.vfov_deg)
+        _check_size(self.size)
+        object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
+        if not (0 < self.yaw_step_deg <= 360):
+            raise InputError(f"grid yaw step must be in (0, 360] degrees; got {self.yaw_step_deg}")
+        n_yaw = 360.0 / self.yaw_step_deg
+        if abs(n_yaw - round(n_yaw)) > 1e-6:
+            raise InputError(f"grid yaw step must divide 360 degrees; got {self.yaw_step_deg}")
+        if not (self.pitch_step_deg > 0):
+            raise InputError(f"grid pitch step must be > 0 degrees; got {self.pitch_step_deg}")
+        if not (-90 <= self.pitch_min_deg <= self.pitch_max_deg <= 90):
+            raise InputError(
+                f"grid pitch range must satisfy -90 <= min <= max <= 90; got {self.pitch_min_deg}..{self.pitch_max_deg}"
+            )
+        yaw = self.yaw_start_deg + self.yaw_step_deg * np.arange(int(round(n_yaw)))
+        yaw = (yaw + 180.0) % 360.0 - 180.0
+        n_p = int(math.floor((self.pitch_max_deg - self.pitch_min_deg) / self.pitch_step_deg + 1e-9)) + 1
+        pitch = self.pitch_min_deg + self.pitch_step_deg * np.arange(n_p)
+        yaw.setflags(write=False)
+        pitch.setflags(write=False)
+        object.__setattr__(self, "yaw_deg", yaw)
+        object.__setattr__(self, "pitch_deg", pitch)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(P, Y)``: number of pitch rows and yaw columns (the grid file's axis order)."""
+        return len(self.pitch_deg), len(self.yaw_deg)
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.pitch_deg) * len(self.yaw_deg)
+
+    def centres_deg(self) -> tuple[NDArray, NDArray]:
+        """``(pitch, yaw)`` of every window, each shape ``(P, Y)``, degrees."""
+        return np.meshgrid(self.pitch_deg, self.yaw_deg, indexing="ij")
+
+    def to_dict(self) -> dict:
+        return {
+            "yaw_step_deg": self.yaw_step_deg,
+            "pitch_step_deg": self.pitch_step_deg,
+            "pitch_min_deg": self.pitch_min_deg,
+            "pitch_max_deg": self.pitch_max_deg,
+            "yaw_start_deg": self.yaw_start_deg,
+            "hfov_deg": self.hfov_deg,
+            "vfov_deg": self.vfov_deg,
+            "size": list(self.size),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> WindowGrid:
+        d = dict(d)
+        if "size" in d:
+            d["size"] = tuple(d["size"])
+        return cls(**d)
+
+
+GRID_PRESETS: dict[str, dict] = {
+    "default": dict(yaw_step_deg=15.0, pitch_step_deg=7.5, pitch_min_deg=-37.5, pitch_max_deg=37.5),
+    "paper-198": dict(yaw_step_deg=20.0, pitch_step_deg=7.5, pitch_min_deg=-37.5, pitch_max_deg=37.5),
+}
+
+
+def grid_preset(
+    name: str = "default",
+    *,
+    hfov_deg: float = 107.0,
+    vfov_deg: float | None = None,
+    size: tuple[int, int] = (256, 256),
+) -> WindowGrid:
+    """A :class:`WindowGrid` from a preset name (``default`` or ``paper-198``)."""
+    if name not in GRID_PRESETS:
+        raise InputError(f"unknown grid preset {name!r}; expected one of {', '.join(GRID_PRESETS)}")
+    return WindowGrid(
+        **GRID_PRESETS[name],
+        hfov_deg=hfov_deg,
+        vfov_deg=hfov_deg if vfov_deg is None else vfov_deg,
+        size=size,
+    )
+
+
+class WindowExtractor:
+    """Extract every window of a :class:`WindowGrid` from equirect frames of one size, fast.
+
+    The sampling maps of all windows are built once (per grid and frame size), stacked
+    into one tall map and converted to OpenCV's fixed-point form, then every frame is a
+    single ``cv2.remap`` call (bicubic, seam wrap, pole crossing).
+
+    Parameters
+    ----------
+    grid : WindowGrid
+    equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
+
+    Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``.
+    """
+
+    def __init__(self, grid: WindowGrid, equirect_size: tuple[int, int]):
+        self.grid = grid
+        self.equirect_size = _check_size(equirect_size)
+        self._m1, self._m2 = _window_maps(grid, self.equirect_size)
+
+    def __call__(self, frame: NDArray, *, interp: Literal["cubic", "linear"] = "cubic") -> NDArray:
+        H, W = frame.shape[:2]
+        if (W, H) != self.equirect_size:
+            raise InputError(f"frame is {W}x{H}; this extractor was built for {self.equirect_size[0]}x{self.equirect_size[1]}")
+        flags = cv2.INTER_CUBIC if interp == "cubic" else cv2.INTER_LINEAR
+        padded = _pad_equirect(np.ascontiguousarray(frame))
+        out = cv2.remap(padded, self._m1, self._m2, flags, borderMode=cv2.BORDER_REPLICATE)
+        P, Y = self.grid.shape
+        w, h = self.grid.size
+        # Tiles are laid out (P*h, Y*w) (OpenCV limits each side to < 32767 pixels).
+        return np.moveaxis(out.reshape(P, h, Y, w, *out.shape[2:]), 2, 1)
+
+
+@functools.lru_cache(maxsize=4)
+def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
+    W, H = equirect_size
+    dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
+    pitch, yaw = grid.centres_deg()
+    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()  # (N, 3, 3)
+    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
+    mx, my = _equirect_remap_coords(world, W, H)
+    (P, Y), (w, h) = grid.shape, grid.size
+    # Tile the windows as a (P*h, Y*w) image: row block = pitch, column block = yaw.
+    mx = mx.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
+    my = my.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
+    if max(mx.shape) >= 32767:
+        raise InputError(f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows")
+    m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
+    m1.setflags(write=False)
+    m2.setflags(write=False)
+    return m1, m2

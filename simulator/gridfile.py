@@ -1,0 +1,205 @@
+"""The grid file: the per-window optical-flow matrix of a video (the paper's POF matrix).
+
+A ``.npz`` (no pickles; loaded with ``allow_pickle=False``) holding
+
+``pof_dps`` : float32, shape (T, P, Y)
+    Perceived optical flow of each window for frame t in **deg/s of visual angle**: the
+    solid-angle-weighted mean over the window of the angle between the ray of a pixel
+    and the ray of its flow target, times fps. Frame t is the flow from frame t-1 to t;
+    frame 0 repeats frame 1.
+``pof_px`` : float32, shape (T, P, Y)
+    The paper's measure: mean flow magnitude in window pixels per frame.
+``yaw_deg`` : float64, shape (Y,); ``pitch_deg`` : float64, shape (P,)
+    Window centres in degrees (yaw + right, pitch + up; windows have no roll).
+``meta`` : 0-d str array, a JSON object with at least ``format``
+    (:data:`FORMAT`), ``version`` (:data:`VERSION`), ``grid`` (a
+    :class:`~simulator.geometry.WindowGrid` dict: steps, pitch range, ``hfov_deg``,
+    ``vfov_deg``, window ``size``), ``fps``, ``n_frames``, ``flow`` (method and
+    parameters), ``layout``, ``eye``, ``video`` (``path``, ``width``, ``height``,
+    ``sar``, ``content_hash``).
+
+Optional (sphere mode): ``field_dps`` float16/float32 (T, n_lat, n_lon), the per-frame
+angular-speed field on a lon/lat grid, described by ``meta["field"]``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+from simulator.fileio import atomic_output, check_input_file
+from simulator.geometry import WindowGrid
+
+__all__ = ["FORMAT", "VERSION", "GridFile", "load_grid", "save_grid", "content_hash"]
+
+FORMAT = "vimsim-grid"
+VERSION = 1
+_REQUIRED_META = ("format", "version", "grid", "fps", "n_frames", "flow", "layout", "eye", "video")
+
+
+@dataclass(frozen=True)
+class GridFile:
+    """A loaded grid file (see the module docstring for the arrays and their units)."""
+
+    pof_dps: NDArray[np.float32]
+    pof_px: NDArray[np.float32]
+    yaw_deg: NDArray[np.float64]
+    pitch_deg: NDArray[np.float64]
+    meta: dict
+    path: str = ""
+    field_dps: NDArray | None = field(default=None, repr=False)
+
+    @property
+    def grid(self) -> WindowGrid:
+        return WindowGrid.from_dict(self.meta["grid"])
+
+    @property
+    def fps(self) -> float:
+        return float(self.meta["fps"])
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.pof_dps.shape[0])
+
+    @property
+    def hfov_deg(self) -> float:
+        return float(self.meta["grid"]["hfov_deg"])
+
+    @property
+    def vfov_deg(self) -> float:
+        return float(self.meta["grid"]["vfov_deg"])
+
+    def frame_times_s(self) -> NDArray[np.float64]:
+        """Presentation time of each frame, seconds from the video start (``t / fps``)."""
+        return np.arange(self.n_frames) / self.fps
+
+    def check_video(self, info, *, source: str | None = None) -> None:
+        """Raise InputError unless this grid was made from the video described by ``info``
+        (a :class:`simulator.video.MediaInfo`): same stored size and frame rate, and a
+        frame count within one frame (container headers and decoders may differ by one)."""
+        v = self.meta["video"]
+        src = source or self.path
+        if (int(v["width"]), int(v["height"])) != (info.width, info.height):
+            raise InputError(
+                f"{src}: grid was made from a {v['width']}x{v['height']} video, not this "
+                f"{info.width}x{info.height} one ({info.path}); run vimsim preprocess on it"
+            )
+        if abs(float(self.meta["fps"]) - info.fps) > 1e-3 * info.fps:
+            raise InputError(f"{src}: grid is for a {self.meta['fps']} fps video; {info.path} is {info.fps:g} fps")
+        if abs(int(self.meta["n_frames"]) - info.n_frames) > 1:
+            raise InputError(
+                f"{src}: grid has {self.meta['n_frames']} frames; {info.path} has {info.n_frames}: made from another video?"
+            )
+
+
+def save_grid(
+    path: str | os.PathLike,
+    pof_dps: NDArray,
+    pof_px: NDArray,
+    grid: WindowGrid,
+    meta: dict,
+    *,
+    field_dps: NDArray | None = None,
+) -> None:
+    """Write a grid file atomically (temporary name, renamed when complete).
+
+    ``meta`` is completed with ``format``, ``version`` and ``grid``; it must already
+    hold ``fps``, ``n_frames``, ``flow``, ``layout``, ``eye`` and ``video``.
+    """
+    pof_dps = np.asarray(pof_dps, np.float32)
+    pof_px = np.asarray(pof_px, np.float32)
+    P, Y = grid.shape
+    if pof_dps.ndim != 3 or pof_dps.shape[1:] != (P, Y) or pof_px.shape != pof_dps.shape:
+        raise ValueError(f"pof arrays must be (T, {P}, {Y}); got {pof_dps.shape} and {pof_px.shape}")
+    m = dict(meta)
+    m.update(format=FORMAT, version=VERSION, grid=grid.to_dict())
+    missing = [k for k in _REQUIRED_META if k not in m]
+    if missing:
+        raise ValueError(f"grid meta lacks {missing}")
+    arrays = dict(
+        pof_dps=pof_dps,
+        pof_px=pof_px,
+        yaw_deg=np.asarray(grid.yaw_deg, np.float64),
+        pitch_deg=np.asarray(grid.pitch_deg, np.float64),
+        meta=np.array(json.dumps(m, sort_keys=True)),
+    )
+    if field_dps is not None:
+        arrays["field_dps"] = np.asarray(field_dps)
+    with atomic_output(path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+
+
+def load_grid(path: str | os.PathLike) -> GridFile:
+    """Read and validate a grid file; InputError (one line) if it is not a vimsim grid
+    of this version or its arrays are inconsistent."""
+    p = check_input_file(path, "grid")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            names = set(z.files)
+            need = {"pof_dps", "pof_px", "yaw_deg", "pitch_deg", "meta"}
+            if not need <= names:
+                raise InputError(f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing")
+            arrs = {k: z[k] for k in names}
+    except InputError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
+        raise InputError(f"{p}: not a vimsim grid file (.npz expected): {e}") from None
+    try:
+        meta = json.loads(str(arrs["meta"]))
+    except (json.JSONDecodeError, TypeError):
+        raise InputError(f"{p}: grid meta is not JSON; not a vimsim grid file") from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        raise InputError(f"{p}: not a vimsim grid file (format {meta.get('format') if isinstance(meta, dict) else None!r})")
+    if meta.get("version") != VERSION:
+        raise InputError(f"{p}: grid file version {meta.get('version')}; this vimsim reads version {VERSION}: re-run vimsim preprocess")
+    missing = [k for k in _REQUIRED_META if k not in meta]
+    if missing:
+        raise InputError(f"{p}: grid meta lacks {missing}")
+    dps, px = arrs["pof_dps"], arrs["pof_px"]
+    Y, P = arrs["yaw_deg"].shape[0], arrs["pitch_deg"].shape[0]
+    if dps.ndim != 3 or dps.shape[1:] != (P, Y) or px.shape != dps.shape:
+        raise InputError(f"{p}: pof arrays have shape {dps.shape}/{px.shape}; expected (T, {P}, {Y})")
+    if dps.shape[0] < 1 or not np.all(np.isfinite(dps)):
+        raise InputError(f"{p}: pof_dps is empty or has non-finite values")
+    try:
+        WindowGrid.from_dict(meta["grid"])
+    except (TypeError, InputError) as e:
+        raise InputError(f"{p}: grid description in meta is invalid ({e})") from None
+    return GridFile(
+        pof_dps=dps.astype(np.float32, copy=False),
+        pof_px=px.astype(np.float32, copy=False),
+        yaw_deg=arrs["yaw_deg"].astype(np.float64),
+        pitch_deg=arrs["pitch_deg"].astype(np.float64),
+        meta=meta,
+        path=str(p),
+        field_dps=arrs.get("field_dps"),
+    )
+
+
+def content_hash(path: str | os.PathLike, *, chunk: int = 1 << 20, max_bytes: int = 64 << 20) -> str:
+    """SHA-256 of a file's first ``max_bytes`` and its size (fast for long videos).
+
+    Returns ``"sha256:<hex>"``; identifies the source video of a grid.
+    """
+    p = Path(path)
+    h = hashlib.sha256()
+    size = p.stat().st_size
+    h.update(str(size).encode())
+    with open(p, "rb") as f:
+        read = 0
+        while read < max_bytes:
+            b = f.read(min(chunk, max_bytes - read))
+            if not b:
+                break
+            h.update(b)
+            read += len(b)
+    return "sha256:" + h.hexdigest()

@@ -1,0 +1,279 @@
+"""Video and image input/output through PyAV (FFmpeg) and Pillow.
+
+Frames are ``(H, W, 3)`` uint8 RGB or ``(H, W)`` uint8 grayscale (the Y plane, read
+without an RGB conversion), origin top-left, stored pixels (a non-square sample aspect
+ratio is reported in :class:`MediaInfo`, never resampled away: equirect longitude is
+linear in the stored column). Stereo layouts (``top-bottom``: left eye on top;
+``side-by-side``: left eye on the left) are split by :func:`simulator.geometry.split_eye`.
+
+Decoding streams: one frame in memory at a time, whatever the video's length.
+Writing goes to a temporary file renamed into place when the writer is closed without
+error, so an interrupted encode never leaves an MP4 that looks complete.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+from simulator.fileio import check_input_file
+from simulator.geometry import check_equirect_aspect, split_eye
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "MediaInfo",
+    "probe",
+    "iter_frames",
+    "read_frame",
+    "VideoWriter",
+]
+
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
+PixelFormat = Literal["rgb24", "gray"]
+
+
+@dataclass(frozen=True)
+class MediaInfo:
+    """What a media file holds.
+
+    width, height : stored size in pixels (both eyes for stereo)
+    sar : sample (pixel) aspect ratio, display width = width * sar
+    fps : frames per second (1.0 for a still image)
+    n_frames : number of frames (1 for a still image)
+    is_video : False for a still image
+    codec : decoder name (``"image"`` for stills)
+    """
+
+    path: str
+    width: int
+    height: int
+    sar: float
+    fps: float
+    n_frames: int
+    is_video: bool
+    codec: str
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames / self.fps
+
+    def eye_size(self, layout: str = "mono") -> tuple[int, int]:
+        """Stored per-eye ``(w, h)``, after checking each eye displays as 2:1."""
+        return check_equirect_aspect(self.width, self.height, layout, self.sar, source=self.path)
+
+
+def _open_container(path: Path):
+    import av
+
+    try:
+        return av.open(str(path))
+    except av.error.FFmpegError as e:  # not a media file FFmpeg can read
+        raise InputError(f"{path}: not a readable video or image ({e.strerror or type(e).__name__})") from None
+
+
+def _is_image_path(path: Path) -> bool:
+    return path.suffix.lower() in IMAGE_SUFFIXES
+
+
+def _probe_image(path: Path) -> MediaInfo:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(path) as im:
+            w, h = im.size
+    except (UnidentifiedImageError, OSError) as e:
+        raise InputError(f"{path}: not a readable image ({e})") from None
+    return MediaInfo(str(path), w, h, 1.0, 1.0, 1, False, "image")
+
+
+def probe(path: str | os.PathLike) -> MediaInfo:
+    """Size, sample aspect ratio, frame rate and frame count of a video or image.
+
+    The frame count comes from the stream header when it has one, otherwise from
+    counting packets (no decoding). Raises InputError for a missing file, a file FFmpeg
+    cannot read, or a container without a video stream.
+    """
+    p = check_input_file(path, "video")
+    if _is_image_path(p):
+        return _probe_image(p)
+    with _open_container(p) as c:
+        if not c.streams.video:
+            raise InputError(f"{p}: no video stream")
+        s = c.streams.video[0]
+        cc = s.codec_context
+        w, h = cc.width, cc.height
+        sar_f = s.sample_aspect_ratio or cc.sample_aspect_ratio
+        sar = float(sar_f) if sar_f else 1.0
+        # Nominal rate (r_frame_rate) first: average_rate is skewed by the last frame's duration.
+        rate = s.guessed_rate or s.base_rate or s.average_rate
+        fps = float(rate) if rate else 0.0
+        codec = cc.name
+        n = int(s.frames or 0)
+        if n <= 0:
+            try:
+                n = sum(1 for pk in c.demux(s) if pk.size > 0)
+            except Exception as e:  # noqa: BLE001 - corrupt stream
+                raise InputError(f"{p}: unreadable video stream ({e})") from None
+    if codec in ("mjpeg", "png", "bmp", "tiff", "webp") and n <= 1:
+        return MediaInfo(str(p), w, h, sar, 1.0, 1, False, codec)
+    if w <= 0 or h <= 0:
+        raise InputError(f"{p}: video stream has no frame size")
+    if fps <= 0:
+        raise InputError(f"{p}: video stream has no frame rate")
+    return MediaInfo(str(p), w, h, sar, fps, n, True, codec)
+
+
+def _frame_array(frame, fmt: PixelFormat) -> NDArray[np.uint8]:
+    if fmt == "gray":
+        # Fast path: the luma plane of planar YUV is the grayscale image (no RGB step).
+        if frame.format.name in ("yuv420p", "yuvj420p", "yuv422p", "yuvj422p", "yuv444p", "yuvj444p", "gray", "nv12"):
+            plane = frame.planes[0]
+            buf = np.frombuffer(plane, np.uint8).reshape(plane.height, plane.line_size)
+            return buf[:, : frame.width]
+        return frame.to_ndarray(format="gray")
+    return frame.to_ndarray(format="rgb24")
+
+
+def iter_frames(
+    path: str | os.PathLike,
+    *,
+    fmt: PixelFormat = "rgb24",
+    layout: str = "mono",
+    eye: str = "left",
+    start: int = 0,
+    end: int | None = None,
+) -> Iterator[NDArray[np.uint8]]:
+    """Decode frames ``start <= index < end`` of a video (or the one frame of an image).
+
+    Yields one eye's frame, ``(h, w, 3)`` RGB or ``(h, w)`` gray uint8 (stored pixels),
+    one at a time (streaming: memory does not grow with the video's length). Frames are
+    yielded as views into decoder buffers where possible: copy one to keep it.
+    """
+    p = check_input_file(path, "video")
+    if _is_image_path(p):
+        if start == 0 and (end is None or end > 0):
+            yield split_eye(_read_image(p, fmt), layout, eye, source=str(p))
+        return
+    import av
+
+    with _open_container(p) as c:
+        if not c.streams.video:
+            raise InputError(f"{p}: no video stream")
+        s = c.streams.video[0]
+        s.thread_type = "AUTO"
+        i = -1
+        try:
+            for i, frame in enumerate(c.decode(s)):
+                if i < start:
+                    continue
+                if end is not None and i >= end:
+                    break
+                yield split_eye(_frame_array(frame, fmt), layout, eye, source=str(p))
+        except av.error.FFmpegError as e:
+            raise InputError(f"{p}: unreadable video stream at frame {i + 1} ({e.strerror or e})") from None
+
+
+def _read_image(p: Path, fmt: PixelFormat) -> NDArray[np.uint8]:
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(p) as im:
+            im = im.convert("L" if fmt == "gray" else "RGB")
+            return np.asarray(im)
+    except (UnidentifiedImageError, OSError) as e:
+        raise InputError(f"{p}: not a readable image ({e})") from None
+
+
+def read_frame(
+    path: str | os.PathLike,
+    index: int = 0,
+    *,
+    fmt: PixelFormat = "rgb24",
+    layout: str = "mono",
+    eye: str = "left",
+) -> NDArray[np.uint8]:
+    """One eye's frame ``index`` of a video or the image itself (a copy)."""
+    if index < 0:
+        raise InputError(f"{path}: frame index must be >= 0; got {index}")
+    for f in iter_frames(path, fmt=fmt, layout=layout, eye=eye, start=index, end=index + 1):
+        return np.array(f)
+    raise InputError(f"{path}: has no frame {index}")
+
+
+class VideoWriter:
+    """H.264 MP4 writer (PyAV), atomic: the file appears under its name only on success.
+
+    Parameters
+    ----------
+    path : output file (``.mp4``)
+    fps : frame rate, frames/s (a float such as 29.97 is kept as an exact fraction)
+    size : (width, height) pixels; even numbers (yuv420p)
+    crf : x264 constant rate factor (lower = better quality)
+
+    Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
+    """
+
+    def __init__(self, path: str | os.PathLike, fps: float, size: tuple[int, int], *, crf: int = 18, preset: str = "veryfast"):
+        import av
+
+        self.path = Path(path)
+        w, h = int(size[0]), int(size[1])
+        if w <= 0 or h <= 0 or w % 2 or h % 2:
+            raise InputError(f"{self.path}: H.264 output size must be positive and even; got {w}x{h}")
+        if not (fps > 0):
+            raise InputError(f"{self.path}: frame rate must be > 0; got {fps}")
+        parent = self.path.parent
+        if not parent.is_dir() or not os.access(parent, os.W_OK):
+            raise InputError(f"{self.path}: output directory {parent} does not exist or is not writable")
+        self._tmp = parent / f".{self.path.stem}.tmp-{os.getpid()}{self.path.suffix or '.mp4'}"
+        self.size = (w, h)
+        self.n_written = 0
+        self._container = av.open(str(self._tmp), mode="w", format="mp4")
+        rate = Fraction(fps).limit_denominator(1001)
+        self._stream = self._container.add_stream("libx264", rate=rate)
+        self._stream.width, self._stream.height = w, h
+        self._stream.pix_fmt = "yuv420p"
+        self._stream.options = {"crf": str(crf), "preset": preset}
+        self._closed = False
+
+    def write(self, frame: NDArray[np.uint8]) -> None:
+        import av
+
+        if frame.shape != (self.size[1], self.size[0], 3) or frame.dtype != np.uint8:
+            raise ValueError(f"frame must be ({self.size[1]}, {self.size[0]}, 3) uint8; got {frame.shape} {frame.dtype}")
+        vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")
+        for pkt in self._stream.encode(vf):
+            self._container.mux(pkt)
+        self.n_written += 1
+
+    def close(self, ok: bool = True) -> None:
+        """Flush and close; rename into place if ``ok``, else delete the partial file."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if ok:
+                for pkt in self._stream.encode():
+                    self._container.mux(pkt)
+        finally:
+            self._container.close()
+        if ok:
+            os.replace(self._tmp, self.path)
+        else:
+            with contextlib.suppress(FileNotFoundError):
+                self._tmp.unlink()
+
+    def __enter__(self) -> VideoWriter:
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.close(ok=exc_type is None)
