@@ -273,7 +273,9 @@ def test_cli_missing_columns_named(tmp_path: Path, capsys: pytest.CaptureFixture
     assert err.count("\n") == 1
     assert "ssq_fatigue" in err
     assert "ssq_vertigo (found 'ssq_vertgo'?)" in err
-    data = _write(tmp_path / "e.csv", ["id", "ssq_n", "ssq_o", "ssq_d", "flow"], [["a", 1, 1, 1, 1]])
+    data = _write(
+        tmp_path / "e.csv", ["id", "ssq_n", "ssq_o", "ssq_d", "flow"], [["a", 1, 1, 1, 1]]
+    )
     assert main(["analyze", str(data), "-o", str(tmp_path / "r")]) == 2
     err = capsys.readouterr().err
     assert "column 'condition' missing" in err
@@ -292,7 +294,9 @@ def test_cli_out_of_range_rows_reported(tmp_path: Path, capsys: pytest.CaptureFi
     err = capsys.readouterr().err.splitlines()
     warn = [ln for ln in err if "warning" in ln]
     assert len(warn) == 4  # one line per bad row
-    assert "row 2 (line 3, id 'p1')" in warn[0] and "ssq_fatigue = 4 outside 0..3" in warn[0]
+    assert (
+        "row 2 (line 4, id 'p1')" in warn[0]
+    )  # line 1 comment, 2 header and "ssq_fatigue = 4 outside 0..3" in warn[0]
     assert "id 'p5'" in warn[1] and "mssq_child_cars = 'x'" in warn[1]
     assert "id 'p6'" in warn[2] and "adult section" in warn[2]
     assert "id 'p7'" in warn[3] and "ssq_eyestrain" in warn[3]
@@ -312,7 +316,9 @@ def test_cli_one_condition(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     assert err.count("\n") == 1
 
 
-def test_cli_three_conditions_need_choice(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_cli_three_conditions_need_choice(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     rows = [_items_row(f"p{i}", "ABC"[i % 3], [i % 4] * 16) for i in range(9)]
     data = _write(tmp_path / "d.csv", _ITEM_HEADER, rows)
     assert main(["analyze", str(data), "-o", str(tmp_path / "r")]) == 2
