@@ -668,6 +668,14 @@ class Analysis:
         if len(self.conditions) != 2 or self.conditions[0] == self.conditions[1]:
             raise InputError(f"expected two different conditions; got {self.conditions}")
 
+    def messages(self) -> list[str]:
+        """Notes, then per-measure test notes (measures with the same note on one line)."""
+        by_note: dict[str, list[str]] = {}
+        for r in self.comparisons:
+            if r["note"]:
+                by_note.setdefault(r["note"], []).append(r["measure"])
+        return list(self.notes) + [f"{', '.join(m)}: {n}" for n, m in by_note.items()]
+
 
 def _shapiro(values: NDArray[np.float64]) -> tuple[float, float, str]:
     from scipy import stats
@@ -982,8 +990,7 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     lines += ["", "## Rows with problems (not used)", ""]
     lines += [f"- {s}" for s in an.study.problems] or ["- none"]
     lines += ["", "## Notes", ""]
-    notes = list(an.notes) + [r["note"] for r in an.comparisons if r["note"]]
-    lines += [f"- {s}" for s in dict.fromkeys(notes)] or ["- none"]
+    lines += [f"- {s}" for s in an.messages()] or ["- none"]
     with atomic_output(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     written.append(out / "report.md")

@@ -80,6 +80,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the analysis; exit 0 when scores were written (notes on stderr), 2 on bad input."""
+    import math
+
     from simulator.analyze import analyze_study, read_study, write_report
 
     study = read_study(args.data, flow_stat=args.flow_stat)
@@ -88,13 +90,15 @@ def run(args: argparse.Namespace) -> int:
     an = analyze_study(study, exclude_below=args.exclude_below, conditions=args.conditions)
     for pid, why in an.excluded:
         print(f"vimsim analyze: excluded {pid}: {why}", file=sys.stderr)
-    notes = list(an.notes) + [r["note"] for r in an.comparisons if r["note"]]
-    for note in dict.fromkeys(notes):
+    for note in an.messages():
         print(f"vimsim analyze: note: {note}", file=sys.stderr)
     written = write_report(an, args.output)
     a, b = an.conditions
     for r in an.comparisons:
-        p = "n/a" if r["p"] != r["p"] else f"{r['p']:.3f}"
-        print(f"{r['measure']}: {a} vs. {b} means {r['mean_a']:.2f} vs. {r['mean_b']:.2f}, p = {p}")
+        ma, mb, p = (
+            "n/a" if math.isnan(v) else f"{v:.{d}f}"
+            for v, d in ((r["mean_a"], 2), (r["mean_b"], 2), (r["p"], 3))
+        )
+        print(f"{r['measure']}: {a} vs. {b} means {ma} vs. {mb}, p = {p}")
     print(f"wrote {len(written)} files to {args.output}")
     return 0
