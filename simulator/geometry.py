@@ -73,11 +73,19 @@ __all__ = [
     "GRID_PRESETS",
     "grid_preset",
     "WindowExtractor",
+    "Interp",
+    "INTERPS",
 ]
 
 Layout = Literal["mono", "top-bottom", "side-by-side"]
 Eye = Literal["left", "right"]
 LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
+#: Interpolation kernels of :func:`sample_equirect`. ``cubic``: OpenCV's bicubic (Keys,
+#: a = -0.75; sub-pixel positions quantised to 1/32 px; fast, used for the window grid).
+#: ``lagrange``: the 4-point Lagrange cubic that ffmpeg's v360 calls ``cubic``, exact
+#: sub-pixel positions, numpy (slower; closest to v360). ``linear``, ``nearest``: OpenCV.
+Interp = Literal["cubic", "lagrange", "linear", "nearest"]
+INTERPS: tuple[str, ...] = ("cubic", "lagrange", "linear", "nearest")
 EYES: tuple[str, ...] = ("left", "right")
 
 #: Extra rows/columns added around an equirect frame before bicubic sampling, so that
@@ -287,17 +295,66 @@ def sample_equirect(
     map_x: NDArray[np.float32],
     map_y: NDArray[np.float32],
     *,
-    interp: Literal["cubic", "linear", "nearest"] = "cubic",
+    interp: Interp = "cubic",
 ) -> NDArray:
     """Sample an equirect frame at maps from :func:`perspective_map` (or any like them).
 
     Bicubic by default (the paper's 4x4 neighbourhood), with longitude wrap-around at the
-    +-180 deg seam and correct continuation across the poles. ``img`` is ``(H, W)`` or
+    +-180 deg seam and correct continuation across the poles. ``interp`` is one of
+    :data:`INTERPS` (``lagrange`` = ffmpeg v360's cubic kernel, exact but slower). ``img`` is ``(H, W)`` or
     ``(H, W, C)`` with C <= 4; the result has the maps' shape (+ channels), same dtype.
     """
-    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interp]
+    if interp not in INTERPS:
+        raise InputError(f"unknown interpolation {interp!r}; expected one of {', '.join(INTERPS)}")
     padded = _pad_equirect(np.ascontiguousarray(img))
+    if interp == "lagrange":
+        return _remap_lagrange(padded, map_x, map_y)
+    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interp]
     return cv2.remap(padded, map_x, map_y, flags, borderMode=cv2.BORDER_REPLICATE)
+
+
+def _lagrange_weights(t: NDArray[np.float32]) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Weights of taps at offsets -1, 0, 1, 2 for fraction ``t`` in [0, 1): the cubic
+    through 4 samples (Lagrange); v360's ``calculate_bicubic_coeffs``. Sum to 1."""
+    tt = t * t
+    ttt = tt * t
+    return (
+        -t / 3 + tt / 2 - ttt / 6,
+        1 - t / 2 - tt + ttt / 2,
+        t + tt / 2 - ttt / 2,
+        (ttt - t) / 6,
+    )
+
+
+def _remap_lagrange(padded: NDArray, map_x: NDArray, map_y: NDArray) -> NDArray:
+    """Separable 4x4 Lagrange-cubic sampling of ``padded`` at array-index coordinates
+    (pixel centres at integers, as ``cv2.remap``), exact fractional positions, float32
+    accumulation, rounded and clipped back to the input dtype (integers)."""
+    Hp, Wp = padded.shape[:2]
+    C = 1 if padded.ndim == 2 else padded.shape[2]
+    flat = padded.reshape(Hp * Wp, C)
+    fx = np.floor(map_x)
+    fy = np.floor(map_y)
+    cx = _lagrange_weights((map_x - fx).astype(np.float32).reshape(-1, 1))
+    cy = _lagrange_weights((map_y - fy).astype(np.float32).reshape(-1, 1))
+    # Tap (i, j) = (row fy - 1 + i, col fx - 1 + j); the pad keeps every tap in range,
+    # the clip only guards maps that leave the padded frame (edge replicated there).
+    ix = np.clip(fx.astype(np.int64) - 1, 0, Wp - 4).reshape(-1)
+    iy = np.clip(fy.astype(np.int64) - 1, 0, Hp - 4).reshape(-1)
+    base = iy * Wp + ix
+    out = np.zeros((base.size, C), np.float32)
+    row = np.empty_like(out)
+    for i in range(4):
+        row.fill(0.0)
+        bi = base + i * Wp
+        for j in range(4):
+            row += cx[j] * np.take(flat, bi + j, axis=0)
+        out += cy[i] * row
+    shape = map_x.shape + padded.shape[2:]
+    if np.issubdtype(padded.dtype, np.integer):
+        info = np.iinfo(padded.dtype)
+        out = np.clip(np.rint(out), info.min, info.max)
+    return out.astype(padded.dtype).reshape(shape)
 
 
 def extract_view(
@@ -309,7 +366,7 @@ def extract_view(
     hfov_deg: float = 107.0,
     vfov_deg: float | None = None,
     size: tuple[int, int] = (256, 256),
-    interp: Literal["cubic", "linear", "nearest"] = "cubic",
+    interp: Interp = "cubic",
 ) -> NDArray:
     """One perspective view of an equirect frame (one eye, any dtype cv2 can remap).
 
@@ -322,7 +379,7 @@ def extract_view(
 
 
 def rotate_equirect(
-    img: NDArray, rot: Rotation, *, interp: Literal["cubic", "linear", "nearest"] = "cubic"
+    img: NDArray, rot: Rotation, *, interp: Interp = "cubic"
 ) -> NDArray:
     """Equirect frame of the scene rotated by ``rot`` (a world-frame rotation).
 

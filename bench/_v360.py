@@ -1,0 +1,121 @@
+"""Call ffmpeg's ``v360`` filter (the project's outside reference) on numpy frames.
+
+The ffmpeg binary is the one shipped by the ``imageio-ffmpeg`` package. Frames go in and
+come out as raw RGB through pipes (no files, no codec): ``format=gbrp`` keeps v360 in
+RGB, so the only differences from our views are v360's geometry and interpolation.
+
+v360's conventions, read from ``libavfilter/vf_v360.c`` and checked by bench/v360_agreement.py
+------------------------------------------------------------------------------------------
+- Flat (perspective) output: pixel ``(i, j)`` has its centre at ``(2i + 1) / w - 1`` times
+  ``tan(h_fov / 2)`` (same as ours).
+- Equirect input: ``uf = (lon / pi + 1) * W / 2`` is used directly as an array index
+  (taps ``floor(uf) - 1 .. floor(uf) + 2``), i.e. v360 puts pixel ``k``'s centre at
+  ``lon = k / W * 360 - 180``, half a pixel left of (and above) SPEC.md's centre rule.
+  Our maps + 0.5 (array-index convention) reproduce v360's sampling positions.
+- ``interp=cubic`` is the 4-point Lagrange cubic (not Keys/OpenCV a = -0.75), weights
+  ``lrintf(cx * cy * 16385)``, sum shifted right by 14 (floor), clipped.
+- Beyond a pole, rows reflect without repeating the edge row (``-y``; SPEC's continuation
+  repeats it: row -1 is row 0 on the opposite meridian).
+"""
+
+from __future__ import annotations
+
+import functools
+import subprocess
+import time
+
+import numpy as np
+
+__all__ = ["ffmpeg_exe", "v360_filter", "v360_view", "v360_time_ms"]
+
+
+@functools.lru_cache(maxsize=1)
+def ffmpeg_exe() -> str:
+    import imageio_ffmpeg
+
+    return imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def v360_filter(yaw_deg, pitch_deg, roll_deg, hfov_deg, vfov_deg, size, interp="cubic") -> str:
+    """The ``-vf`` string: equirect in, flat out, RGB planar throughout."""
+    w, h = size
+    return (
+        f"format=gbrp,v360=e:flat:h_fov={hfov_deg:.10g}:v_fov={vfov_deg:.10g}:w={w}:h={h}"
+        f":yaw={yaw_deg:.10g}:pitch={pitch_deg:.10g}:roll={roll_deg:.10g}:interp={interp}"
+    )
+
+
+def v360_view(
+    img: np.ndarray,
+    yaw_deg: float,
+    pitch_deg: float,
+    roll_deg: float = 0.0,
+    *,
+    hfov_deg: float = 90.0,
+    vfov_deg: float | None = None,
+    size: tuple[int, int] = (256, 256),
+    interp: str = "cubic",
+) -> np.ndarray:
+    """ffmpeg v360's perspective view of an ``(H, W, 3)`` uint8 RGB equirect frame.
+
+    Same argument meaning as :func:`simulator.geometry.extract_view` (degrees, yaw +
+    right, pitch + up, roll + right ear down, ``size = (width, height)``); the values are
+    passed to v360 as they are (v360's signs agree with SPEC.md). Returns
+    ``(height, width, 3)`` uint8.
+    """
+    vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
+    img = np.ascontiguousarray(img)
+    if img.ndim == 2:
+        img = np.repeat(img[..., None], 3, axis=2)
+    H, W = img.shape[:2]
+    cmd = [
+        ffmpeg_exe(), "-v", "error", "-hide_banner",
+        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{W}x{H}", "-i", "-",
+        "-vf", v360_filter(yaw_deg, pitch_deg, roll_deg, hfov_deg, vfov_deg, size, interp),
+        "-f", "rawvideo", "-pix_fmt", "rgb24", "-",
+    ]
+    r = subprocess.run(cmd, input=img.tobytes(), capture_output=True, check=False)
+    if r.returncode != 0:
+        raise RuntimeError(f"ffmpeg v360 failed: {r.stderr.decode(errors='replace').strip()}")
+    w, h = size
+    out = np.frombuffer(r.stdout, np.uint8)
+    if out.size != w * h * 3:
+        raise RuntimeError(f"ffmpeg v360 returned {out.size} bytes; expected {w * h * 3}")
+    return out.reshape(h, w, 3)
+
+
+def v360_time_ms(
+    img: np.ndarray, *, size: tuple[int, int], hfov_deg: float = 107.0, vfov_deg=None, n: int = 40
+) -> float:
+    """Time per frame of v360 (ms), without process start-up and decoding.
+
+    Runs ffmpeg twice on ``n`` copies of the frame from a raw file: once with the v360
+    filter, once with the same pipeline minus v360 (``format=gbrp`` only), and returns
+    ``(t_with - t_without) / n`` of the wall-clock times. Threads: ffmpeg's default
+    (``-filter_threads`` = cores).
+    """
+    import os
+    import tempfile
+
+    vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
+    H, W = img.shape[:2]
+    with tempfile.TemporaryDirectory() as d:
+        raw = os.path.join(d, "in.rgb")
+        with open(raw, "wb") as f:
+            f.write(np.ascontiguousarray(img).tobytes() * n)
+
+        def run(vf: str) -> float:
+            cmd = [
+                ffmpeg_exe(), "-v", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
+                "-s", f"{W}x{H}", "-i", raw, "-vf", vf, "-f", "null", "-",
+            ]
+            best = float("inf")
+            for _ in range(3):
+                t0 = time.perf_counter()
+                subprocess.run(cmd, check=True, capture_output=True)
+                best = min(best, time.perf_counter() - t0)
+            return best
+
+        t_with = run(v360_filter(30.0, 10.0, 0.0, hfov_deg, vfov_deg, size))
+        t_without = run("format=gbrp")
+    return (t_with - t_without) / n * 1e3

@@ -1,0 +1,106 @@
+"""``vimsim viewport``: one perspective view from an equirect image or video frame."""
+
+from __future__ import annotations
+
+import argparse
+
+from simulator.commands._types import fov_deg, nonneg_int, size_wxh
+from simulator.errors import InputError
+
+__all__ = ["register", "run", "DEFAULT_SIZE", "DEFAULT_FOV_DEG"]
+
+#: Preview size (width, height) in pixels and FOV in degrees (HTC Vive Pro Eye: 107 x 107).
+DEFAULT_SIZE = (512, 512)
+DEFAULT_FOV_DEG = 107.0
+
+# = simulator.geometry.LAYOUTS / EYES / INTERPS (kept light: no numpy/cv2 import here).
+_LAYOUTS = ("mono", "top-bottom", "side-by-side")
+_EYES = ("left", "right")
+_INTERPS = ("cubic", "lagrange", "linear", "nearest")
+
+
+def _angle_deg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an angle in degrees, e.g. -30.5; got {text!r}") from None
+    if v != v or abs(v) == float("inf"):
+        raise argparse.ArgumentTypeError(f"expected a finite angle in degrees, e.g. 30; got {text!r}")
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``viewport`` parser."""
+    p = subparsers.add_parser(
+        "viewport",
+        help="one perspective view (PNG) from an equirect image or video frame",
+        description="Render what a head-mounted display shows at one head orientation: a "
+        "perspective (gnomonic) view of an equirectangular image or video frame, bicubic. "
+        "Angles in degrees: positive yaw turns right (toward +longitude), positive pitch "
+        "looks up, positive roll tilts the head right ear down (the picture turns "
+        "counter-clockwise). Applied yaw, then pitch, then roll, as ffmpeg's v360. "
+        "See docs/geometry.md.",
+    )
+    p.add_argument("src", metavar="SRC", help="equirect image (.jpg, .png, ...) or video")
+    p.add_argument("-o", "--output", metavar="OUT.png", required=True, help="output PNG (written atomically)")
+    p.add_argument("--yaw", type=_angle_deg, required=True, metavar="D", help="degrees, + turns right")
+    p.add_argument("--pitch", type=_angle_deg, required=True, metavar="D", help="degrees, + looks up")
+    p.add_argument("--roll", type=_angle_deg, default=0.0, metavar="D", help="degrees, + right ear down (default 0)")
+    p.add_argument(
+        "--fov", type=fov_deg, default=None, metavar="D",
+        help=f"horizontal and vertical FOV, degrees in (0, 180) (default {DEFAULT_FOV_DEG:g})",
+    )
+    p.add_argument("--hfov", type=fov_deg, default=None, metavar="D", help="horizontal FOV, degrees (with --vfov)")
+    p.add_argument("--vfov", type=fov_deg, default=None, metavar="D", help="vertical FOV, degrees (with --hfov)")
+    p.add_argument(
+        "--size", type=size_wxh, default=DEFAULT_SIZE, metavar="WxH",
+        help=f"output size in pixels, e.g. 1440x1600 (default {DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]})",
+    )
+    p.add_argument("--frame", type=nonneg_int, default=0, metavar="N", help="video frame index from 0 (default 0)")
+    p.add_argument(
+        "--layout", choices=_LAYOUTS, default="mono",
+        help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left (default mono)",
+    )
+    p.add_argument("--eye", choices=_EYES, default="left", help="eye of a stereo source (default left)")
+    p.add_argument(
+        "--interp", choices=_INTERPS, default="cubic",
+        help="cubic = OpenCV bicubic (as the window grid); lagrange = ffmpeg v360's cubic (default cubic)",
+    )
+    p.set_defaults(func=run)
+
+
+def _fovs(args: argparse.Namespace) -> tuple[float, float]:
+    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
+        raise InputError("give either --fov or --hfov with --vfov, not both")
+    if (args.hfov is None) != (args.vfov is None):
+        raise InputError("--hfov and --vfov go together (or use --fov for both)")
+    if args.hfov is not None:
+        return args.hfov, args.vfov
+    fov = DEFAULT_FOV_DEG if args.fov is None else args.fov
+    return fov, fov
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the view; InputError (exit 2, no output) on bad input."""
+    from PIL import Image
+
+    from simulator import geometry, video
+    from simulator.fileio import atomic_output
+
+    hfov, vfov = _fovs(args)
+    info = video.probe(args.src)
+    w, h = info.eye_size(args.layout)  # checks 2:1 per eye (SAR-aware) and the layout
+    if info.is_video and args.frame >= info.n_frames:
+        raise InputError(f"{args.src}: has {info.n_frames} frames; --frame {args.frame} is beyond the last")
+    if not info.is_video and args.frame != 0:
+        raise InputError(f"{args.src}: a still image has only frame 0; got --frame {args.frame}")
+    eye = video.read_frame(args.src, args.frame, layout=args.layout, eye=args.eye)
+    if eye.shape[:2] != (h, w):
+        raise InputError(f"{args.src}: decoded eye is {eye.shape[1]}x{eye.shape[0]}; expected {w}x{h}")
+    view = geometry.extract_view(
+        eye, args.yaw, args.pitch, args.roll, hfov_deg=hfov, vfov_deg=vfov, size=args.size, interp=args.interp
+    )
+    with atomic_output(args.output) as tmp:
+        Image.fromarray(view).save(tmp, format="PNG")
+    return 0
+
