@@ -1,0 +1,172 @@
+"""``vimsim preprocess``: a video's sliding-window optical-flow matrix (the grid file)."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from simulator.commands._types import fov_deg, positive_float
+
+__all__ = ["register", "run"]
+
+_LAYOUTS = ("mono", "top-bottom", "side-by-side")  # = simulator.geometry.LAYOUTS (light import)
+_GRIDS = ("default", "paper-198")  # = simulator.geometry.GRID_PRESETS
+
+
+def _window_size(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"window size must be pixels, e.g. 256; got {text!r}"
+        ) from None
+    if not (16 <= v <= 2048):
+        raise argparse.ArgumentTypeError(
+            f"window size must be 16..2048 pixels, e.g. 256; got {text!r}"
+        )
+    return v
+
+
+def _seconds(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 1.5; got {text!r}") from None
+    if not (0.0 <= v < float("inf")):
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 1.5; got {text!r}")
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``preprocess`` parser."""
+    p = subparsers.add_parser(
+        "preprocess",
+        help="per-window optical flow of a video (the paper's POF matrix) -> GRID.npz",
+        description="Extract every window of the sliding-window grid (default 24 x 11 windows, "
+        "15 deg yaw x 7.5 deg pitch steps, 107 deg FOV, 256x256 px) from each frame, compute the "
+        "optical flow between consecutive frames inside each window and write pof_dps (deg/s of "
+        "visual angle) and pof_px (window px/frame) per frame and window. Long runs save a "
+        "checkpoint beside the output (GRID.npz.partial.npz) every minute and on Ctrl-C; "
+        "--resume continues it. See docs/preprocess.md.",
+    )
+    p.add_argument(
+        "video", metavar="VIDEO", help="equirectangular video (2:1 per eye), any FFmpeg format"
+    )
+    p.add_argument("-o", "--output", metavar="GRID.npz", required=True, help="grid file to write")
+    p.add_argument(
+        "--grid",
+        choices=_GRIDS,
+        default="default",
+        help="window grid: default (15 deg yaw steps, 264 windows) or paper-198 (20 deg, 198)",
+    )
+    p.add_argument(
+        "--fov",
+        type=fov_deg,
+        default=None,
+        metavar="D",
+        help="window FOV in degrees, horizontal = vertical (default 107)",
+    )
+    p.add_argument(
+        "--hfov", type=fov_deg, default=None, metavar="D", help="horizontal window FOV, degrees"
+    )
+    p.add_argument(
+        "--vfov", type=fov_deg, default=None, metavar="D", help="vertical window FOV, degrees"
+    )
+    p.add_argument(
+        "--window-size",
+        type=_window_size,
+        default=256,
+        metavar="N",
+        help="window size N x N pixels (default 256)",
+    )
+    p.add_argument(
+        "--flow",
+        default="dis",
+        metavar="METHOD",
+        help="flow backend: dis (OpenCV DIS ultrafast, default), dis:fast, dis:medium, "
+        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow)",
+    )
+    p.add_argument(
+        "--layout",
+        choices=_LAYOUTS,
+        default="mono",
+        help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left)",
+    )
+    p.add_argument(
+        "--eye",
+        choices=("left", "right"),
+        default="left",
+        help="eye of a stereo video (default left)",
+    )
+    p.add_argument(
+        "--start",
+        type=_seconds,
+        default=0.0,
+        metavar="S",
+        help="first frame at S seconds (default 0)",
+    )
+    p.add_argument(
+        "--end",
+        type=_seconds,
+        default=None,
+        metavar="S",
+        help="stop before S seconds (default: the end)",
+    )
+    p.add_argument(
+        "--resume",
+        action="store_true",
+        help="continue an interrupted run from GRID.npz.partial.npz (same video and options)",
+    )
+    p.add_argument(
+        "--checkpoint-every",
+        type=positive_float,
+        default=60.0,
+        metavar="S",
+        help="seconds between checkpoints (default 60)",
+    )
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=None,
+        metavar="N",
+        help="flow worker threads (default: CPU count)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Preprocess; 0 when the grid file was written, 2 on bad input, 130 when interrupted."""
+    from simulator.errors import InputError
+    from simulator.geometry import grid_preset
+    from simulator.preprocess import PreprocessInterrupted, preprocess_video
+
+    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
+        raise InputError("give either --fov or --hfov/--vfov, not both")
+    hfov = args.hfov if args.hfov is not None else (args.fov if args.fov is not None else 107.0)
+    vfov = args.vfov if args.vfov is not None else (args.fov if args.fov is not None else hfov)
+    grid = grid_preset(
+        args.grid, hfov_deg=hfov, vfov_deg=vfov, size=(args.window_size, args.window_size)
+    )
+    if args.threads is not None and args.threads < 1:
+        raise InputError(f"--threads must be >= 1; got {args.threads}")
+    try:
+        out = preprocess_video(
+            args.video,
+            args.output,
+            grid=grid,
+            flow=args.flow,
+            layout=args.layout,
+            eye=args.eye,
+            start_s=args.start,
+            end_s=args.end,
+            resume=args.resume,
+            checkpoint_every_s=args.checkpoint_every,
+            threads=args.threads,
+            progress=not args.no_progress,
+        )
+    except PreprocessInterrupted as e:
+        print(f"vimsim preprocess: {e.message}", file=sys.stderr)
+        return 130
+    print(f"wrote {out}")
+    return 0

@@ -1,0 +1,280 @@
+"""Optical-flow backends behind one small interface.
+
+A backend takes a batch of ``N`` window pairs and returns their dense flow::
+
+    flow = backend(prev, nxt)   # prev, nxt: (N, h, w) uint8 gray -> (N, h, w, 2) float32
+
+``flow[n, y, x] = (dx, dy)`` in **window pixels per frame**: the content at pixel
+``(x, y)`` of ``prev[n]`` (image coordinates, +x right, +y down, origin top-left) is at
+``(x + dx, y + dy)`` in ``nxt[n]``.
+
+Backends (:func:`make_backend` parses the ``--flow`` text):
+
+``dis`` (default)
+    OpenCV's DIS (Kroeger et al. 2016), preset ``ultrafast`` by default
+    (``dis:fast``, ``dis:medium`` select others): the preset was chosen from measured
+    accuracy and speed, see ``docs/preprocess.md``. Deterministic; thread-safe (one DIS
+    object per thread).
+``farneback``
+    OpenCV's Farneback (pyramid 0.5, 3 levels, window 15, 3 iterations, poly_n 5,
+    sigma 1.2); slower, for comparison.
+``torch:MODEL.pt``
+    A TorchScript model taking two ``(N, 3, H, W)`` float tensors in ``[0, 1]`` (RGB;
+    gray windows are repeated over the 3 channels) and returning ``(N, 2, H, W)`` pixel
+    flow ``(dx, dy)``. Run in batches on CUDA when available, else CPU. torch is
+    imported only here (optional dependency). ``docs/preprocess.md`` shows how to export
+    RAFT (torchvision) or FlowNet2 to this interface.
+"""
+
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+from typing import ClassVar, Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+
+__all__ = [
+    "DIS_PRESETS",
+    "FLOW_CHOICES",
+    "DISFlow",
+    "FarnebackFlow",
+    "FlowBackend",
+    "TorchFlow",
+    "make_backend",
+]
+
+DISPreset = Literal["ultrafast", "fast", "medium"]
+DIS_PRESETS: dict[str, int] = {
+    "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+    "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+    "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+}
+#: What ``--flow`` accepts (for help texts).
+FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
+
+
+def _check_pair(prev: NDArray, nxt: NDArray) -> tuple[NDArray, NDArray]:
+    prev = np.asarray(prev)
+    nxt = np.asarray(nxt)
+    if prev.ndim == 2:
+        prev, nxt = prev[None], nxt[None]
+    if prev.shape != nxt.shape or prev.ndim != 3 or prev.dtype != np.uint8 or nxt.dtype != np.uint8:
+        raise ValueError(
+            f"flow input must be two (N, h, w) uint8 arrays of one shape; got {prev.shape} "
+            f"{prev.dtype} and {nxt.shape} {nxt.dtype}"
+        )
+    return prev, nxt
+
+
+class FlowBackend:
+    """Base class: dense flow for a batch of gray window pairs.
+
+    Attributes
+    ----------
+    name : str
+        Method name recorded in the grid file (``"dis"``, ``"farneback"``, ``"torch"``).
+    params : dict
+        Everything that determines the result, JSON-serialisable (recorded in ``meta``).
+    thread_safe : bool
+        True when several threads may call the backend at once (the caller then splits a
+        frame's windows over a thread pool); False for backends that parallelise inside
+        (torch) and want the whole batch.
+    """
+
+    name: str = ""
+    params: dict
+    thread_safe: bool = True
+
+    def __call__(self, prev: NDArray[np.uint8], nxt: NDArray[np.uint8]) -> NDArray[np.float32]:
+        """Flow of each pair.
+
+        Parameters
+        ----------
+        prev, nxt : ndarray, shape (N, h, w), uint8
+            Gray windows of frames t-1 and t.
+
+        Returns
+        -------
+        flow : ndarray, shape (N, h, w, 2), float32
+            ``(dx, dy)`` in window pixels per frame (+x right, +y down).
+        """
+        prev, nxt = _check_pair(prev, nxt)
+        out = np.empty((*prev.shape, 2), np.float32)
+        for i in range(prev.shape[0]):
+            out[i] = self._pair(prev[i], nxt[i])
+        return out
+
+    def _pair(self, a: NDArray[np.uint8], b: NDArray[np.uint8]) -> NDArray[np.float32]:
+        raise NotImplementedError
+
+    def describe(self) -> dict:
+        """``{"method": name, **params}``: the ``flow`` entry of a grid file's meta."""
+        return {"method": self.name, **self.params}
+
+
+class DISFlow(FlowBackend):
+    """OpenCV DIS optical flow (deterministic; one DIS object per calling thread).
+
+    Parameters
+    ----------
+    preset : ``"ultrafast"`` (default), ``"fast"`` or ``"medium"``
+    """
+
+    name = "dis"
+    thread_safe = True
+
+    def __init__(self, preset: DISPreset = "ultrafast"):
+        if preset not in DIS_PRESETS:
+            raise InputError(
+                f"unknown DIS preset {preset!r}; expected one of {', '.join(DIS_PRESETS)}"
+            )
+        self.preset = preset
+        self.params = {"preset": preset, "opencv": cv2.__version__}
+        self._local = threading.local()
+
+    def _dis(self):
+        d = getattr(self._local, "dis", None)
+        if d is None:
+            d = cv2.DISOpticalFlow_create(DIS_PRESETS[self.preset])
+            self._local.dis = d
+        return d
+
+    def _pair(self, a, b):
+        return self._dis().calc(a, b, None)
+
+
+class FarnebackFlow(FlowBackend):
+    """OpenCV Farneback dense flow (pyramid 0.5, 3 levels, window 15, 3 iterations,
+    poly_n 5, poly_sigma 1.2)."""
+
+    name = "farneback"
+    thread_safe = True
+    _ARGS: ClassVar[dict] = {
+        "pyr_scale": 0.5,
+        "levels": 3,
+        "winsize": 15,
+        "iterations": 3,
+        "poly_n": 5,
+        "poly_sigma": 1.2,
+    }
+
+    def __init__(self):
+        self.params = {**self._ARGS, "opencv": cv2.__version__}
+
+    def _pair(self, a, b):
+        k = self._ARGS
+        return cv2.calcOpticalFlowFarneback(
+            a,
+            b,
+            None,
+            k["pyr_scale"],
+            k["levels"],
+            k["winsize"],
+            k["iterations"],
+            k["poly_n"],
+            k["poly_sigma"],
+            0,
+        )
+
+
+class TorchFlow(FlowBackend):
+    """A TorchScript flow model: ``model(img1, img2)`` with ``(N, 3, H, W)`` float
+    tensors in ``[0, 1]`` returns ``(N, 2, H, W)`` pixel flow ``(dx, dy)``.
+
+    Parameters
+    ----------
+    path : the TorchScript file (``torch.jit.save``)
+    device : ``"cuda"`` / ``"cpu"``; default CUDA when available
+    batch : windows per forward pass (memory bound; all of a frame's windows are
+        processed, ``batch`` at a time)
+
+    The model is checked on load with a ``(1, 3, 64, 64)`` pair: anything but a
+    ``(1, 2, 64, 64)`` floating tensor raises InputError "not a flow model".
+    """
+
+    name = "torch"
+    thread_safe = False
+
+    def __init__(self, path: str | Path, *, device: str | None = None, batch: int = 32):
+        try:
+            import torch
+        except ImportError:
+            raise InputError(
+                f"{path}: the torch flow backend needs PyTorch; install it (pip install torch) "
+                "or use --flow dis"
+            ) from None
+        p = Path(path)
+        if not p.is_file():
+            raise InputError(f"{p}: TorchScript flow model file not found")
+        self._torch = torch
+        self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
+        try:
+            self.model = torch.jit.load(str(p), map_location=self.device).eval()
+        except Exception as e:  # noqa: BLE001 - torch raises many types for a bad file
+            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise InputError(f"{p}: not a TorchScript model ({first})") from None
+        if batch < 1:
+            raise InputError(f"torch flow batch must be >= 1; got {batch}")
+        self.batch = int(batch)
+        self.params = {"model": str(p), "model_bytes": p.stat().st_size, "device": self.device}
+        self._path = p
+        self._validate()
+
+    def _validate(self) -> None:
+        torch = self._torch
+        x = torch.zeros(1, 3, 64, 64, device=self.device)
+        try:
+            with torch.inference_mode():
+                y = self.model(x, x)
+        except Exception as e:  # noqa: BLE001
+            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise InputError(
+                f"{self._path}: not a flow model: calling it with two (1, 3, 64, 64) tensors failed ({first[:200]})"
+            ) from None
+        shape = tuple(y.shape) if isinstance(y, torch.Tensor) else type(y).__name__
+        if not isinstance(y, torch.Tensor) or shape != (1, 2, 64, 64) or not y.is_floating_point():
+            raise InputError(
+                f"{self._path}: not a flow model: two (1, 3, 64, 64) inputs gave {shape}; expected a "
+                "(1, 2, 64, 64) float tensor (see docs/preprocess.md for the interface)"
+            )
+
+    def __call__(self, prev, nxt):
+        torch = self._torch
+        prev, nxt = _check_pair(prev, nxt)
+        N, h, w = prev.shape
+        out = np.empty((N, h, w, 2), np.float32)
+        with torch.inference_mode():
+            for s in range(0, N, self.batch):
+                a = torch.from_numpy(np.ascontiguousarray(prev[s : s + self.batch])).to(self.device)
+                b = torch.from_numpy(np.ascontiguousarray(nxt[s : s + self.batch])).to(self.device)
+                a = (a.float() / 255.0)[:, None].expand(-1, 3, -1, -1).contiguous()
+                b = (b.float() / 255.0)[:, None].expand(-1, 3, -1, -1).contiguous()
+                f = self.model(a, b)
+                if tuple(f.shape) != (a.shape[0], 2, h, w):
+                    raise InputError(
+                        f"{self._path}: not a flow model: gave {tuple(f.shape)} for {tuple(a.shape)} inputs"
+                    )
+                out[s : s + self.batch] = f.float().permute(0, 2, 3, 1).cpu().numpy()
+        return out
+
+
+def make_backend(spec: str) -> FlowBackend:
+    """A backend from its ``--flow`` text: ``dis``, ``dis:PRESET``, ``farneback`` or
+    ``torch:MODEL.pt``. Raises InputError for anything else."""
+    text = str(spec).strip()
+    kind, _, arg = text.partition(":")
+    kind = kind.lower()
+    if kind == "dis":
+        return DISFlow(arg or "ultrafast")  # type: ignore[arg-type]
+    if kind == "farneback" and not arg:
+        return FarnebackFlow()
+    if kind == "torch":
+        if not arg:
+            raise InputError("--flow torch needs a model file: torch:MODEL.pt")
+        return TorchFlow(arg)
+    raise InputError(f"unknown flow backend {text!r}; expected one of {FLOW_CHOICES}")

@@ -1,0 +1,440 @@
+"""The paper's pre-processing (sections 3.2-3.4): a video's sliding-window POF matrix.
+
+For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.geometry.WindowGrid`
+is extracted from both frames (gray, bicubic, :class:`~simulator.geometry.WindowExtractor`),
+the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
+scalars:
+
+``pof_px``  (window pixels / frame)
+    The paper's measure: the mean flow magnitude ``|f(p)|`` over the window's pixels.
+``pof_dps`` (deg/s of visual angle)
+    ``sum_p Omega(p) * angle(ray(p), ray(p + f(p))) * fps / sum_p Omega(p)``: the
+    solid-angle-weighted (``Omega``) mean angle between the ray of a pixel centre and the
+    ray of its flow target, times the frame rate. Rays follow
+    :func:`~simulator.geometry.perspective_rays`: the continuous window position
+    ``(x, y)`` (pixel centres at ``i + 0.5``) has its ray through
+    ``u = (x / w * 2 - 1) tan(hfov / 2)``, ``v = (1 - y / h * 2) tan(vfov / 2)`` on the
+    plane ``z = 1``; flow targets outside the window still have a ray. The angle between
+    a window's own rays does not depend on the window's orientation, so one set of
+    per-pixel constants serves every window.
+
+Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
+:func:`simulator.gridfile.save_grid` (atomic: the grid file appears only when complete).
+
+Streaming and checkpoints: frames are decoded one at a time (memory flat in the video's
+length; the (T, P, Y) result grows by 2 KB per frame for the default grid). Finished rows
+are saved periodically to ``GRID.npz.partial.npz`` beside the output (atomically), and on
+Ctrl-C before exiting; ``resume=True`` continues from it and gives the same grid as an
+uninterrupted run (every row depends on its two frames only, which are decoded
+identically). A checkpoint made from another video or with other options is refused,
+naming the difference.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import sys
+import time
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+from simulator.fileio import atomic_output
+from simulator.flow import FlowBackend, make_backend
+from simulator.geometry import WindowExtractor, WindowGrid, perspective_rays
+from simulator.gridfile import content_hash, save_grid
+from simulator.video import iter_frames, probe
+
+__all__ = [
+    "PreprocessInterrupted",
+    "WindowFlowReducer",
+    "checkpoint_path",
+    "preprocess_video",
+]
+
+_CKPT_FORMAT = "vimsim-preprocess-checkpoint"
+_CKPT_VERSION = 1
+
+
+class PreprocessInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`preprocess_video`; the checkpoint was saved (message says where)."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+
+class WindowFlowReducer:
+    """Reduce window flow fields to ``(pof_dps, pof_px)`` (see the module docstring).
+
+    Parameters
+    ----------
+    size : (w, h), window pixels
+    hfov_deg, vfov_deg : float, degrees, the windows' exact FOVs
+
+    Call with ``flow`` ``(N, h, w, 2)`` float32 (window px / frame) and ``fps``; returns
+    ``(dps, px)``, each ``(N,)`` float64: deg/s and px/frame.
+
+    The angle is ``atan2(|r0 x r1|, r0 . r1)`` with the unnormalised rays
+    ``r = (u, v, 1)`` (exact at any angle), evaluated with OpenCV's vectorised
+    ``magnitude`` and ``phase`` (relative error < 3e-4).
+    """
+
+    def __init__(self, size: tuple[int, int], hfov_deg: float, vfov_deg: float):
+        w, h = int(size[0]), int(size[1])
+        _, sa = perspective_rays((w, h), hfov_deg, vfov_deg)
+        tx = math.tan(math.radians(hfov_deg) / 2.0)
+        ty = math.tan(math.radians(vfov_deg) / 2.0)
+        u = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * tx
+        v = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * ty
+        uu, vv = np.meshgrid(u, v)
+        self.size = (w, h)
+        self._u0 = uu.astype(np.float32)
+        self._v0 = vv.astype(np.float32)
+        self._a = (1.0 + uu * uu + vv * vv).astype(np.float32)
+        # Pixel steps of u and v: +x right = +u, +y down = -v.
+        self._cx = np.float32(2.0 * tx / w)
+        self._cy = np.float32(-2.0 * ty / h)
+        self._wt = (sa / sa.astype(np.float64).sum()).astype(np.float32).ravel()
+
+    def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Per-pixel angle in **radians** between each ray and its flow target's ray,
+        ``(h, w)`` float32, for one window's flow ``(h, w, 2)``."""
+        du = flow[..., 0] * self._cx
+        dv = flow[..., 1] * self._cy
+        c3 = self._u0 * dv
+        c3 -= self._v0 * du
+        cross = cv2.magnitude(cv2.magnitude(du, dv), c3)
+        dot = self._u0 * du
+        dot += self._v0 * dv
+        dot += self._a
+        return cv2.phase(dot, cross)
+
+    def __call__(
+        self, flow: NDArray[np.float32], fps: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        flow = np.asarray(flow, np.float32)
+        if flow.ndim != 4 or flow.shape[1:] != (self.size[1], self.size[0], 2):
+            raise ValueError(
+                f"flow must be (N, {self.size[1]}, {self.size[0]}, 2); got {flow.shape}"
+            )
+        n = flow.shape[0]
+        dps = np.empty(n)
+        px = np.empty(n)
+        k = math.degrees(1.0) * float(fps)
+        for i in range(n):
+            f = flow[i]
+            dps[i] = float(np.dot(self.angles(f).ravel(), self._wt)) * k
+            fx = np.ascontiguousarray(f[..., 0])
+            fy = np.ascontiguousarray(f[..., 1])
+            px[i] = cv2.mean(cv2.magnitude(fx, fy))[0]
+        return dps, px
+
+
+def checkpoint_path(output: str | os.PathLike) -> Path:
+    """The checkpoint file of an output grid: ``GRID.npz.partial.npz`` beside it."""
+    return Path(str(output) + ".partial.npz")
+
+
+def _flatten(d: dict, prefix: str = "") -> dict:
+    out = {}
+    for k, v in d.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, dict):
+            out.update(_flatten(v, key + "."))
+        else:
+            out[key] = v
+    return out
+
+
+def _save_checkpoint(path: Path, identity: dict, dps: list, px: list) -> None:
+    meta = {
+        "format": _CKPT_FORMAT,
+        "version": _CKPT_VERSION,
+        "identity": identity,
+        "done": len(dps),
+    }
+    with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(
+            fh,
+            pof_dps=np.asarray(dps, np.float32).reshape(len(dps), *identity["grid_shape"]),
+            pof_px=np.asarray(px, np.float32).reshape(len(px), *identity["grid_shape"]),
+            meta=np.array(json.dumps(meta, sort_keys=True)),
+        )
+
+
+def _load_checkpoint(path: Path, identity: dict) -> tuple[list, list]:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            dps, px = z["pof_dps"], z["pof_px"]
+    except Exception as e:  # noqa: BLE001 - any unreadable checkpoint is the same user error
+        raise InputError(
+            f"{path}: unreadable preprocess checkpoint ({type(e).__name__}: {e}); delete it"
+        ) from None
+    if (
+        not isinstance(meta, dict)
+        or meta.get("format") != _CKPT_FORMAT
+        or meta.get("version") != _CKPT_VERSION
+    ):
+        raise InputError(
+            f"{path}: not a vimsim preprocess checkpoint of version {_CKPT_VERSION}; delete it"
+        )
+    theirs, ours = _flatten(meta.get("identity", {})), _flatten(identity)
+    for key in sorted(set(theirs) | set(ours)):
+        a, b = theirs.get(key), ours.get(key)
+        if isinstance(a, list):
+            a = [x for x in a]
+        if isinstance(b, (tuple, list)):
+            b = list(b)
+        if a != b:
+            raise InputError(
+                f"{path}: checkpoint was made with {key} = {a!r}, this run has {b!r}; "
+                "rerun with the original video and options, or delete the checkpoint"
+            )
+    n = int(meta.get("done", -1))
+    if dps.shape != px.shape or dps.shape[0] != n or dps.shape[1:] != tuple(identity["grid_shape"]):
+        raise InputError(
+            f"{path}: checkpoint arrays are inconsistent ({dps.shape}, {n} rows); delete it"
+        )
+    return list(dps), list(px)
+
+
+def _frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
+    fps = info.fps
+    if not (start_s >= 0 and math.isfinite(start_s)):
+        raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
+    s = round(start_s * fps)
+    e = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
+    if end_s is not None and not (end_s > start_s):
+        raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
+    if s >= info.n_frames:
+        raise InputError(
+            f"{src}: --start {start_s} s is past the end of the video ({info.duration_s:.3f} s)"
+        )
+    if e - s < 2:
+        raise InputError(
+            f"{src}: {e - s} frame(s) in the chosen range; flow needs at least 2 frames "
+            f"(video: {info.n_frames} frames at {fps:g} fps)"
+        )
+    return s, e
+
+
+def preprocess_video(
+    video: str | os.PathLike,
+    output: str | os.PathLike,
+    *,
+    grid: WindowGrid,
+    flow: str | FlowBackend = "dis",
+    layout: str = "mono",
+    eye: str = "left",
+    start_s: float = 0.0,
+    end_s: float | None = None,
+    resume: bool = False,
+    checkpoint_every_s: float = 60.0,
+    threads: int | None = None,
+    progress: bool = True,
+    on_frame: Callable[[int], None] | None = None,
+) -> Path:
+    """Compute a video's grid file (``pof_dps``, ``pof_px``; see the module docstring).
+
+    Parameters
+    ----------
+    video : path of any FFmpeg-readable video (equirect, 2:1 per eye)
+    output : the grid file to write (``.npz``)
+    grid : the window grid (FOVs, steps, window size)
+    flow : a backend or its ``--flow`` text (``dis``, ``farneback``, ``torch:MODEL.pt``)
+    layout, eye : stereo layout of the video and the eye to use
+    start_s, end_s : seconds; frames ``round(start_s * fps) <= i < round(end_s * fps)``
+    resume : continue from ``checkpoint_path(output)`` if it exists
+    checkpoint_every_s : wall-clock seconds between periodic checkpoints (0: every frame)
+    threads : worker threads for the flow (default: CPU count)
+    progress : show a tqdm bar (frames/s, ETA) on stderr
+    on_frame : called with the grid row index after each row (tests use it to interrupt)
+
+    Returns
+    -------
+    Path of the written grid file. Raises InputError on bad input (nothing written) and
+    :class:`PreprocessInterrupted` on Ctrl-C (after saving a checkpoint).
+    """
+    src = str(video)
+    info = probe(video)
+    if not info.is_video:
+        raise InputError(
+            f"{src}: is a still image; preprocess needs a video with at least 2 frames"
+        )
+    if info.n_frames < 1:
+        raise InputError(f"{src}: video stream has no frames")
+    eye_w, eye_h = info.eye_size(layout)
+    start_f, end_f = _frame_range(info, float(start_s), end_s, src)
+    backend = flow if isinstance(flow, FlowBackend) else make_backend(flow)
+    out = Path(output)
+    ckpt = checkpoint_path(out)
+    identity = {
+        "video": {
+            "width": info.width,
+            "height": info.height,
+            "sar": round(info.sar, 9),
+            "fps": info.fps,
+            "n_frames": info.n_frames,
+            "content_hash": content_hash(video),
+        },
+        "grid": grid.to_dict(),
+        "grid_shape": list(grid.shape),
+        "flow": backend.describe(),
+        "layout": layout,
+        "eye": eye,
+        "start_frame": start_f,
+        "end_frame": end_f,
+    }
+    dps_rows: list[NDArray] = []
+    px_rows: list[NDArray] = []
+    if ckpt.exists():
+        if not resume:
+            raise InputError(
+                f"{out}: a checkpoint of an interrupted run exists ({ckpt}); pass --resume to "
+                "continue it or delete it to start again"
+            )
+        dps_rows, px_rows = _load_checkpoint(ckpt, identity)
+    elif resume and progress:
+        print(
+            f"vimsim preprocess: no checkpoint {ckpt}; starting from the first frame",
+            file=sys.stderr,
+        )
+
+    extractor = WindowExtractor(grid, (eye_w, eye_h))
+    reducer = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg)
+    P, Y = grid.shape
+    n_win = P * Y
+    w, h = grid.size
+    fps = info.fps
+    n_threads = max(1, int(threads or os.cpu_count() or 1))
+    n_chunks = n_threads * 4 if backend.thread_safe and n_threads > 1 else 1
+    bounds = np.linspace(0, n_win, min(n_chunks, n_win) + 1).astype(int)
+    chunks = [(int(a), int(b)) for a, b in itertools.pairwise(bounds) if b > a]
+    rb = np.linspace(0, n_win, min(2 * n_threads, n_win) + 1).astype(int)
+    red_chunks = [(int(a), int(b)) for a, b in itertools.pairwise(rb) if b > a]
+
+    def work(prev: NDArray, cur: NDArray, a: int, b: int):
+        return reducer(backend(prev[a:b], cur[a:b]), fps)
+
+    done = len(dps_rows)
+    total = end_f - start_f
+    # Row r (r >= 1) is the flow from video frame start_f + r - 1 to start_f + r; row 0
+    # repeats row 1 and is stored when row 1 is known.
+    first_row = max(done, 1)
+    decode_from = start_f + first_row - 1
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=total,
+        initial=done,
+        unit="frame",
+        desc="preprocess",
+        disable=not progress,
+        mininterval=0.5,
+        dynamic_ncols=True,
+        file=sys.stderr,
+    )
+    last_ckpt = time.monotonic()
+    prev_win: NDArray | None = None
+    row = first_row - 1
+    pool = ThreadPoolExecutor(n_threads) if len(chunks) > 1 or not backend.thread_safe else None
+    try:
+        for frame in iter_frames(
+            video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
+        ):
+            win = extractor(frame).reshape(n_win, h, w)
+            if prev_win is None:
+                prev_win = win
+                continue
+            row += 1
+            if pool is not None and backend.thread_safe:
+                futs = [pool.submit(work, prev_win, win, a, b) for a, b in chunks]
+                parts = [f.result() for f in futs]
+            elif pool is not None:
+                fl = backend(prev_win, win)
+                futs = [pool.submit(reducer, fl[a:b], fps) for a, b in red_chunks]
+                parts = [f.result() for f in futs]
+            else:
+                parts = [work(prev_win, win, 0, n_win)]
+            d = np.concatenate([p[0] for p in parts]).astype(np.float32).reshape(P, Y)
+            x = np.concatenate([p[1] for p in parts]).astype(np.float32).reshape(P, Y)
+            if not (np.all(np.isfinite(d)) and np.all(np.isfinite(x))):
+                raise InputError(
+                    f"{src}: flow backend {backend.name} gave non-finite flow at frame {start_f + row}"
+                )
+            if row == 1:
+                dps_rows.append(d)
+                px_rows.append(x)
+                bar.update(1)
+            dps_rows.append(d)
+            px_rows.append(x)
+            bar.update(1)
+            prev_win = win
+            if on_frame is not None:
+                on_frame(row)
+            now = time.monotonic()
+            if now - last_ckpt >= checkpoint_every_s:
+                _save_checkpoint(ckpt, identity, dps_rows, px_rows)
+                last_ckpt = now
+    except KeyboardInterrupt:
+        bar.close()
+        if dps_rows:
+            _save_checkpoint(ckpt, identity, dps_rows, px_rows)
+            raise PreprocessInterrupted(
+                f"interrupted after {len(dps_rows)} of {total} frames; checkpoint saved to {ckpt}; "
+                "run the same command with --resume to continue"
+            ) from None
+        raise PreprocessInterrupted(
+            "interrupted before the first frame pair; nothing saved"
+        ) from None
+    finally:
+        bar.close()
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+    n_rows = len(dps_rows)
+    if n_rows < 2:
+        raise InputError(f"{src}: only {n_rows} frame(s) could be decoded; flow needs at least 2")
+    meta = {
+        "fps": fps,
+        "n_frames": n_rows,
+        "flow": backend.describe(),
+        "layout": layout,
+        "eye": eye,
+        "start_frame": start_f,
+        "end_frame": start_f + n_rows,
+        "start_s": start_f / fps,
+        "eye_size": [eye_w, eye_h],
+        "units": {
+            "pof_dps": "deg/s of visual angle (solid-angle-weighted mean)",
+            "pof_px": "window px/frame (mean magnitude)",
+        },
+        "frame0": "repeats frame 1",
+        "video": {
+            "path": str(Path(video).resolve()),
+            "width": info.width,
+            "height": info.height,
+            "sar": info.sar,
+            "codec": info.codec,
+            "n_frames": info.n_frames,
+            "content_hash": identity["video"]["content_hash"],
+        },
+    }
+    if n_rows != total:
+        print(
+            f"vimsim preprocess: warning: {src}: expected {total} frames, decoded {n_rows}",
+            file=sys.stderr,
+        )
+    save_grid(out, np.stack(dps_rows), np.stack(px_rows), grid, meta)
+    ckpt.unlink(missing_ok=True)
+    return out
