@@ -1,0 +1,713 @@
+"""Synthetic 360 deg clips with analytic ground-truth optical flow.
+
+Three scenes (:data:`SCENES`), all described as a camera moving through a static world:
+
+``rotate``
+    A textured panorama at infinity (an environment map) and a camera turning at a
+    constant ``omega_dps`` about ``axis`` (camera frame); equivalently, the panorama
+    rotates at ``omega`` about ``axis`` in the video. A scene point at direction ``d``
+    moves at ``omega * |a x d|`` (``a`` the unit axis).
+``forward``
+    The camera moves along +z (its forward direction) at ``speed_mps`` through a
+    textured box tunnel (walls, floor, ceiling and end walls are planes with texture
+    coordinates in metres), ray-cast per equirect pixel with trilinear mipmapping.
+``coaster``
+    A figure-eight ride with hills through a textured box room: speed varies along the
+    path (accelerations), the camera looks along its velocity (turns, pitch) and banks
+    into the turns (roll).
+
+Frames and conventions (:mod:`simulator.geometry`): world and camera frames are
++x right, +y up, +z forward; the equirect frame of the video *is* the camera frame
+(pixel column ``x`` has longitude ``(x + 0.5) / W * 360 - 180`` deg, row ``y`` latitude
+``90 - (y + 0.5) / H * 180`` deg). The camera pose at time ``t`` (seconds) is a rotation
+``R(t)`` taking camera-frame vectors to the world frame and an origin ``c(t)`` (metres).
+Frame ``k`` of the clip shows time ``k / fps``. Stereo: the eyes sit at
+``c + R (-+ipd/2, 0, 0)`` (64 mm apart along the camera's x axis, perpendicular to its
+forward direction); the top-bottom layout puts the left eye on top.
+
+Ground truth (derivation). A static world point ``X`` seen from an eye at ``c(t)`` with
+orientation ``R(t)`` has camera-frame position ``q = R^T (X - c)``; with the world
+angular velocity ``w`` (``dR/dt = [w]x R``) and velocity ``v = dc/dt``::
+
+    dq/dt = -R^T (w x (X - c)) - R^T v = -(w_c x q) - v_c,   w_c = R^T w, v_c = R^T v
+
+and the unit ray ``d = q / r`` (``r = |q|``, the depth along the ray) moves at::
+
+    dd/dt = (dq/dt - (dq/dt . d) d) / r = -(w_c x d) - (v_c - (v_c . d) d) / r
+
+The angular speed is ``|dd/dt|`` (rad/s), reported in deg/s. For the rotating panorama
+``r`` is infinite and ``w_c = -omega a``, giving ``omega |a x d|``. An eye offset ``e``
+(camera frame) from the rig centre moves at ``v_c + w_c x e``.
+
+The truth file (``OUT.truth.npz``, no pickles; :func:`load_truth`) holds, per frame
+``t``, this speed at the centres of a coarse lon/lat grid, evaluated at the middle of the
+frame interval from ``t - 1`` to ``t`` (time ``(t - 0.5) / fps``), like the grid file's
+``pof_dps`` (frame t = motion from frame t-1 to t; frame 0 repeats frame 1). The
+per-frame displacement angle differs from ``speed / fps`` by O((motion per frame)^2).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from simulator.errors import InputError
+from simulator.fileio import atomic_output
+from simulator.geometry import dir_to_lonlat, equirect_pixel_lonlat, lonlat_to_dir, lonlat_to_equirect_xy
+
+__all__ = [
+    "Scene",
+    "SCENES",
+    "SynthConfig",
+    "SynthScene",
+    "Truth",
+    "make_scene",
+    "synthesize",
+    "load_truth",
+    "truth_path_for",
+    "load_texture",
+    "procedural_panorama",
+    "angular_speed_dps",
+]
+
+Scene = Literal["rotate", "forward", "coaster"]
+SCENES: tuple[str, ...] = ("rotate", "forward", "coaster")
+SynthLayout = Literal["mono", "top-bottom"]
+SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
+TRUTH_FORMAT = "vimsim-synth-truth"
+TRUTH_VERSION = 1
+_BUNDLED = "panorama.jpg"
+_G = 9.81  # m/s^2, for the coaster's banking
+
+
+# --------------------------------------------------------------------------- textures
+def _bundled_texture_path() -> Path:
+    return Path(str(resources.files("simulator") / "data" / _BUNDLED))
+
+
+def load_texture(path: str | os.PathLike | None = None) -> tuple[NDArray[np.uint8], str]:
+    """An RGB texture ``(H, W, 3)`` uint8 and a short name for it.
+
+    ``None`` loads the panorama bundled in ``simulator/data/`` (procedural, see
+    ``simulator/data/CREDITS.md``). Any image Pillow reads is accepted (for the rotate
+    scene it should be a 2:1 equirect panorama; for the box scenes it is tiled).
+    """
+    from PIL import Image, UnidentifiedImageError
+
+    p = _bundled_texture_path() if path is None else Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: texture file not found")
+    try:
+        with Image.open(p) as im:
+            im.load()
+            rgb = np.asarray(im.convert("RGB"))
+    except (UnidentifiedImageError, OSError, ValueError) as e:
+        raise InputError(f"{p}: texture is not a readable image ({type(e).__name__}: {e})") from None
+    if rgb.shape[0] < 8 or rgb.shape[1] < 8:
+        raise InputError(f"{p}: texture is {rgb.shape[1]}x{rgb.shape[0]}; need at least 8x8 pixels")
+    return np.ascontiguousarray(rgb), ("bundled:" + _BUNDLED if path is None else str(p))
+
+
+def procedural_panorama(size: tuple[int, int] = (1024, 512), seed: int = 0) -> NDArray[np.uint8]:
+    """A richly textured equirect panorama ``(H, W, 3)`` uint8 made of 3-D noise on the sphere.
+
+    Multi-octave smooth (cubic) noise sampled at the unit direction of each pixel, so it
+    is seamless at the +-180 deg seam and at the poles. Colour from two low-frequency
+    channels, luminance detail from two more, and contour lines for sharp edges (optical
+    flow needs texture at every scale). This made ``simulator/data/panorama.jpg``
+    (``size=(1024, 512), seed=0``).
+    """
+    from scipy import ndimage
+
+    W, H = int(size[0]), int(size[1])
+    rng = np.random.default_rng(seed)
+    lon, lat = equirect_pixel_lonlat(W, H)
+    LO, LA = np.meshgrid(lon, lat)
+    d = lonlat_to_dir(LO, LA).reshape(-1, 3)
+    chans = []
+    for beta, octaves in ((0.9, (2, 4, 8, 16)), (0.9, (2, 4, 8, 16, 32)), (0.7, (4, 8, 16, 32, 64, 128)), (0.4, (16, 32, 64, 128))):
+        acc = np.zeros(H * W)
+        for f in octaves:
+            n = 2 * f + 4
+            lattice = rng.standard_normal((n, n, n))
+            coords = (d * f + n / 2).T + rng.uniform(0, 1, (3, 1))
+            acc += ndimage.map_coordinates(lattice, coords, order=3, mode="grid-wrap") * f ** (-beta)
+        acc = (acc - acc.mean()) / acc.std()
+        chans.append(acc.reshape(H, W))
+    z0, z1, z2, z3 = chans
+    hue = (np.arctan2(z0, z1) / (2 * np.pi) + 0.5) * 179
+    sat = np.clip(0.5 + 0.25 * np.tanh(z0), 0, 1) * 255
+    lum = 0.5 + 0.25 * np.tanh(1.2 * z2) + 0.15 * np.tanh(1.5 * z3)
+    lines = 0.55 + 0.45 * (np.abs(np.sin(3.0 * z1 + 2.0 * z2)) > 0.25)
+    val = np.clip(lum * lines, 0, 1) * 255
+    hsv = np.stack([hue, sat, val], -1).astype(np.uint8)
+    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+
+
+class _MipTexture:
+    """A periodic texture with a mip pyramid packed into one atlas, for trilinear lookups.
+
+    The image is mirror-tiled 2 x 2 (so it repeats without seams), halved with box
+    filtering down to 8 pixels, and each level is padded by wrapping so that bilinear
+    taps at a tile edge read the other side. Two ``cv2.remap`` calls per frame.
+    """
+
+    _P = 2  # wrap padding, pixels
+
+    def __init__(self, img: NDArray[np.uint8]):
+        tile = np.concatenate([img, img[:, ::-1]], axis=1)
+        tile = np.concatenate([tile, tile[::-1]], axis=0)
+        h, w = tile.shape[:2]
+        # Even sizes all the way down: crop to a multiple of 2^k.
+        levels = [tile.astype(np.float32)]
+        while min(levels[-1].shape[:2]) >= 16 and all(s % 2 == 0 for s in levels[-1].shape[:2]):
+            prev = levels[-1]
+            levels.append(cv2.resize(prev, (prev.shape[1] // 2, prev.shape[0] // 2), interpolation=cv2.INTER_AREA))
+        p = self._P
+        padded = [np.pad(lv, ((p, p), (p, p), (0, 0)), mode="wrap") for lv in levels]
+        width = padded[0].shape[1]
+        offs, rows = [], 0
+        for pl in padded:
+            offs.append(rows)
+            rows += pl.shape[0]
+        atlas = np.zeros((rows, width, 3), np.float32)
+        for o, pl in zip(offs, padded):
+            atlas[o : o + pl.shape[0], : pl.shape[1]] = pl
+        self.atlas = atlas
+        self.size = (w, h)  # texels of level 0 per period
+        self.n_levels = len(levels)
+        self._w = np.array([lv.shape[1] for lv in levels], np.float32)
+        self._h = np.array([lv.shape[0] for lv in levels], np.float32)
+        self._off = np.array(offs, np.float32)
+
+    def _coords(self, u: NDArray, v: NDArray, level: NDArray) -> tuple[NDArray, NDArray]:
+        s = np.exp2(-level.astype(np.float32))
+        w, h = self._w[level], self._h[level]
+        x = np.mod(u * s - 0.5, w) + self._P
+        y = np.mod(v * s - 0.5, h) + (self._P + self._off[level])
+        return x, y
+
+    def sample(self, u: NDArray, v: NDArray, lod: NDArray) -> NDArray[np.float32]:
+        """Trilinear lookup at level-0 texel coordinates ``u, v`` (any float) and level of
+        detail ``lod`` (log2 of the footprint in texels); returns ``(..., 3)`` float32."""
+        # Reduce to one period in float64 once (every level's period is the same in
+        # level-0 texels), then work in float32.
+        u = np.mod(u, self.size[0]).astype(np.float32)
+        v = np.mod(v, self.size[1]).astype(np.float32)
+        lod = np.clip(lod, 0.0, self.n_levels - 1.0)
+        l0 = np.floor(lod).astype(np.intp)
+        l1 = np.minimum(l0 + 1, self.n_levels - 1)
+        f = (lod - l0).astype(np.float32)[..., None]
+        x0, y0 = self._coords(u, v, l0)
+        x1, y1 = self._coords(u, v, l1)
+        a = cv2.remap(self.atlas, x0, y0, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        b = cv2.remap(self.atlas, x1, y1, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return a * (1.0 - f) + b * f
+
+
+# ------------------------------------------------------------------------ trajectories
+@dataclass(frozen=True)
+class SynthConfig:
+    """Everything that defines a synthetic clip (validated on construction).
+
+    Parameters
+    ----------
+    scene : ``"rotate"``, ``"forward"`` or ``"coaster"``
+    seconds : float, clip length in seconds (> 0; at least 2 frames)
+    fps : float, frames per second (> 0)
+    size : (W, H), pixels of one eye's equirect frame; ``W = 2 H``, both even
+    layout : ``"mono"`` or ``"top-bottom"`` (left eye on top; the frame is W x 2H)
+    texture : path of an image, or None for the bundled panorama
+    seed : int, varies the texture placement on the walls
+    axis : (x, y, z), rotate: rotation axis in the camera frame (+y up = a yaw pan)
+    omega_dps : float, rotate: rotation rate in deg/s (> 0); the panorama turns
+        right-handedly about ``axis`` (``axis = (0, 1, 0)`` moves the image to the left)
+    speed_mps : float, forward: camera speed in m/s; coaster: mean speed along the path
+    ipd_m : float, stereo eye separation in metres (64 mm)
+    texture_m : float, metres covered by the texture's width on the walls
+    truth_cell_deg : float, cell size of the truth grid in degrees (divides 180)
+    """
+
+    scene: str
+    seconds: float = 3.0
+    fps: float = 30.0
+    size: tuple[int, int] = (1024, 512)
+    layout: str = "mono"
+    texture: str | None = None
+    seed: int = 0
+    axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
+    omega_dps: float = 30.0
+    speed_mps: float | None = None
+    ipd_m: float = 0.064
+    texture_m: float = 3.0
+    truth_cell_deg: float = 2.0
+
+    def __post_init__(self) -> None:
+        if self.scene not in SCENES:
+            raise InputError(f"unknown scene {self.scene!r}; expected one of {', '.join(SCENES)}")
+        for name in ("seconds", "fps", "omega_dps", "ipd_m", "texture_m", "truth_cell_deg"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be a finite number > 0; got {v!r}")
+        if self.speed_mps is not None and not (math.isfinite(self.speed_mps) and self.speed_mps > 0):
+            raise InputError(f"speed must be a finite number > 0 m/s; got {self.speed_mps!r}")
+        if self.n_frames < 2:
+            raise InputError(
+                f"a clip of {self.seconds} s at {self.fps} fps has {self.n_frames} frame(s); flow needs at least 2"
+            )
+        try:
+            w, h = int(self.size[0]), int(self.size[1])
+        except (TypeError, ValueError, IndexError):
+            raise InputError(f"size must be (W, H) pixels, e.g. 1024x512; got {self.size!r}") from None
+        if w != 2 * h or h < 16 or h % 2:
+            raise InputError(f"equirect size must be 2:1 with an even height >= 16, e.g. 1024x512; got {w}x{h}")
+        object.__setattr__(self, "size", (w, h))
+        if self.layout not in SYNTH_LAYOUTS:
+            raise InputError(f"unknown layout {self.layout!r}; expected one of {', '.join(SYNTH_LAYOUTS)}")
+        a = np.asarray(self.axis, float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) < 1e-9:
+            raise InputError(f"rotation axis must be three numbers, not all zero, e.g. 0,1,0; got {self.axis!r}")
+        object.__setattr__(self, "axis", tuple(float(x) for x in a))
+        n = 180.0 / self.truth_cell_deg
+        if abs(n - round(n)) > 1e-6:
+            raise InputError(f"truth cell size must divide 180 degrees, e.g. 2; got {self.truth_cell_deg}")
+
+    @property
+    def n_frames(self) -> int:
+        return int(round(self.seconds * self.fps))
+
+    @property
+    def eyes(self) -> tuple[str, ...]:
+        return ("left", "right") if self.layout == "top-bottom" else ("mono",)
+
+    @property
+    def speed(self) -> float:
+        """Speed actually used (m/s): the given one or the scene's default."""
+        if self.speed_mps is not None:
+            return float(self.speed_mps)
+        return {"forward": 2.0, "coaster": 6.0}.get(self.scene, 0.0)
+
+    def to_dict(self) -> dict:
+        return {
+            "scene": self.scene,
+            "seconds": self.seconds,
+            "fps": self.fps,
+            "size": list(self.size),
+            "layout": self.layout,
+            "texture": self.texture,
+            "seed": self.seed,
+            "axis": list(self.axis),
+            "omega_dps": self.omega_dps,
+            "speed_mps": self.speed_mps,
+            "ipd_m": self.ipd_m,
+            "texture_m": self.texture_m,
+            "truth_cell_deg": self.truth_cell_deg,
+        }
+
+
+def angular_speed_dps(dirs_cam: NDArray, omega_cam_dps: NDArray, vel_cam_mps: NDArray, depth_m: NDArray) -> NDArray:
+    """Angular speed (deg/s) of static points seen along camera-frame rays.
+
+    ``|-(w_c x d) - (v_c - (v_c . d) d) / r|`` (derivation in the module docstring).
+
+    Parameters
+    ----------
+    dirs_cam : ndarray, shape (..., 3), unit rays in the camera frame
+    omega_cam_dps : ndarray, shape (3,), camera angular velocity in the camera frame, deg/s
+    vel_cam_mps : ndarray, shape (3,), eye velocity in the camera frame, m/s
+    depth_m : ndarray, shape (...), distance to the point along each ray (inf allowed)
+
+    Returns
+    -------
+    ndarray, shape (...), float64, deg/s
+    """
+    d = np.asarray(dirs_cam, float)
+    w = np.radians(np.asarray(omega_cam_dps, float))
+    v = np.asarray(vel_cam_mps, float)
+    rot = -np.cross(w, d)
+    vd = d @ v
+    trans = -(v - vd[..., None] * d) / np.asarray(depth_m, float)[..., None]
+    return np.degrees(np.linalg.norm(rot + trans, axis=-1))
+
+
+@dataclass(frozen=True)
+class _Box:
+    lo: tuple[float, float, float]
+    hi: tuple[float, float, float]
+
+    def intersect(self, origin: NDArray, dirs: NDArray) -> tuple[NDArray, NDArray]:
+        """Distance along unit rays ``(..., 3)`` from an inside ``origin`` to the box, and
+        the face hit (0..5: -x, +x, -y, +y, -z, +z)."""
+        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t_hi = (hi - origin) / dirs
+            t_lo = (lo - origin) / dirs
+        t = np.where(dirs > 0, t_hi, np.where(dirs < 0, t_lo, np.inf))
+        axis = np.argmin(t, axis=-1)
+        dist = np.take_along_axis(t, axis[..., None], -1)[..., 0]
+        face = 2 * axis + (np.take_along_axis(dirs, axis[..., None], -1)[..., 0] > 0)
+        return dist, face
+
+    def contains(self, p: NDArray, margin: float = 0.0) -> bool:
+        return bool(np.all(p > np.asarray(self.lo) + margin) and np.all(p < np.asarray(self.hi) - margin))
+
+
+class SynthScene:
+    """A camera trajectory through a static world, with rendering and analytic flow.
+
+    Built by :func:`make_scene` from a :class:`SynthConfig`. Times in seconds.
+    """
+
+    def __init__(self, cfg: SynthConfig, texture: NDArray[np.uint8], texture_name: str):
+        self.cfg = cfg
+        self.texture_name = texture_name
+        W, H = cfg.size
+        self._pixel_rad = math.pi / H
+        if cfg.scene == "rotate":
+            self.box = None
+            th, tw = texture.shape[:2]
+            if (tw, th) != (W, H):
+                interp = cv2.INTER_AREA if tw > W else cv2.INTER_CUBIC
+                texture = cv2.resize(texture, (W, H), interpolation=interp)
+            self._pano_padded = self._pad_equirect(texture)
+            a = np.asarray(cfg.axis) / np.linalg.norm(cfg.axis)
+            self._axis = a
+        else:
+            self._mip = _MipTexture(texture)
+            self._texels_per_m = texture.shape[1] / cfg.texture_m
+            rng = np.random.default_rng(cfg.seed)
+            self._face_offset = rng.uniform(0, 2 * cfg.texture_m, (6, 2))
+            if cfg.scene == "forward":
+                length = cfg.speed * cfg.seconds
+                self.box = _Box((-3.0, -1.6, -20.0), (3.0, 2.4, length + 30.0))
+            else:
+                self.box = _Box((-17.0, -4.5, -12.5), (17.0, 6.5, 12.5))
+                self._coaster_w = self._coaster_rate(cfg.speed)
+            for t in np.linspace(0, cfg.seconds, 64):
+                if not self.box.contains(self.position(float(t)), margin=0.2):
+                    raise InputError(
+                        f"{cfg.scene}: the camera leaves the room at t = {t:.2f} s; lower --speed or --seconds"
+                    )
+
+    # -- trajectory ------------------------------------------------------------------
+    @staticmethod
+    def _lissajous(s: NDArray | float) -> tuple[NDArray, NDArray, NDArray]:
+        """Coaster path at phase ``s`` (radians): position, d/ds, d2/ds2 (metres)."""
+        s = np.asarray(s, float)
+        A, B, C = 12.0, 8.0, 2.0
+        p = np.stack([A * np.sin(s), C * np.sin(3 * s), B * np.sin(2 * s)], -1)
+        dp = np.stack([A * np.cos(s), 3 * C * np.cos(3 * s), 2 * B * np.cos(2 * s)], -1)
+        ddp = np.stack([-A * np.sin(s), -9 * C * np.sin(3 * s), -4 * B * np.sin(2 * s)], -1)
+        return p, dp, ddp
+
+    @classmethod
+    def _coaster_rate(cls, mean_speed: float) -> float:
+        s = np.linspace(0, 2 * np.pi, 2001)[:-1]
+        return mean_speed / float(np.mean(np.linalg.norm(cls._lissajous(s)[1], axis=-1)))
+
+    def position(self, t: float) -> NDArray[np.float64]:
+        """Rig centre ``c(t)`` in the world frame, metres."""
+        cfg = self.cfg
+        if cfg.scene == "rotate":
+            return np.zeros(3)
+        if cfg.scene == "forward":
+            return np.array([0.0, 0.0, cfg.speed * t])
+        return self._lissajous(self._coaster_w * t + 0.3)[0]
+
+    def velocity(self, t: float) -> NDArray[np.float64]:
+        """Rig velocity ``dc/dt`` in the world frame, m/s (analytic)."""
+        cfg = self.cfg
+        if cfg.scene == "rotate":
+            return np.zeros(3)
+        if cfg.scene == "forward":
+            return np.array([0.0, 0.0, cfg.speed])
+        return self._lissajous(self._coaster_w * t + 0.3)[1] * self._coaster_w
+
+    def rotation(self, t: float) -> Rotation:
+        """``R(t)``: camera-frame vectors to world-frame vectors."""
+        cfg = self.cfg
+        if cfg.scene == "rotate":
+            # The panorama turns by +omega t about the axis, so the camera by -omega t.
+            return Rotation.from_rotvec(-self._axis * math.radians(cfg.omega_dps) * t)
+        if cfg.scene == "forward":
+            return Rotation.identity()
+        w = self._coaster_w
+        _, dp, ddp = self._lissajous(w * t + 0.3)
+        vel, acc = dp * w, ddp * w * w
+        f = vel / np.linalg.norm(vel)
+        right = np.cross([0.0, 1.0, 0.0], f)
+        right /= np.linalg.norm(right)
+        up = np.cross(f, right)
+        # Bank into the turn: roll (+ right ear down) = atan(lateral acceleration / g).
+        roll = math.atan2(float(acc @ right), _G)
+        look = Rotation.from_matrix(np.stack([right, up, f], axis=1))
+        return look * Rotation.from_rotvec([0.0, 0.0, -roll])
+
+    def omega_cam_dps(self, t: float, h: float = 1e-4) -> NDArray[np.float64]:
+        """Camera angular velocity in the camera frame, deg/s (central difference of
+        the analytic ``R(t)`` with step ``h`` seconds; relative error ~1e-8)."""
+        if self.cfg.scene == "forward":
+            return np.zeros(3)
+        if self.cfg.scene == "rotate":
+            return -self._axis * self.cfg.omega_dps
+        w_world = (self.rotation(t + h) * self.rotation(t - h).inv()).as_rotvec() / (2 * h)
+        return np.degrees(self.rotation(t).inv().apply(w_world))
+
+    def eye_offset(self, eye: str) -> NDArray[np.float64]:
+        """Camera-frame offset of an eye from the rig centre, metres."""
+        half = self.cfg.ipd_m / 2.0
+        return {"mono": np.zeros(3), "left": np.array([-half, 0.0, 0.0]), "right": np.array([half, 0.0, 0.0])}[eye]
+
+    def eye_velocity_cam(self, t: float, eye: str) -> NDArray[np.float64]:
+        """Velocity of an eye in the camera frame, m/s: ``v_c + w_c x e``."""
+        v_c = self.rotation(t).inv().apply(self.velocity(t))
+        return v_c + np.cross(np.radians(self.omega_cam_dps(t)), self.eye_offset(eye))
+
+    def eye_origin(self, t: float, eye: str) -> NDArray[np.float64]:
+        return self.position(t) + self.rotation(t).apply(self.eye_offset(eye))
+
+    # -- geometry and truth ------------------------------------------------------------
+    def depth(self, t: float, dirs_cam: NDArray, eye: str = "mono") -> NDArray[np.float64]:
+        """Distance (m) to the scene along camera-frame unit rays ``(..., 3)`` (inf for
+        the panorama at infinity)."""
+        if self.box is None:
+            return np.full(np.shape(dirs_cam)[:-1], np.inf)
+        world = self.rotation(t).apply(np.asarray(dirs_cam, float).reshape(-1, 3))
+        dist, _ = self.box.intersect(self.eye_origin(t, eye), world)
+        return dist.reshape(np.shape(dirs_cam)[:-1])
+
+    def speed_dps(self, t: float, dirs_cam: NDArray, eye: str = "mono") -> NDArray[np.float64]:
+        """Analytic angular speed (deg/s) at time ``t`` of the static points seen along
+        camera-frame unit rays ``dirs_cam`` ``(..., 3)`` by ``eye`` (mono/left/right)."""
+        return angular_speed_dps(
+            dirs_cam, self.omega_cam_dps(t), self.eye_velocity_cam(t, eye), self.depth(t, dirs_cam, eye)
+        )
+
+    # -- rendering -------------------------------------------------------------------
+    _PAD = 4
+
+    @classmethod
+    def _pad_equirect(cls, img: NDArray) -> NDArray:
+        """Pad by ``_PAD`` pixels for bicubic sampling: columns wrap at the seam, rows
+        beyond a pole continue on the meridian 180 deg away."""
+        H, W = img.shape[:2]
+        p = cls._PAD
+        top = np.roll(img[p - 1 :: -1], W // 2, axis=1)
+        bottom = np.roll(img[: H - p - 1 : -1], W // 2, axis=1)
+        tall = np.concatenate([top, img, bottom], axis=0)
+        return np.ascontiguousarray(np.concatenate([tall[:, -p:], tall, tall[:, :p]], axis=1))
+
+    @functools.cached_property
+    def _cam_dirs(self) -> NDArray[np.float64]:
+        W, H = self.cfg.size
+        lon, lat = equirect_pixel_lonlat(W, H)
+        LO, LA = np.meshgrid(lon, lat)
+        return lonlat_to_dir(LO, LA)
+
+    def render_eye(self, t: float, eye: str = "mono") -> NDArray[np.uint8]:
+        """One eye's equirect frame ``(H, W, 3)`` uint8 RGB at time ``t`` seconds."""
+        R = self.rotation(t)
+        if self.box is None:
+            # Output pixel d (camera) shows the panorama at world direction R d.
+            W, H = self.cfg.size
+            lon, lat = dir_to_lonlat(R.apply(self._cam_dirs.reshape(-1, 3)))
+            x, y = lonlat_to_equirect_xy(lon, lat, W, H)
+            p = self._PAD
+            mx = (x - 0.5 + p).reshape(H, W).astype(np.float32)
+            my = (y - 0.5 + p).reshape(H, W).astype(np.float32)
+            return cv2.remap(self._pano_padded, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+        W, H = self.cfg.size
+        world = R.apply(self._cam_dirs.reshape(-1, 3))
+        origin = self.eye_origin(t, eye)
+        dist, face = self.box.intersect(origin, world)
+        hit = origin + world * dist[:, None]
+        axis = face // 2
+        # Texture coordinates (metres) on each face: x faces (z, y), y faces (x, z), z faces (x, y).
+        uu = np.where(axis == 0, hit[:, 2], hit[:, 0])
+        vv = np.where(axis == 1, hit[:, 2], hit[:, 1])
+        off = self._face_offset[face]
+        k = self._texels_per_m
+        u = (uu + off[:, 0]) * k
+        v = (-vv + off[:, 1]) * k
+        cos_inc = np.abs(np.take_along_axis(world, axis[:, None], 1)[:, 0])
+        footprint = dist * self._pixel_rad / np.sqrt(np.maximum(cos_inc, 1e-3)) * k
+        lod = np.log2(np.maximum(footprint, 1.0))
+        rgb = self._mip.sample(u.reshape(H, W), v.reshape(H, W), lod.reshape(H, W))
+        return np.clip(rgb + 0.5, 0, 255).astype(np.uint8)
+
+    def render(self, t: float) -> NDArray[np.uint8]:
+        """The clip's frame at time ``t`` (both eyes stacked for top-bottom)."""
+        eyes = self.cfg.eyes
+        imgs = [self.render_eye(t, e) for e in eyes]
+        return imgs[0] if len(imgs) == 1 else np.concatenate(imgs, axis=0)
+
+
+def make_scene(cfg: SynthConfig) -> SynthScene:
+    """Load the texture and build the scene of ``cfg``."""
+    tex, name = load_texture(cfg.texture)
+    return SynthScene(cfg, tex, name)
+
+
+# ------------------------------------------------------------------------- truth file
+@dataclass(frozen=True)
+class Truth:
+    """A loaded truth file (``OUT.truth.npz``).
+
+    speed_dps : ndarray, shape (T, n_lat, n_lon), float32, deg/s
+        Left (or mono) eye's angular speed at cell centres; row t = interval t-1 -> t.
+    speed_dps_right : same for the right eye (top-bottom clips), else None
+    lon_deg : ndarray, shape (n_lon,), cell-centre longitudes, -180 + c/2 .. 180 - c/2
+    lat_deg : ndarray, shape (n_lat,), cell-centre latitudes, from +90 - c/2 (top) down
+    time_s : ndarray, shape (T,), time at which each row is evaluated
+    meta : dict (``config``, ``trajectory``, conventions)
+    """
+
+    speed_dps: NDArray[np.float32]
+    lon_deg: NDArray[np.float64]
+    lat_deg: NDArray[np.float64]
+    time_s: NDArray[np.float64]
+    meta: dict
+    speed_dps_right: NDArray[np.float32] | None = field(default=None, repr=False)
+
+    @property
+    def config(self) -> SynthConfig:
+        c = dict(self.meta["config"])
+        c["size"] = tuple(c["size"])
+        c["axis"] = tuple(c["axis"])
+        return SynthConfig(**c)
+
+    def scene(self) -> SynthScene:
+        """Rebuild the scene (for analytic truth at any ray)."""
+        return make_scene(self.config)
+
+
+def truth_path_for(video_path: str | os.PathLike) -> Path:
+    """``OUT.mp4`` -> ``OUT.truth.npz``."""
+    p = Path(video_path)
+    return p.with_name(p.stem + ".truth.npz")
+
+
+def _interval_times(n_frames: int, fps: float) -> NDArray[np.float64]:
+    t = (np.arange(n_frames) - 0.5) / fps
+    t[0] = t[1] if n_frames > 1 else 0.0
+    return t
+
+
+def load_truth(path: str | os.PathLike) -> Truth:
+    """Read a truth file written by :func:`synthesize` (``allow_pickle=False``)."""
+    import zipfile
+
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"{p}: truth file not found")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            arrs = {k: z[k] for k in z.files}
+        meta = json.loads(str(arrs["meta"]))
+    except (zipfile.BadZipFile, ValueError, OSError, KeyError, json.JSONDecodeError) as e:
+        raise InputError(f"{p}: not a vimsim truth file ({type(e).__name__})") from None
+    if meta.get("format") != TRUTH_FORMAT or meta.get("version") != TRUTH_VERSION:
+        raise InputError(f"{p}: not a vimsim truth file version {TRUTH_VERSION}")
+    return Truth(
+        speed_dps=arrs["speed_dps"],
+        lon_deg=arrs["lon_deg"],
+        lat_deg=arrs["lat_deg"],
+        time_s=arrs["time_s"],
+        meta=meta,
+        speed_dps_right=arrs.get("speed_dps_right"),
+    )
+
+
+def _texture_hash(cfg: SynthConfig) -> str:
+    p = _bundled_texture_path() if cfg.texture is None else Path(cfg.texture)
+    return "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def synthesize(cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: bool = False) -> tuple[Path, Path]:
+    """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
+
+    Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
+    written after the video, so a truth file implies a complete video.
+    """
+    from simulator.video import VideoWriter
+
+    out = Path(out)
+    if out.suffix.lower() != ".mp4":
+        raise InputError(f"{out}: output must be an .mp4 file")
+    scene = make_scene(cfg)
+    W, H = cfg.size
+    n = cfg.n_frames
+    frame_size = (W, H * len(cfg.eyes))
+    it = range(n)
+    if progress:
+        from tqdm import tqdm
+
+        it = tqdm(it, desc=f"synth {cfg.scene}", unit="frame", leave=False)
+    with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw:
+        for k in it:
+            vw.write(scene.render(k / cfg.fps))
+
+    # Truth on the coarse grid (cell centres), per eye, per frame interval.
+    c = cfg.truth_cell_deg
+    n_lat, n_lon = int(round(180 / c)), int(round(360 / c))
+    lon_deg = -180.0 + c * (np.arange(n_lon) + 0.5)
+    lat_deg = 90.0 - c * (np.arange(n_lat) + 0.5)
+    LO, LA = np.meshgrid(np.radians(lon_deg), np.radians(lat_deg))
+    dirs = lonlat_to_dir(LO, LA)
+    times = _interval_times(n, cfg.fps)
+    fields = {e: np.empty((n, n_lat, n_lon), np.float32) for e in cfg.eyes}
+    traj = {"frame_time_s": [], "position_m": [], "quat_xyzw": [], "interval_time_s": [], "omega_cam_dps": [], "velocity_cam_mps": []}
+    for k in range(n):
+        for e in cfg.eyes:
+            fields[e][k] = scene.speed_dps(float(times[k]), dirs, e)
+        tk = k / cfg.fps
+        traj["frame_time_s"].append(tk)
+        traj["position_m"].append(scene.position(tk).round(9).tolist())
+        traj["quat_xyzw"].append(scene.rotation(tk).as_quat().round(12).tolist())
+        traj["interval_time_s"].append(float(times[k]))
+        traj["omega_cam_dps"].append(scene.omega_cam_dps(float(times[k])).round(9).tolist())
+        traj["velocity_cam_mps"].append(scene.eye_velocity_cam(float(times[k]), "mono").round(9).tolist())
+    meta = {
+        "format": TRUTH_FORMAT,
+        "version": TRUTH_VERSION,
+        "config": cfg.to_dict(),
+        "video": {"path": out.name, "width": frame_size[0], "height": frame_size[1], "fps": cfg.fps, "n_frames": n},
+        "texture": {"name": scene.texture_name, "hash": _texture_hash(cfg)},
+        "speed_mps": scene.cfg.speed,
+        "room_m": None if scene.box is None else {"lo": list(scene.box.lo), "hi": list(scene.box.hi)},
+        "eyes": list(cfg.eyes),
+        "units": "deg/s of visual angle",
+        "cells": (
+            f"speed_dps[t, i, j]: cell centre lon_deg[j] = -180 + {c:g} (j + 0.5), "
+            f"lat_deg[i] = 90 - {c:g} (i + 0.5) (row 0 at the top), camera frame = equirect frame"
+        ),
+        "time": "row t covers frames t-1 -> t, evaluated at (t - 0.5) / fps; row 0 repeats row 1",
+        "frames": "camera: +x right, +y up, +z forward; quat_xyzw/position_m: camera->world pose at frame_time_s",
+        "trajectory": traj,
+    }
+    arrays = {
+        "speed_dps": fields[cfg.eyes[0]],
+        "lon_deg": lon_deg,
+        "lat_deg": lat_deg,
+        "time_s": times,
+        "meta": np.array(json.dumps(meta)),
+    }
+    if "right" in fields:
+        arrays["speed_dps_right"] = fields["right"]
+    tpath = truth_path_for(out)
+    with atomic_output(tpath) as tmp:
+        with open(tmp, "wb") as f:
+            np.savez_compressed(f, **arrays)
+    return out, tpath
