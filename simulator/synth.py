@@ -65,21 +65,26 @@ from scipy.spatial.transform import Rotation
 
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
-from simulator.geometry import dir_to_lonlat, equirect_pixel_lonlat, lonlat_to_dir, lonlat_to_equirect_xy
+from simulator.geometry import (
+    dir_to_lonlat,
+    equirect_pixel_lonlat,
+    lonlat_to_dir,
+    lonlat_to_equirect_xy,
+)
 
 __all__ = [
-    "Scene",
     "SCENES",
+    "Scene",
     "SynthConfig",
     "SynthScene",
     "Truth",
-    "make_scene",
-    "synthesize",
-    "load_truth",
-    "truth_path_for",
-    "load_texture",
-    "procedural_panorama",
     "angular_speed_dps",
+    "load_texture",
+    "load_truth",
+    "make_scene",
+    "procedural_panorama",
+    "synthesize",
+    "truth_path_for",
 ]
 
 Scene = Literal["rotate", "forward", "coaster"]
@@ -114,7 +119,9 @@ def load_texture(path: str | os.PathLike | None = None) -> tuple[NDArray[np.uint
             im.load()
             rgb = np.asarray(im.convert("RGB"))
     except (UnidentifiedImageError, OSError, ValueError) as e:
-        raise InputError(f"{p}: texture is not a readable image ({type(e).__name__}: {e})") from None
+        raise InputError(
+            f"{p}: texture is not a readable image ({type(e).__name__}: {e})"
+        ) from None
     if rgb.shape[0] < 8 or rgb.shape[1] < 8:
         raise InputError(f"{p}: texture is {rgb.shape[1]}x{rgb.shape[0]}; need at least 8x8 pixels")
     return np.ascontiguousarray(rgb), ("bundled:" + _BUNDLED if path is None else str(p))
@@ -137,13 +144,20 @@ def procedural_panorama(size: tuple[int, int] = (1024, 512), seed: int = 0) -> N
     LO, LA = np.meshgrid(lon, lat)
     d = lonlat_to_dir(LO, LA).reshape(-1, 3)
     chans = []
-    for beta, octaves in ((0.9, (2, 4, 8, 16)), (0.9, (2, 4, 8, 16, 32)), (0.7, (4, 8, 16, 32, 64, 128)), (0.4, (16, 32, 64, 128))):
+    for beta, octaves in (
+        (0.9, (2, 4, 8, 16)),
+        (0.9, (2, 4, 8, 16, 32)),
+        (0.7, (4, 8, 16, 32, 64, 128)),
+        (0.4, (16, 32, 64, 128)),
+    ):
         acc = np.zeros(H * W)
         for f in octaves:
             n = 2 * f + 4
             lattice = rng.standard_normal((n, n, n))
             coords = (d * f + n / 2).T + rng.uniform(0, 1, (3, 1))
-            acc += ndimage.map_coordinates(lattice, coords, order=3, mode="grid-wrap") * f ** (-beta)
+            acc += ndimage.map_coordinates(lattice, coords, order=3, mode="grid-wrap") * f ** (
+                -beta
+            )
         acc = (acc - acc.mean()) / acc.std()
         chans.append(acc.reshape(H, W))
     z0, z1, z2, z3 = chans
@@ -174,7 +188,11 @@ class _MipTexture:
         levels = [tile.astype(np.float32)]
         while min(levels[-1].shape[:2]) >= 16 and all(s % 2 == 0 for s in levels[-1].shape[:2]):
             prev = levels[-1]
-            levels.append(cv2.resize(prev, (prev.shape[1] // 2, prev.shape[0] // 2), interpolation=cv2.INTER_AREA))
+            levels.append(
+                cv2.resize(
+                    prev, (prev.shape[1] // 2, prev.shape[0] // 2), interpolation=cv2.INTER_AREA
+                )
+            )
         p = self._P
         padded = [np.pad(lv, ((p, p), (p, p), (0, 0)), mode="wrap") for lv in levels]
         width = padded[0].shape[1]
@@ -261,7 +279,9 @@ class SynthConfig:
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise InputError(f"{name} must be a finite number > 0; got {v!r}")
-        if self.speed_mps is not None and not (math.isfinite(self.speed_mps) and self.speed_mps > 0):
+        if self.speed_mps is not None and not (
+            math.isfinite(self.speed_mps) and self.speed_mps > 0
+        ):
             raise InputError(f"speed must be a finite number > 0 m/s; got {self.speed_mps!r}")
         if self.n_frames < 2:
             raise InputError(
@@ -270,23 +290,33 @@ class SynthConfig:
         try:
             w, h = int(self.size[0]), int(self.size[1])
         except (TypeError, ValueError, IndexError):
-            raise InputError(f"size must be (W, H) pixels, e.g. 1024x512; got {self.size!r}") from None
+            raise InputError(
+                f"size must be (W, H) pixels, e.g. 1024x512; got {self.size!r}"
+            ) from None
         if w != 2 * h or h < 16 or h % 2:
-            raise InputError(f"equirect size must be 2:1 with an even height >= 16, e.g. 1024x512; got {w}x{h}")
+            raise InputError(
+                f"equirect size must be 2:1 with an even height >= 16, e.g. 1024x512; got {w}x{h}"
+            )
         object.__setattr__(self, "size", (w, h))
         if self.layout not in SYNTH_LAYOUTS:
-            raise InputError(f"unknown layout {self.layout!r}; expected one of {', '.join(SYNTH_LAYOUTS)}")
+            raise InputError(
+                f"unknown layout {self.layout!r}; expected one of {', '.join(SYNTH_LAYOUTS)}"
+            )
         a = np.asarray(self.axis, float)
         if a.shape != (3,) or not np.all(np.isfinite(a)) or np.linalg.norm(a) < 1e-9:
-            raise InputError(f"rotation axis must be three numbers, not all zero, e.g. 0,1,0; got {self.axis!r}")
+            raise InputError(
+                f"rotation axis must be three numbers, not all zero, e.g. 0,1,0; got {self.axis!r}"
+            )
         object.__setattr__(self, "axis", tuple(float(x) for x in a))
         n = 180.0 / self.truth_cell_deg
         if abs(n - round(n)) > 1e-6:
-            raise InputError(f"truth cell size must divide 180 degrees, e.g. 2; got {self.truth_cell_deg}")
+            raise InputError(
+                f"truth cell size must divide 180 degrees, e.g. 2; got {self.truth_cell_deg}"
+            )
 
     @property
     def n_frames(self) -> int:
-        return int(round(self.seconds * self.fps))
+        return round(self.seconds * self.fps)
 
     @property
     def eyes(self) -> tuple[str, ...]:
@@ -317,7 +347,9 @@ class SynthConfig:
         }
 
 
-def angular_speed_dps(dirs_cam: NDArray, omega_cam_dps: NDArray, vel_cam_mps: NDArray, depth_m: NDArray) -> NDArray:
+def angular_speed_dps(
+    dirs_cam: NDArray, omega_cam_dps: NDArray, vel_cam_mps: NDArray, depth_m: NDArray
+) -> NDArray:
     """Angular speed (deg/s) of static points seen along camera-frame rays.
 
     ``|-(w_c x d) - (v_c - (v_c . d) d) / r|`` (derivation in the module docstring).
@@ -361,7 +393,9 @@ class _Box:
         return dist, face
 
     def contains(self, p: NDArray, margin: float = 0.0) -> bool:
-        return bool(np.all(p > np.asarray(self.lo) + margin) and np.all(p < np.asarray(self.hi) - margin))
+        return bool(
+            np.all(p > np.asarray(self.lo) + margin) and np.all(p < np.asarray(self.hi) - margin)
+        )
 
 
 class SynthScene:
@@ -468,7 +502,11 @@ class SynthScene:
     def eye_offset(self, eye: str) -> NDArray[np.float64]:
         """Camera-frame offset of an eye from the rig centre, metres."""
         half = self.cfg.ipd_m / 2.0
-        return {"mono": np.zeros(3), "left": np.array([-half, 0.0, 0.0]), "right": np.array([half, 0.0, 0.0])}[eye]
+        return {
+            "mono": np.zeros(3),
+            "left": np.array([-half, 0.0, 0.0]),
+            "right": np.array([half, 0.0, 0.0]),
+        }[eye]
 
     def eye_velocity_cam(self, t: float, eye: str) -> NDArray[np.float64]:
         """Velocity of an eye in the camera frame, m/s: ``v_c + w_c x e``."""
@@ -492,7 +530,10 @@ class SynthScene:
         """Analytic angular speed (deg/s) at time ``t`` of the static points seen along
         camera-frame unit rays ``dirs_cam`` ``(..., 3)`` by ``eye`` (mono/left/right)."""
         return angular_speed_dps(
-            dirs_cam, self.omega_cam_dps(t), self.eye_velocity_cam(t, eye), self.depth(t, dirs_cam, eye)
+            dirs_cam,
+            self.omega_cam_dps(t),
+            self.eye_velocity_cam(t, eye),
+            self.depth(t, dirs_cam, eye),
         )
 
     # -- rendering -------------------------------------------------------------------
@@ -527,7 +568,9 @@ class SynthScene:
             p = self._PAD
             mx = (x - 0.5 + p).reshape(H, W).astype(np.float32)
             my = (y - 0.5 + p).reshape(H, W).astype(np.float32)
-            return cv2.remap(self._pano_padded, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)
+            return cv2.remap(
+                self._pano_padded, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
+            )
         W, H = self.cfg.size
         world = R.apply(self._cam_dirs.reshape(-1, 3))
         origin = self.eye_origin(t, eye)
@@ -635,7 +678,9 @@ def _texture_hash(cfg: SynthConfig) -> str:
     return "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest()
 
 
-def synthesize(cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: bool = False) -> tuple[Path, Path]:
+def synthesize(
+    cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: bool = False
+) -> tuple[Path, Path]:
     """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
 
     Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
@@ -661,14 +706,21 @@ def synthesize(cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progr
 
     # Truth on the coarse grid (cell centres), per eye, per frame interval.
     c = cfg.truth_cell_deg
-    n_lat, n_lon = int(round(180 / c)), int(round(360 / c))
+    n_lat, n_lon = round(180 / c), round(360 / c)
     lon_deg = -180.0 + c * (np.arange(n_lon) + 0.5)
     lat_deg = 90.0 - c * (np.arange(n_lat) + 0.5)
     LO, LA = np.meshgrid(np.radians(lon_deg), np.radians(lat_deg))
     dirs = lonlat_to_dir(LO, LA)
     times = _interval_times(n, cfg.fps)
     fields = {e: np.empty((n, n_lat, n_lon), np.float32) for e in cfg.eyes}
-    traj = {"frame_time_s": [], "position_m": [], "quat_xyzw": [], "interval_time_s": [], "omega_cam_dps": [], "velocity_cam_mps": []}
+    traj = {
+        "frame_time_s": [],
+        "position_m": [],
+        "quat_xyzw": [],
+        "interval_time_s": [],
+        "omega_cam_dps": [],
+        "velocity_cam_mps": [],
+    }
     for k in range(n):
         for e in cfg.eyes:
             fields[e][k] = scene.speed_dps(float(times[k]), dirs, e)
@@ -678,15 +730,25 @@ def synthesize(cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progr
         traj["quat_xyzw"].append(scene.rotation(tk).as_quat().round(12).tolist())
         traj["interval_time_s"].append(float(times[k]))
         traj["omega_cam_dps"].append(scene.omega_cam_dps(float(times[k])).round(9).tolist())
-        traj["velocity_cam_mps"].append(scene.eye_velocity_cam(float(times[k]), "mono").round(9).tolist())
+        traj["velocity_cam_mps"].append(
+            scene.eye_velocity_cam(float(times[k]), "mono").round(9).tolist()
+        )
     meta = {
         "format": TRUTH_FORMAT,
         "version": TRUTH_VERSION,
         "config": cfg.to_dict(),
-        "video": {"path": out.name, "width": frame_size[0], "height": frame_size[1], "fps": cfg.fps, "n_frames": n},
+        "video": {
+            "path": out.name,
+            "width": frame_size[0],
+            "height": frame_size[1],
+            "fps": cfg.fps,
+            "n_frames": n,
+        },
         "texture": {"name": scene.texture_name, "hash": _texture_hash(cfg)},
         "speed_mps": scene.cfg.speed,
-        "room_m": None if scene.box is None else {"lo": list(scene.box.lo), "hi": list(scene.box.hi)},
+        "room_m": None
+        if scene.box is None
+        else {"lo": list(scene.box.lo), "hi": list(scene.box.hi)},
         "eyes": list(cfg.eyes),
         "units": "deg/s of visual angle",
         "cells": (
@@ -707,7 +769,6 @@ def synthesize(cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progr
     if "right" in fields:
         arrays["speed_dps_right"] = fields["right"]
     tpath = truth_path_for(out)
-    with atomic_output(tpath) as tmp:
-        with open(tmp, "wb") as f:
-            np.savez_compressed(f, **arrays)
+    with atomic_output(tpath) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(f, **arrays)
     return out, tpath

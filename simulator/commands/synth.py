@@ -17,7 +17,9 @@ def _axis(text: str) -> tuple[float, float, float]:
         if len(parts) != 3 or not all(abs(p) < float("inf") for p in parts):
             raise ValueError
     except ValueError:
-        raise argparse.ArgumentTypeError(f"axis must be three numbers X,Y,Z, e.g. 0,1,0; got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"axis must be three numbers X,Y,Z, e.g. 0,1,0; got {text!r}"
+        ) from None
     if all(p == 0 for p in parts):
         raise argparse.ArgumentTypeError(f"axis must not be zero, e.g. 0,1,0; got {text!r}")
     return parts[0], parts[1], parts[2]
@@ -36,10 +38,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--speed m/s), coaster (a figure-eight ride with hills, turns, banking and "
         "changing speed through a textured room). See docs/synth.md.",
     )
-    p.add_argument("output", metavar="OUT.mp4", help="output clip (H.264); OUT.truth.npz is written beside it")
+    p.add_argument(
+        "output", metavar="OUT.mp4", help="output clip (H.264); OUT.truth.npz is written beside it"
+    )
     p.add_argument("--scene", required=True, choices=_SCENES, help="which motion")
-    p.add_argument("--seconds", type=positive_float, default=3.0, help="clip length, seconds (default 3)")
-    p.add_argument("--fps", type=positive_float, default=30.0, help="frames per second (default 30)")
+    p.add_argument(
+        "--seconds", type=positive_float, default=3.0, help="clip length, seconds (default 3)"
+    )
+    p.add_argument(
+        "--fps", type=positive_float, default=30.0, help="frames per second (default 30)"
+    )
     p.add_argument(
         "--size",
         type=size_wxh,
@@ -60,7 +68,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="texture image: the panorama for rotate (2:1 equirect), tiled on the walls "
         "for forward/coaster (default: the bundled procedural panorama)",
     )
-    p.add_argument("--seed", type=nonneg_int, default=0, help="texture placement on the walls (default 0)")
+    p.add_argument(
+        "--seed", type=nonneg_int, default=0, help="texture placement on the walls (default 0)"
+    )
     p.add_argument(
         "--axis",
         type=_axis,
@@ -69,7 +79,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="rotate: rotation axis in the camera frame (+x right, +y up, +z forward); "
         "default 0,1,0 (the panorama pans left)",
     )
-    p.add_argument("--omega", type=positive_float, default=30.0, metavar="DPS", help="rotate: rate, deg/s (default 30)")
+    p.add_argument(
+        "--omega",
+        type=positive_float,
+        default=30.0,
+        metavar="DPS",
+        help="rotate: rate, deg/s (default 30)",
+    )
     p.add_argument(
         "--speed",
         type=positive_float,
@@ -84,7 +100,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="DEG",
         help="cell size of the truth grid, degrees dividing 180 (default 2)",
     )
-    p.add_argument("--crf", type=nonneg_int, default=16, help="x264 quality, lower is better (default 16)")
+    p.add_argument(
+        "--crf", type=nonneg_int, default=16, help="x264 quality, lower is better (default 16)"
+    )
     p.set_defaults(func=run)
 
 
