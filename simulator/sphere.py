@@ -1,0 +1,755 @@
+"""Sphere mode: the optical flow of a frame as one angular-speed field on the sphere.
+
+The paper computes flow separately for 198-264 heavily overlapping windows per frame and
+needs a new preprocessing run for every headset FOV. Here the flow of a frame pair is
+computed once, on a few overlapping perspective *tiles* covering the sphere (a cube with
+faces a little wider than 90 deg), converted to angular speed per pixel and splatted into
+lon/lat *cells*. Any viewport (FOV, roll, asymmetric frustum) or any window grid is then a
+weighted sum over cells.
+
+Conventions (SPEC.md, :mod:`simulator.geometry`)
+------------------------------------------------
+World: +x right, +y up, +z forward (lon = 0, lat = 0); lon = atan2(x, z) increases to the
+right, lat + up. Degrees at every public boundary (``*_deg``), radians inside. Speeds are
+**deg/s of visual angle**: the angle between the ray of a pixel of frame t-1 and the ray of
+its flow target in frame t, times fps.
+
+The field
+---------
+``field_dps`` : float32, shape (T, n_lat, n_lon), deg/s. Laid out like an equirect frame:
+row ``i`` covers latitudes ``[90 - (i+1) c, 90 - i c]`` deg (row 0 at the north pole),
+column ``j`` longitudes ``[-180 + j c, -180 + (j+1) c]`` deg, ``c`` = ``cell_deg``. A cell
+holds the solid-angle-weighted mean angular speed of the content inside it at frame t-1
+(the flow from t-1 to t); frame 0 repeats frame 1 (the grid file's rule).
+
+Two EPOF definitions (do not mix them)
+--------------------------------------
+* Paper mode (:mod:`simulator.epof`): EPOF = sum_n POF_n OL_n / sum_n OL_n, an
+  overlap-weighted average of *window means*; a window far larger than the viewport still
+  contributes its whole mean.
+* Sphere mode (:func:`viewport_epof`, "exact EPOF"): the solid-angle-weighted mean angular
+  speed over the actual viewport, sum_c f_c w_c / sum_c w_c with w_c the solid angle of
+  cell c inside the viewport.
+
+They agree for uniform motion and differ in general. To compare sphere mode with paper mode
+compare like with like: :func:`window_pof` derives the paper's window matrix (window means)
+from the field for any grid preset and FOV.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import queue
+import threading
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
+from typing import Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy import sparse
+from scipy.special import ellipe
+
+from simulator.errors import InputError
+from simulator.geometry import (
+    WindowGrid,
+    _equirect_remap_coords,
+    _pad_equirect,
+    dir_to_lonlat,
+    head_rotation,
+    perspective_rays,
+)
+
+__all__ = [
+    "SphereConfig",
+    "CellGrid",
+    "Frustum",
+    "FieldEstimator",
+    "field_from_frames",
+    "field_from_video",
+    "window_pof",
+    "viewport_weights",
+    "viewport_epof",
+    "ViewportQuery",
+    "require_field",
+    "field_meta",
+    "cells_from_meta",
+]
+
+#: How a user makes a grid with a field; quoted by every "no field" error.
+MAKE_FIELD_HINT = "vimsim preprocess VIDEO -o GRID.npz --method sphere"
+
+#: Cube faces as (yaw_deg, pitch_deg): front, right, back, left, up, down.
+_CUBE = ((0.0, 0.0), (90.0, 0.0), (180.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (0.0, -90.0))
+
+DisPreset = Literal["ultrafast", "fast", "medium"]
+_DIS_PRESETS = {
+    "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+    "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
+    "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
+}
+
+#: A flow function: ``flow(prev, cur)`` with ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)``
+#: float32 pixel flow ``(dx, dy)`` from prev to cur (x right, y down).
+FlowFn = Callable[[NDArray[np.uint8], NDArray[np.uint8]], NDArray[np.float32]]
+
+
+# ---------------------------------------------------------------------------- configs
+@dataclass(frozen=True)
+class SphereConfig:
+    """How the field is computed.
+
+    tile_fov_deg : float, degrees in (90, 150)
+        FOV of each of the 6 cube-face tiles (a little wider than 90 deg so faces overlap
+        and every direction lies well inside some tile).
+    tile_size : int, pixels
+        Side of each square tile.
+    cell_deg : float, degrees
+        Cell size of the lon/lat field; must divide 180.
+    dis_preset : "ultrafast" | "fast" | "medium"
+        OpenCV DIS preset (used when no flow function is given).
+    """
+
+    tile_fov_deg: float = 110.0
+    tile_size: int = 192
+    cell_deg: float = 4.0
+    dis_preset: DisPreset = "ultrafast"
+
+    def __post_init__(self) -> None:
+        if not (90.0 < float(self.tile_fov_deg) < 150.0):
+            raise InputError(f"sphere tile FOV must be degrees in (90, 150); got {self.tile_fov_deg}")
+        if not (16 <= int(self.tile_size) <= 1024):
+            raise InputError(f"sphere tile size must be 16..1024 pixels; got {self.tile_size}")
+        object.__setattr__(self, "tile_size", int(self.tile_size))
+        CellGrid(self.cell_deg)  # validates
+        if self.dis_preset not in _DIS_PRESETS:
+            raise InputError(f"unknown DIS preset {self.dis_preset!r}; expected one of {', '.join(_DIS_PRESETS)}")
+
+    def to_dict(self) -> dict:
+        return {
+            "tile_fov_deg": float(self.tile_fov_deg),
+            "tile_size": self.tile_size,
+            "tiles": "cube",
+            "cell_deg": float(self.cell_deg),
+            "dis_preset": self.dis_preset,
+        }
+
+
+@dataclass(frozen=True)
+class CellGrid:
+    """The lon/lat cells of the field (layout in the module docstring).
+
+    cell_deg : float, degrees; must divide 180 (e.g. 2, 2.5, 3, 4, 5).
+    """
+
+    cell_deg: float = 4.0
+
+    def __post_init__(self) -> None:
+        c = float(self.cell_deg)
+        if not (0.5 <= c <= 30.0) or abs(180.0 / c - round(180.0 / c)) > 1e-6:
+            raise InputError(f"field cell size must divide 180 degrees and lie in [0.5, 30]; got {self.cell_deg}")
+        object.__setattr__(self, "cell_deg", c)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(n_lat, n_lon)``."""
+        n = int(round(180.0 / self.cell_deg))
+        return n, 2 * n
+
+    @property
+    def n_cells(self) -> int:
+        a, b = self.shape
+        return a * b
+
+    def centres_lonlat(self) -> tuple[NDArray, NDArray]:
+        """Cell-centre ``lon (n_lon,)`` and ``lat (n_lat,)`` in **radians** (row 0 north)."""
+        n_lat, n_lon = self.shape
+        c = math.radians(self.cell_deg)
+        lon = -math.pi + (np.arange(n_lon) + 0.5) * c
+        lat = math.pi / 2 - (np.arange(n_lat) + 0.5) * c
+        return lon, lat
+
+    def solid_angles(self) -> NDArray[np.float64]:
+        """Solid angle of each cell, shape ``(n_lat, n_lon)``, steradians (sums to 4 pi)."""
+        return _cell_geometry(self.cell_deg)[3].reshape(self.shape)
+
+    def index(self, lon, lat) -> NDArray[np.intp]:
+        """Flat cell index (row-major ``i_lat * n_lon + j_lon``) of lon/lat in **radians**."""
+        n_lat, n_lon = self.shape
+        c = math.radians(self.cell_deg)
+        j = np.floor((np.asarray(lon) + math.pi) / c).astype(np.intp) % n_lon
+        i = np.clip(np.floor((math.pi / 2 - np.asarray(lat)) / c).astype(np.intp), 0, n_lat - 1)
+        return i * n_lon + j
+
+
+@functools.lru_cache(maxsize=8)
+def _cell_geometry(cell_deg: float):
+    """Per-cell centre direction ``(C, 3)``, east and north unit vectors scaled by the
+    cell's half extent in radians (``(C, 3)`` each), and solid angle ``(C,)``; read-only."""
+    cg = CellGrid(cell_deg)
+    lon, lat = cg.centres_lonlat()
+    LON, LAT = np.meshgrid(lon, lat)  # (n_lat, n_lon)
+    c = math.radians(cell_deg)
+    cl, sl = np.cos(LAT), np.sin(LAT)
+    co, so = np.cos(LON), np.sin(LON)
+    centre = np.stack([cl * so, sl, cl * co], -1).reshape(-1, 3)
+    east = np.stack([co, np.zeros_like(co), -so], -1).reshape(-1, 3)
+    north = np.stack([-sl * so, cl, -sl * co], -1).reshape(-1, 3)
+    top, bot = LAT + c / 2, LAT - c / 2
+    sa = (c * (np.sin(top) - np.sin(bot))).reshape(-1)
+    # Half extents (radians) along east (at the centre latitude; polar cells are wedges,
+    # their east extent is taken at the wider edge so they never vanish) and north.
+    half_e = 0.5 * c * np.maximum(cl, np.abs(np.cos(LAT - np.sign(LAT) * c / 2))).reshape(-1)
+    half_n = np.full(sa.shape, 0.5 * c)
+    out = (centre, east * half_e[:, None], north * half_n[:, None], sa)
+    stacked = np.ascontiguousarray(np.concatenate(out[:3], axis=0).T)  # (3, 3C)
+    for a in (*out, stacked):
+        a.setflags(write=False)
+    return (*out, stacked)
+
+
+@dataclass(frozen=True)
+class Frustum:
+    """A perspective viewport in the head frame, by its four half-angles in degrees.
+
+    ``left_deg``/``right_deg``: angles of the left and right edges from the view axis
+    (both > 0, measured outward); ``down_deg``/``up_deg`` likewise. Symmetric views use
+    :meth:`symmetric`. Each angle lies in (0, 89.5].
+    """
+
+    left_deg: float
+    right_deg: float
+    down_deg: float
+    up_deg: float
+
+    def __post_init__(self) -> None:
+        for name in ("left_deg", "right_deg", "down_deg", "up_deg"):
+            v = float(getattr(self, name))
+            if not (0.0 < v <= 89.5) or not math.isfinite(v):
+                raise InputError(f"viewport half-angle {name} must be degrees in (0, 89.5]; got {v}")
+            object.__setattr__(self, name, v)
+
+    @classmethod
+    def symmetric(cls, hfov_deg: float, vfov_deg: float | None = None) -> Frustum:
+        """A centred ``hfov_deg x vfov_deg`` view (exact FOVs, degrees in (0, 179])."""
+        vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
+        for name, v in (("hfov", hfov_deg), ("vfov", vfov_deg)):
+            if not (0.0 < float(v) <= 179.0) or not math.isfinite(float(v)):
+                raise InputError(f"{name} must be degrees in (0, 179]; got {v}")
+        return cls(hfov_deg / 2.0, hfov_deg / 2.0, vfov_deg / 2.0, vfov_deg / 2.0)
+
+    @property
+    def hfov_deg(self) -> float:
+        return self.left_deg + self.right_deg
+
+    @property
+    def vfov_deg(self) -> float:
+        return self.down_deg + self.up_deg
+
+    def normals(self) -> NDArray[np.float64]:
+        """Inward unit normals ``(4, 3)`` of the four planes bounding the view (head frame)."""
+        lf, rt, dn, up = (math.radians(a) for a in (self.left_deg, self.right_deg, self.down_deg, self.up_deg))
+        return np.array(
+            [
+                [math.cos(lf), 0.0, math.sin(lf)],  # left edge: x >= -tan(lf) z
+                [-math.cos(rt), 0.0, math.sin(rt)],  # right edge
+                [0.0, math.cos(dn), math.sin(dn)],  # bottom edge
+                [0.0, -math.cos(up), math.sin(up)],  # top edge
+            ]
+        )
+
+
+# --------------------------------------------------------------------- field estimation
+class _TileGeometry:
+    """Everything about the tiles that depends only on config and frame size."""
+
+    def __init__(self, cfg: SphereConfig, equirect_size: tuple[int, int]):
+        W, H = equirect_size
+        s, fov = cfg.tile_size, cfg.tile_fov_deg
+        t = math.tan(math.radians(fov) / 2.0)
+        # Pyramid level: halve the equirect while its pixels stay finer than a tile's
+        # centre pixel (anti-aliasing for the linear remap, and a cheaper remap).
+        centre_px_deg = math.degrees(2.0 * math.atan(t / s))
+        level, w = 0, W
+        while w % 2 == 0 and (w // 2) % 2 == 0 and 360.0 / (w // 2) <= centre_px_deg and w // 2 >= 64:
+            w //= 2
+            level += 1
+        self.level = level
+        self.small_size = (W >> level, H >> level)
+        dirs, sa = perspective_rays((s, s), fov, fov)
+        R = head_rotation([a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0).as_matrix()  # (6, 3, 3)
+        world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (6, s, s, 3)
+        mx, my = _equirect_remap_coords(world.reshape(len(_CUBE) * s, s, 3), *self.small_size)
+        self.m1, self.m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
+        # Flow is evaluated on every ``stride``-th pixel (DIS presets with finest scale 2
+        # compute flow at 1/4 resolution and upsample it: stride 2 loses nothing).
+        st = self.stride = 2 if cfg.dis_preset in ("ultrafast", "fast") else 1
+        sel = np.arange(st // 2, s, st)
+        self.sel = slice(st // 2, None, st)
+        # Tile-plane coordinates (tan units) of the evaluated pixel centres, x right, y up.
+        u = ((np.arange(s) + 0.5) / s * 2.0 - 1.0) * t
+        uu, vv = np.meshgrid(u[sel], -u[sel])
+        self.u0 = uu.astype(np.float32)
+        self.v0 = vv.astype(np.float32)
+        self.r2 = (1.0 + uu * uu + vv * vv).astype(np.float32)
+        self.px_to_tan = np.float32(2.0 * t / s)
+        # Blend weight: 1 inside the cube face each tile owns (max(|u|,|v|) <= 1), falling
+        # smoothly to 0 at the tile border where flow is least reliable.
+        m = np.maximum(np.abs(uu), np.abs(vv))
+        x = np.clip((t - m) / (t - 1.0), 0.0, 1.0)
+        blend = x * x * (3.0 - 2.0 * x)
+        sub_world = world[:, sel][:, :, sel].reshape(-1, 3)
+        w = np.broadcast_to(sa[np.ix_(sel, sel)] * blend, (len(_CUBE), len(sel), len(sel))).reshape(-1)
+        lon, lat = dir_to_lonlat(sub_world)
+        cells = CellGrid(cfg.cell_deg)
+        idx = cells.index(lon, lat)
+        self.splat = _splat_matrix(idx, w, cells, sub_world)
+        self.n_tiles = len(_CUBE)
+        self.size = s
+
+    def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        f = np.ascontiguousarray(frame)
+        for _ in range(self.level):
+            f = cv2.pyrDown(f)
+        out = cv2.remap(_pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return out.reshape(self.n_tiles, self.size, self.size)
+
+    def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
+        """Angle (radians) between each evaluated pixel's ray and its flow target's ray;
+        flow is ``(N, s, s, 2)`` pixels (x right, y down) -> ``(N, s', s')``."""
+        if self.stride > 1:
+            flow = flow[:, self.sel, self.sel]
+        du = flow[..., 0] * self.px_to_tan
+        dv = flow[..., 1] * -self.px_to_tan
+        # a = (u0, v0, 1), b = a + (du, dv, 0): |a x b| and a . b in closed form.
+        cz = self.u0 * dv - self.v0 * du
+        cross = np.sqrt(du * du + dv * dv + cz * cz)
+        dot = self.r2 + self.u0 * du + self.v0 * dv
+        return np.arctan2(cross, dot)
+
+
+def _splat_matrix(idx: NDArray, w: NDArray, cells: CellGrid, dirs: NDArray) -> sparse.csr_matrix:
+    """Sparse ``(C, n_px)`` matrix: cell value = weighted mean of its pixels' values; cells
+    no pixel centre falls in (tiny polar cells) copy their nearest covered cell."""
+    C = cells.n_cells
+    keep = w > 0
+    idx, w, cols = idx[keep], w[keep], np.nonzero(keep)[0]
+    tot = np.bincount(idx, weights=w, minlength=C)
+    covered = tot > 0
+    rows, vals = idx, w / tot[idx]
+    if not covered.all():
+        centre = _cell_geometry(cells.cell_deg)[0]
+        empty = np.nonzero(~covered)[0]
+        full = np.nonzero(covered)[0]
+        near = full[np.argmax(centre[empty] @ centre[full].T, axis=1)]
+        # Rows of the nearest covered cells, re-labelled.
+        m = sparse.csr_matrix((vals, (rows, cols)), shape=(C, len(keep)))
+        extra = m[near].tocoo()
+        rows = np.concatenate([rows, empty[extra.row]])
+        cols = np.concatenate([cols, extra.col])
+        vals = np.concatenate([vals, extra.data])
+    return sparse.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(C, len(keep)))
+
+
+def _dis_flow(preset: DisPreset) -> FlowFn:
+    dis = cv2.DISOpticalFlow_create(_DIS_PRESETS[preset])
+
+    def flow(prev: NDArray[np.uint8], cur: NDArray[np.uint8]) -> NDArray[np.float32]:
+        return np.stack([dis.calc(a, b, None) for a, b in zip(prev, cur)])
+
+    return flow
+
+
+class FieldEstimator:
+    """Per-frame angular-speed fields of an equirect video, one frame pair at a time.
+
+    Parameters
+    ----------
+    equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
+    fps : float, frames per second (converts per-frame angles to deg/s)
+    config : SphereConfig
+    flow : FlowFn, optional
+        Pixel flow between two stacks of tiles; default OpenCV DIS with
+        ``config.dis_preset``.
+
+    Use :meth:`tiles` on each decoded gray frame, then :meth:`field` on consecutive tile
+    stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.
+    """
+
+    def __init__(self, equirect_size: tuple[int, int], fps: float, config: SphereConfig = SphereConfig(), *, flow: FlowFn | None = None):
+        if not (fps > 0) or not math.isfinite(fps):
+            raise InputError(f"frame rate must be > 0 frames/s; got {fps}")
+        W, H = int(equirect_size[0]), int(equirect_size[1])
+        if W != 2 * H or W % 4:
+            raise InputError(f"sphere mode needs a 2:1 equirect frame with width divisible by 4; got {W}x{H}")
+        self.config = config
+        self.cells = CellGrid(config.cell_deg)
+        self.fps = float(fps)
+        self.equirect_size = (W, H)
+        self._geo = _tile_geometry(config, (W, H))
+        self._flow = flow or _dis_flow(config.dis_preset)
+
+    def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
+        """The 6 cube-face tiles ``(6, s, s)`` uint8 of a gray ``(H, W)`` frame."""
+        if frame.shape[:2] != self.equirect_size[::-1] or frame.ndim != 2:
+            raise InputError(f"expected a gray {self.equirect_size[0]}x{self.equirect_size[1]} frame; got shape {frame.shape}")
+        return self._geo.tiles(frame)
+
+    def field(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> NDArray[np.float32]:
+        """Angular-speed field ``(n_lat, n_lon)`` float32 in deg/s of the flow prev -> cur."""
+        fl = self._flow(prev_tiles, tiles)
+        ang = self._geo.angles(fl)
+        f = self._geo.splat @ ang.reshape(-1)
+        return (f * np.float32(math.degrees(1.0) * self.fps)).astype(np.float32).reshape(self.cells.shape)
+
+
+@functools.lru_cache(maxsize=4)
+def _tile_geometry(cfg: SphereConfig, equirect_size: tuple[int, int]) -> _TileGeometry:
+    return _TileGeometry(cfg, equirect_size)
+
+
+def field_from_frames(
+    frames: Iterable[NDArray[np.uint8]],
+    equirect_size: tuple[int, int],
+    fps: float,
+    config: SphereConfig = SphereConfig(),
+    *,
+    flow: FlowFn | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> NDArray[np.float32]:
+    """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a sequence of gray equirect frames.
+
+    Frame t holds the flow from frame t-1 to t; frame 0 repeats frame 1. Needs >= 2 frames.
+    ``progress(n)`` is called after each frame with the number of frames done.
+    """
+    est = FieldEstimator(equirect_size, fps, config, flow=flow)
+    out: list[NDArray[np.float32]] = []
+    prev = None
+    for k, fr in enumerate(frames):
+        t = est.tiles(fr)
+        if prev is not None:
+            out.append(est.field(prev, t))
+        prev = t
+        if progress is not None:
+            progress(k + 1)
+    if not out:
+        raise InputError("sphere mode needs at least 2 frames; got " + ("0" if prev is None else "1"))
+    return np.stack([out[0], *out])
+
+
+def _prefetch(it: Iterator, fn: Callable, depth: int = 4) -> Iterator:
+    """Run ``fn(item)`` for the items of ``it`` in a background thread (decode and tile
+    extraction release the GIL), yielding results in order; errors are re-raised here."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    END = object()
+
+    def work() -> None:
+        try:
+            for x in it:
+                if stop.is_set():
+                    return
+                q.put(fn(x))
+            q.put(END)
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer
+            q.put(e)
+
+    th = threading.Thread(target=work, daemon=True)
+    th.start()
+    try:
+        while True:
+            x = q.get()
+            if x is END:
+                return
+            if isinstance(x, BaseException):
+                raise x
+            yield x
+    finally:
+        stop.set()
+        while th.is_alive():
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                th.join(0.01)
+
+
+def field_from_video(
+    path,
+    config: SphereConfig = SphereConfig(),
+    *,
+    layout: str = "mono",
+    eye: str = "left",
+    start: int = 0,
+    end: int | None = None,
+    flow: FlowFn | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[NDArray[np.float32], object]:
+    """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
+
+    Decodes the Y plane only; decoding and tile extraction run in a background thread
+    while flow and splatting run in the caller's. Frames ``start <= k < end``.
+    """
+    from simulator.video import iter_frames, probe
+
+    info = probe(path)
+    if not info.is_video:
+        raise InputError(f"{path}: sphere mode needs a video; got a still image")
+    w, h = info.eye_size(layout)
+    est = FieldEstimator((w, h), info.fps, config, flow=flow)
+    frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
+    out: list[NDArray[np.float32]] = []
+    prev = None
+    n = 0
+    for t in _prefetch(frames, est.tiles):
+        if prev is not None:
+            out.append(est.field(prev, t))
+        prev = t
+        n += 1
+        if progress is not None:
+            progress(n)
+    if not out:
+        raise InputError(f"{path}: sphere mode needs at least 2 frames; got {n}")
+    return np.stack([out[0], *out]), info
+
+
+# --------------------------------------------------------------------- integration
+def viewport_weights(
+    cell_deg: float,
+    rot: NDArray[np.float64],
+    frustum: Frustum,
+) -> NDArray[np.float32]:
+    """Solid angle (steradians) of each cell inside each of ``M`` viewports.
+
+    Parameters
+    ----------
+    cell_deg : float, degrees; the field's cell size
+    rot : ndarray, shape (M, 3, 3) or (3, 3)
+        Head -> world rotation matrices (:func:`simulator.geometry.head_rotation`).
+    frustum : Frustum
+
+    Returns
+    -------
+    ndarray, shape (M, n_cells) or (n_cells,), float32
+        ``A_c * coverage_c``; coverage is, per bounding plane, a linear ramp of the
+        signed distance of the cell centre to the plane across the cell's extent along the
+        plane normal (exact for a cell cut parallel to its sides), multiplied over the 4
+        planes. Sums to the viewport's solid angle within ~1% for cells <= 5 deg.
+    """
+    centre, e_half, n_half, sa, stacked = _cell_geometry(float(cell_deg))
+    rot = np.asarray(rot, np.float64)
+    single = rot.ndim == 2
+    R = rot[None] if single else rot
+    normals = np.einsum("mij,kj->mki", R, frustum.normals())  # (M, 4, 3) world
+    C = len(sa)
+    d = (normals.reshape(-1, 3) @ stacked).reshape(len(R), 4, 3, C)
+    hw = np.abs(d[:, :, 1]) + np.abs(d[:, :, 2]) + 1e-9
+    cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
+    w = (cov * sa).astype(np.float32)
+    return w[0] if single else w
+
+
+def _rotations(yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
+    return head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
+
+
+def viewport_epof(
+    field_dps: NDArray,
+    cell_deg: float,
+    yaw_deg,
+    pitch_deg,
+    roll_deg=0.0,
+    *,
+    frustum: Frustum | None = None,
+    hfov_deg: float = 107.0,
+    vfov_deg: float | None = None,
+    chunk: int = 256,
+) -> NDArray[np.float64]:
+    """Exact EPOF (deg/s): mean angular speed over the actual viewport of each frame.
+
+    Parameters
+    ----------
+    field_dps : ndarray, shape (T, n_lat, n_lon)
+        Per-frame fields (deg/s), layout of the module docstring.
+    cell_deg : float, degrees
+    yaw_deg, pitch_deg, roll_deg : array_like, shape (T,) or scalars, degrees
+        Head orientation at each frame (yaw + right, pitch + up, roll + right ear down).
+    frustum : Frustum, optional
+        The viewport; default ``Frustum.symmetric(hfov_deg, vfov_deg)``.
+
+    Returns
+    -------
+    ndarray, shape (T,), float64
+    """
+    f = np.asarray(field_dps)
+    cells = CellGrid(cell_deg)
+    if f.ndim != 3 or f.shape[1:] != cells.shape:
+        raise InputError(f"field must be (T, {cells.shape[0]}, {cells.shape[1]}) for {cell_deg} deg cells; got {f.shape}")
+    fr = frustum or Frustum.symmetric(hfov_deg, vfov_deg)
+    T = f.shape[0]
+    yaw, pitch, roll = (np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg))
+    flat = f.reshape(T, -1)
+    out = np.empty(T)
+    for a in range(0, T, chunk):
+        b = min(T, a + chunk)
+        w = viewport_weights(cell_deg, _rotations(yaw[a:b], pitch[a:b], roll[a:b]), fr)
+        out[a:b] = np.einsum("mc,mc->m", flat[a:b].astype(np.float32), w) / w.sum(axis=1)
+    return out
+
+
+class ViewportQuery:
+    """Fast single-viewport queries of one frame's field (a few tens of microseconds).
+
+    Precomputes the cell geometry and keeps the frustum's normals; each query rotates 4
+    normals, evaluates the coverage of the cells in the latitude band the viewport can
+    reach and returns the weighted mean.
+
+    Parameters
+    ----------
+    cell_deg : float, degrees
+    frustum : Frustum
+    """
+
+    def __init__(self, cell_deg: float, frustum: Frustum):
+        self.cells = CellGrid(cell_deg)
+        self.frustum = frustum
+        centre, e_half, n_half, sa, _ = _cell_geometry(self.cells.cell_deg)
+        n_lat, n_lon = self.cells.shape
+        self._n_lon = n_lon
+        self._normals = frustum.normals()
+        # Angular radius of the viewport around its axis (corner direction), radians.
+        tl, tr, td, tu = (math.tan(math.radians(a)) for a in (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg))
+        self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(self.cells.cell_deg)
+        # Per-row stacks (3, 3 * n_lon) for a contiguous latitude band.
+        self._stack = np.stack(
+            [np.concatenate([centre[i * n_lon : (i + 1) * n_lon], e_half[i * n_lon : (i + 1) * n_lon], n_half[i * n_lon : (i + 1) * n_lon]]).T for i in range(n_lat)]
+        )  # (n_lat, 3, 3 n_lon)
+        self._sa = sa.reshape(n_lat, n_lon)
+        self._lat_c = self.cells.centres_lonlat()[1]
+
+    def weights(self, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> tuple[slice, NDArray[np.float64]]:
+        """``(rows, w)``: the latitude rows the viewport can reach and the cell weights
+        there, ``w`` shape ``(n_rows, n_lon)`` (steradians)."""
+        R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
+        n = self._normals @ R.T  # (4, 3) world
+        axis_lat = math.asin(max(-1.0, min(1.0, R[1, 2])))
+        lo, hi = axis_lat - self._radius, axis_lat + self._radius
+        c = math.radians(self.cells.cell_deg)
+        i0 = max(0, int((math.pi / 2 - hi) / c))
+        i1 = min(len(self._lat_c), int((math.pi / 2 - lo) / c) + 1)
+        st = self._stack[i0:i1]  # (r, 3, 3L)
+        d = (n @ st).reshape(i1 - i0, 4, 3, self._n_lon)  # broadcasting matmul: (r, 4, 3L)
+        hw = np.abs(d[:, :, 1]) + np.abs(d[:, :, 2]) + 1e-9
+        cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
+        return slice(i0, i1), cov * self._sa[i0:i1]
+
+    def __call__(self, field_dps: NDArray, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> float:
+        """Exact EPOF (deg/s) of one ``(n_lat, n_lon)`` field for one head orientation."""
+        rows, w = self.weights(yaw_deg, pitch_deg, roll_deg)
+        return float((field_dps[rows] * w).sum() / w.sum())
+
+
+# ------------------------------------------------------------------- window matrix
+@functools.lru_cache(maxsize=8)
+def _window_matrices(grid: WindowGrid, cell_deg: float, rays: int = 48):
+    """``(Wdps (N, C), Kpx (N, C))``: solid-angle weights of each window over the cells
+    (normalised to sum 1), and the pixel-measure kernel (mean over window pixels of
+    window-pixels per radian of angular displacement, per cell, divided by pixel count)."""
+    fr = Frustum.symmetric(grid.hfov_deg, grid.vfov_deg)
+    pitch, yaw = grid.centres_deg()
+    R = _rotations(yaw.ravel(), pitch.ravel(), 0.0)
+    Wd = viewport_weights(cell_deg, R, fr).astype(np.float64)
+    Wd /= Wd.sum(axis=1, keepdims=True)
+    # Pixel measure: sample rays uniformly in window pixels (each stands for the same
+    # number of pixels); the gnomonic image stretches an angular displacement by
+    # 1/cos^2(theta) radially and 1/cos(theta) tangentially; for flow of any direction
+    # the mean stretch is (2/pi) E(sin^2 theta) / cos^2 theta (complete elliptic
+    # integral): an isotropic-direction approximation.
+    w, h = grid.size
+    nx = ny = rays
+    dirs, _ = perspective_rays((nx, ny), grid.hfov_deg, grid.vfov_deg)
+    cos_t = dirs[..., 2].astype(np.float64).reshape(-1)
+    stretch = (2.0 / math.pi) * ellipe(1.0 - cos_t**2) / cos_t**2
+    ppt = math.sqrt((w / (2.0 * math.tan(math.radians(grid.hfov_deg) / 2.0))) * (h / (2.0 * math.tan(math.radians(grid.vfov_deg) / 2.0))))
+    world = np.einsum("nij,pj->npi", R, dirs.reshape(-1, 3).astype(np.float64))
+    lon, lat = dir_to_lonlat(world)
+    cells = CellGrid(cell_deg)
+    idx = cells.index(lon, lat)  # (N, p)
+    N, p = idx.shape
+    K = np.zeros((N, cells.n_cells))
+    np.add.at(K, (np.repeat(np.arange(N), p), idx.ravel()), np.tile(stretch * ppt / p, N))
+    for a in (Wd, K):
+        a.setflags(write=False)
+    return Wd, K
+
+
+def window_pof(field_dps: NDArray, cell_deg: float, grid: WindowGrid, fps: float) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """The paper's window matrix derived from the field, for any grid preset and FOV.
+
+    Parameters
+    ----------
+    field_dps : ndarray, shape (T, n_lat, n_lon), deg/s
+    cell_deg : float, degrees
+    grid : WindowGrid (any preset, FOV and window size)
+    fps : float, frames/s (for the pixel measure)
+
+    Returns
+    -------
+    pof_dps : ndarray, shape (T, P, Y), float32
+        Solid-angle-weighted mean angular speed of each window (deg/s), as paper mode.
+    pof_px : ndarray, shape (T, P, Y), float32
+        The paper's pixel measure (mean flow magnitude in window pixels per frame),
+        **approximate**: it assumes flow directions are isotropic within each cell.
+    """
+    f = np.asarray(field_dps, np.float64)
+    cells = CellGrid(cell_deg)
+    if f.ndim != 3 or f.shape[1:] != cells.shape:
+        raise InputError(f"field must be (T, {cells.shape[0]}, {cells.shape[1]}); got {f.shape}")
+    Wd, K = _window_matrices(grid, cells.cell_deg)
+    T = f.shape[0]
+    flat = f.reshape(T, -1)
+    P, Y = grid.shape
+    dps = (flat @ Wd.T).reshape(T, P, Y)
+    px = (flat @ K.T * (math.radians(1.0) / fps)).reshape(T, P, Y)
+    return dps.astype(np.float32), px.astype(np.float32)
+
+
+# ---------------------------------------------------------------------- grid files
+def field_meta(config: SphereConfig, dtype: str = "float16") -> dict:
+    """The ``meta["field"]`` entry of a grid file holding a field."""
+    return {
+        "method": "sphere",
+        "units": "deg/s",
+        "dtype": dtype,
+        "cell_deg": float(config.cell_deg),
+        "layout": "lonlat: row 0 = north (lat centre 90 - (i + 0.5) * cell_deg), column 0 = lon -180 (centre -180 + (j + 0.5) * cell_deg); cell = solid-angle mean speed of content at frame t-1, flow t-1 -> t",
+        "tiles": config.to_dict(),
+    }
+
+
+def cells_from_meta(meta: dict, *, source: str = "grid") -> CellGrid:
+    """The :class:`CellGrid` described by ``meta["field"]``; InputError if absent/invalid."""
+    fm = meta.get("field") if isinstance(meta, dict) else None
+    if not isinstance(fm, dict) or "cell_deg" not in fm:
+        raise InputError(f"{source}: grid has no sphere-mode field; make one with `{MAKE_FIELD_HINT}`")
+    return CellGrid(float(fm["cell_deg"]))
+
+
+def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
+    """``(field_dps (T, n_lat, n_lon) float32, cells)`` of a loaded grid file.
+
+    Raises InputError (one line, with the command that makes one) if the grid has no
+    field, e.g. a paper-mode grid.
+    """
+    src = getattr(grid_file, "path", "") or "grid"
+    f = getattr(grid_file, "field_dps", None)
+    if f is None:
+        raise InputError(f"{src}: grid has no sphere-mode field (made in paper mode?); make one with `{MAKE_FIELD_HINT}`")
+    cells = cells_from_meta(grid_file.meta, source=src)
+    f = np.asarray(f)
+    if f.ndim != 3 or f.shape[1:] != cells.shape:
+        raise InputError(f"{src}: field_dps has shape {f.shape}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells")
+    if not np.all(np.isfinite(f)):
+        raise InputError(f"{src}: field_dps has non-finite values")
+    return f.astype(np.float32, copy=False), cells
