@@ -63,19 +63,19 @@ from simulator.geometry import (
 )
 
 __all__ = [
-    "SphereConfig",
     "CellGrid",
-    "Frustum",
     "FieldEstimator",
+    "Frustum",
+    "SphereConfig",
+    "ViewportQuery",
+    "cells_from_meta",
     "field_from_frames",
     "field_from_video",
-    "window_pof",
-    "viewport_weights",
-    "viewport_epof",
-    "ViewportQuery",
-    "require_field",
     "field_meta",
-    "cells_from_meta",
+    "require_field",
+    "viewport_epof",
+    "viewport_weights",
+    "window_pof",
 ]
 
 #: How a user makes a grid with a field; quoted by every "no field" error.
@@ -119,13 +119,17 @@ class SphereConfig:
 
     def __post_init__(self) -> None:
         if not (90.0 < float(self.tile_fov_deg) < 150.0):
-            raise InputError(f"sphere tile FOV must be degrees in (90, 150); got {self.tile_fov_deg}")
+            raise InputError(
+                f"sphere tile FOV must be degrees in (90, 150); got {self.tile_fov_deg}"
+            )
         if not (16 <= int(self.tile_size) <= 1024):
             raise InputError(f"sphere tile size must be 16..1024 pixels; got {self.tile_size}")
         object.__setattr__(self, "tile_size", int(self.tile_size))
         CellGrid(self.cell_deg)  # validates
         if self.dis_preset not in _DIS_PRESETS:
-            raise InputError(f"unknown DIS preset {self.dis_preset!r}; expected one of {', '.join(_DIS_PRESETS)}")
+            raise InputError(
+                f"unknown DIS preset {self.dis_preset!r}; expected one of {', '.join(_DIS_PRESETS)}"
+            )
 
     def to_dict(self) -> dict:
         return {
@@ -149,13 +153,15 @@ class CellGrid:
     def __post_init__(self) -> None:
         c = float(self.cell_deg)
         if not (0.5 <= c <= 30.0) or abs(180.0 / c - round(180.0 / c)) > 1e-6:
-            raise InputError(f"field cell size must divide 180 degrees and lie in [0.5, 30]; got {self.cell_deg}")
+            raise InputError(
+                f"field cell size must divide 180 degrees and lie in [0.5, 30]; got {self.cell_deg}"
+            )
         object.__setattr__(self, "cell_deg", c)
 
     @property
     def shape(self) -> tuple[int, int]:
         """``(n_lat, n_lon)``."""
-        n = int(round(180.0 / self.cell_deg))
+        n = round(180.0 / self.cell_deg)
         return n, 2 * n
 
     @property
@@ -228,7 +234,9 @@ class Frustum:
         for name in ("left_deg", "right_deg", "down_deg", "up_deg"):
             v = float(getattr(self, name))
             if not (0.0 < v <= 89.5) or not math.isfinite(v):
-                raise InputError(f"viewport half-angle {name} must be degrees in (0, 89.5]; got {v}")
+                raise InputError(
+                    f"viewport half-angle {name} must be degrees in (0, 89.5]; got {v}"
+                )
             object.__setattr__(self, name, v)
 
     @classmethod
@@ -250,7 +258,9 @@ class Frustum:
 
     def normals(self) -> NDArray[np.float64]:
         """Inward unit normals ``(4, 3)`` of the four planes bounding the view (head frame)."""
-        lf, rt, dn, up = (math.radians(a) for a in (self.left_deg, self.right_deg, self.down_deg, self.up_deg))
+        lf, rt, dn, up = (
+            math.radians(a) for a in (self.left_deg, self.right_deg, self.down_deg, self.up_deg)
+        )
         return np.array(
             [
                 [math.cos(lf), 0.0, math.sin(lf)],  # left edge: x >= -tan(lf) z
@@ -273,13 +283,17 @@ class _TileGeometry:
         # centre pixel (anti-aliasing for the linear remap, and a cheaper remap).
         centre_px_deg = math.degrees(2.0 * math.atan(t / s))
         level, w = 0, W
-        while w % 2 == 0 and (w // 2) % 2 == 0 and 360.0 / (w // 2) <= centre_px_deg and w // 2 >= 64:
+        while (
+            w % 2 == 0 and (w // 2) % 2 == 0 and 360.0 / (w // 2) <= centre_px_deg and w // 2 >= 64
+        ):
             w //= 2
             level += 1
         self.level = level
         self.small_size = (W >> level, H >> level)
         dirs, sa = perspective_rays((s, s), fov, fov)
-        R = head_rotation([a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0).as_matrix()  # (6, 3, 3)
+        R = head_rotation(
+            [a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0
+        ).as_matrix()  # (6, 3, 3)
         world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (6, s, s, 3)
         mx, my = _equirect_remap_coords(world.reshape(len(_CUBE) * s, s, 3), *self.small_size)
         self.m1, self.m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
@@ -301,7 +315,9 @@ class _TileGeometry:
         x = np.clip((t - m) / (t - 1.0), 0.0, 1.0)
         blend = x * x * (3.0 - 2.0 * x)
         sub_world = world[:, sel][:, :, sel].reshape(-1, 3)
-        w = np.broadcast_to(sa[np.ix_(sel, sel)] * blend, (len(_CUBE), len(sel), len(sel))).reshape(-1)
+        w = np.broadcast_to(sa[np.ix_(sel, sel)] * blend, (len(_CUBE), len(sel), len(sel))).reshape(
+            -1
+        )
         lon, lat = dir_to_lonlat(sub_world)
         cells = CellGrid(cfg.cell_deg)
         idx = cells.index(lon, lat)
@@ -313,7 +329,9 @@ class _TileGeometry:
         f = np.ascontiguousarray(frame)
         for _ in range(self.level):
             f = cv2.pyrDown(f)
-        out = cv2.remap(_pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out = cv2.remap(
+            _pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+        )
         return out.reshape(self.n_tiles, self.size, self.size)
 
     def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
@@ -378,12 +396,21 @@ class FieldEstimator:
     stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.
     """
 
-    def __init__(self, equirect_size: tuple[int, int], fps: float, config: SphereConfig = SphereConfig(), *, flow: FlowFn | None = None):
+    def __init__(
+        self,
+        equirect_size: tuple[int, int],
+        fps: float,
+        config: SphereConfig = SphereConfig(),
+        *,
+        flow: FlowFn | None = None,
+    ):
         if not (fps > 0) or not math.isfinite(fps):
             raise InputError(f"frame rate must be > 0 frames/s; got {fps}")
         W, H = int(equirect_size[0]), int(equirect_size[1])
         if W != 2 * H or W % 4:
-            raise InputError(f"sphere mode needs a 2:1 equirect frame with width divisible by 4; got {W}x{H}")
+            raise InputError(
+                f"sphere mode needs a 2:1 equirect frame with width divisible by 4; got {W}x{H}"
+            )
         self.config = config
         self.cells = CellGrid(config.cell_deg)
         self.fps = float(fps)
@@ -394,7 +421,9 @@ class FieldEstimator:
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The 6 cube-face tiles ``(6, s, s)`` uint8 of a gray ``(H, W)`` frame."""
         if frame.shape[:2] != self.equirect_size[::-1] or frame.ndim != 2:
-            raise InputError(f"expected a gray {self.equirect_size[0]}x{self.equirect_size[1]} frame; got shape {frame.shape}")
+            raise InputError(
+                f"expected a gray {self.equirect_size[0]}x{self.equirect_size[1]} frame; got shape {frame.shape}"
+            )
         return self._geo.tiles(frame)
 
     def field(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> NDArray[np.float32]:
@@ -402,7 +431,11 @@ class FieldEstimator:
         fl = self._flow(prev_tiles, tiles)
         ang = self._geo.angles(fl)
         f = self._geo.splat @ ang.reshape(-1)
-        return (f * np.float32(math.degrees(1.0) * self.fps)).astype(np.float32).reshape(self.cells.shape)
+        return (
+            (f * np.float32(math.degrees(1.0) * self.fps))
+            .astype(np.float32)
+            .reshape(self.cells.shape)
+        )
 
 
 @functools.lru_cache(maxsize=4)
@@ -435,7 +468,9 @@ def field_from_frames(
         if progress is not None:
             progress(k + 1)
     if not out:
-        raise InputError("sphere mode needs at least 2 frames; got " + ("0" if prev is None else "1"))
+        raise InputError(
+            "sphere mode needs at least 2 frames; got " + ("0" if prev is None else "1")
+        )
     return np.stack([out[0], *out])
 
 
@@ -537,7 +572,7 @@ def viewport_weights(
         plane normal (exact for a cell cut parallel to its sides), multiplied over the 4
         planes. Sums to the viewport's solid angle within ~1% for cells <= 5 deg.
     """
-    centre, e_half, n_half, sa, stacked = _cell_geometry(float(cell_deg))
+    _centre, _e_half, _n_half, sa, stacked = _cell_geometry(float(cell_deg))
     rot = np.asarray(rot, np.float64)
     single = rot.ndim == 2
     R = rot[None] if single else rot
@@ -585,10 +620,14 @@ def viewport_epof(
     f = np.asarray(field_dps)
     cells = CellGrid(cell_deg)
     if f.ndim != 3 or f.shape[1:] != cells.shape:
-        raise InputError(f"field must be (T, {cells.shape[0]}, {cells.shape[1]}) for {cell_deg} deg cells; got {f.shape}")
+        raise InputError(
+            f"field must be (T, {cells.shape[0]}, {cells.shape[1]}) for {cell_deg} deg cells; got {f.shape}"
+        )
     fr = frustum or Frustum.symmetric(hfov_deg, vfov_deg)
     T = f.shape[0]
-    yaw, pitch, roll = (np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg))
+    yaw, pitch, roll = (
+        np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg)
+    )
     flat = f.reshape(T, -1)
     out = np.empty(T)
     for a in range(0, T, chunk):
@@ -619,16 +658,32 @@ class ViewportQuery:
         self._n_lon = n_lon
         self._normals = frustum.normals()
         # Angular radius of the viewport around its axis (corner direction), radians.
-        tl, tr, td, tu = (math.tan(math.radians(a)) for a in (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg))
-        self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(self.cells.cell_deg)
+        tl, tr, td, tu = (
+            math.tan(math.radians(a))
+            for a in (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg)
+        )
+        self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(
+            self.cells.cell_deg
+        )
         # Per-row stacks (3, 3 * n_lon) for a contiguous latitude band.
         self._stack = np.stack(
-            [np.concatenate([centre[i * n_lon : (i + 1) * n_lon], e_half[i * n_lon : (i + 1) * n_lon], n_half[i * n_lon : (i + 1) * n_lon]]).T for i in range(n_lat)]
+            [
+                np.concatenate(
+                    [
+                        centre[i * n_lon : (i + 1) * n_lon],
+                        e_half[i * n_lon : (i + 1) * n_lon],
+                        n_half[i * n_lon : (i + 1) * n_lon],
+                    ]
+                ).T
+                for i in range(n_lat)
+            ]
         )  # (n_lat, 3, 3 n_lon)
         self._sa = sa.reshape(n_lat, n_lon)
         self._lat_c = self.cells.centres_lonlat()[1]
 
-    def weights(self, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> tuple[slice, NDArray[np.float64]]:
+    def weights(
+        self, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0
+    ) -> tuple[slice, NDArray[np.float64]]:
         """``(rows, w)``: the latitude rows the viewport can reach and the cell weights
         there, ``w`` shape ``(n_rows, n_lon)`` (steradians)."""
         R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
@@ -644,7 +699,9 @@ class ViewportQuery:
         cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
         return slice(i0, i1), cov * self._sa[i0:i1]
 
-    def __call__(self, field_dps: NDArray, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0) -> float:
+    def __call__(
+        self, field_dps: NDArray, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0
+    ) -> float:
         """Exact EPOF (deg/s) of one ``(n_lat, n_lon)`` field for one head orientation."""
         rows, w = self.weights(yaw_deg, pitch_deg, roll_deg)
         return float((field_dps[rows] * w).sum() / w.sum())
@@ -671,7 +728,10 @@ def _window_matrices(grid: WindowGrid, cell_deg: float, rays: int = 48):
     dirs, _ = perspective_rays((nx, ny), grid.hfov_deg, grid.vfov_deg)
     cos_t = dirs[..., 2].astype(np.float64).reshape(-1)
     stretch = (2.0 / math.pi) * ellipe(1.0 - cos_t**2) / cos_t**2
-    ppt = math.sqrt((w / (2.0 * math.tan(math.radians(grid.hfov_deg) / 2.0))) * (h / (2.0 * math.tan(math.radians(grid.vfov_deg) / 2.0))))
+    ppt = math.sqrt(
+        (w / (2.0 * math.tan(math.radians(grid.hfov_deg) / 2.0)))
+        * (h / (2.0 * math.tan(math.radians(grid.vfov_deg) / 2.0)))
+    )
     world = np.einsum("nij,pj->npi", R, dirs.reshape(-1, 3).astype(np.float64))
     lon, lat = dir_to_lonlat(world)
     cells = CellGrid(cell_deg)
@@ -684,7 +744,9 @@ def _window_matrices(grid: WindowGrid, cell_deg: float, rays: int = 48):
     return Wd, K
 
 
-def window_pof(field_dps: NDArray, cell_deg: float, grid: WindowGrid, fps: float) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+def window_pof(
+    field_dps: NDArray, cell_deg: float, grid: WindowGrid, fps: float
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
     """The paper's window matrix derived from the field, for any grid preset and FOV.
 
     Parameters
@@ -732,7 +794,9 @@ def cells_from_meta(meta: dict, *, source: str = "grid") -> CellGrid:
     """The :class:`CellGrid` described by ``meta["field"]``; InputError if absent/invalid."""
     fm = meta.get("field") if isinstance(meta, dict) else None
     if not isinstance(fm, dict) or "cell_deg" not in fm:
-        raise InputError(f"{source}: grid has no sphere-mode field; make one with `{MAKE_FIELD_HINT}`")
+        raise InputError(
+            f"{source}: grid has no sphere-mode field; make one with `{MAKE_FIELD_HINT}`"
+        )
     return CellGrid(float(fm["cell_deg"]))
 
 
@@ -745,11 +809,15 @@ def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
     src = getattr(grid_file, "path", "") or "grid"
     f = getattr(grid_file, "field_dps", None)
     if f is None:
-        raise InputError(f"{src}: grid has no sphere-mode field (made in paper mode?); make one with `{MAKE_FIELD_HINT}`")
+        raise InputError(
+            f"{src}: grid has no sphere-mode field (made in paper mode?); make one with `{MAKE_FIELD_HINT}`"
+        )
     cells = cells_from_meta(grid_file.meta, source=src)
     f = np.asarray(f)
     if f.ndim != 3 or f.shape[1:] != cells.shape:
-        raise InputError(f"{src}: field_dps has shape {f.shape}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells")
+        raise InputError(
+            f"{src}: field_dps has shape {f.shape}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells"
+        )
     if not np.all(np.isfinite(f)):
         raise InputError(f"{src}: field_dps has non-finite values")
     return f.astype(np.float32, copy=False), cells
