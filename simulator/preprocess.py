@@ -36,9 +36,11 @@ import itertools
 import json
 import math
 import os
+import queue
 import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -208,6 +210,51 @@ def _load_checkpoint(path: Path, identity: dict) -> tuple[list, list]:
     return list(dps), list(px)
 
 
+def _prefetch(items: Iterator, fn: Callable, depth: int = 2) -> Iterator:
+    """Yield ``fn(item)`` for each item, computed ahead in a background thread (decoding
+    and window extraction of frame t+1 overlap the flow of frame t). Exceptions raised
+    there are re-raised here; closing the generator stops the thread."""
+    q: queue.Queue = queue.Queue(maxsize=depth)
+    stop = threading.Event()
+    done = object()
+
+    def put(x) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(x, timeout=0.1)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            for it in items:
+                if not put((fn(it), None)):
+                    break
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer
+            put((None, e))
+        finally:
+            close = getattr(items, "close", None)
+            if close is not None:
+                close()
+            put((done, None))
+
+    th = threading.Thread(target=produce, name="vimsim-decode", daemon=True)
+    th.start()
+    try:
+        while True:
+            val, err = q.get()
+            if err is not None:
+                raise err
+            if val is done:
+                return
+            yield val
+    finally:
+        stop.set()
+        th.join()
+
+
 def _frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
     fps = info.fps
     if not (start_s >= 0 and math.isfinite(start_s)):
@@ -349,10 +396,10 @@ def preprocess_video(
     row = first_row - 1
     pool = ThreadPoolExecutor(n_threads) if len(chunks) > 1 or not backend.thread_safe else None
     try:
-        for frame in iter_frames(
+        frames = iter_frames(
             video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
-        ):
-            win = extractor(frame).reshape(n_win, h, w)
+        )
+        for win in _prefetch(frames, lambda f: extractor(f).reshape(n_win, h, w)):
             if prev_win is None:
                 prev_win = win
                 continue
