@@ -19,15 +19,14 @@ from pathlib import Path
 
 import numpy as np
 from PIL import Image
-from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from preprocess_accuracy import OUT, PANO, make_rotation_video  # noqa: E402
+from preprocess_accuracy import OUT, PANO, make_rotation_video
 
-from simulator.flow import make_backend  # noqa: E402
-from simulator.geometry import WindowExtractor, grid_preset  # noqa: E402
-from simulator.preprocess import WindowFlowReducer, preprocess_video  # noqa: E402
-from simulator.video import iter_frames  # noqa: E402
+from simulator.flow import make_backend
+from simulator.geometry import WindowExtractor, grid_preset
+from simulator.preprocess import WindowFlowReducer, preprocess_video
+from simulator.video import iter_frames
 
 GOAL_FPS = 3.0
 PAPER_S_PER_FRAME = 6.0 * 264  # 6 s per viewport-frame, 264 windows
@@ -58,23 +57,36 @@ def main(argv=None) -> int:
 
     t0 = time.perf_counter()
     preprocess_video(
-        vid, OUT / "speed.npz", grid=grid, flow=args.flow, threads=args.threads,
-        progress=False, on_frame=hook,
+        vid,
+        OUT / "speed.npz",
+        grid=grid,
+        flow=args.flow,
+        threads=args.threads,
+        progress=False,
+        on_frame=hook,
     )
     total = time.perf_counter() - t0
     steady = (len(stamps) - 1) / (stamps[-1] - stamps[0])
-    print(f"input {vid.name}: 2048x1024 H.264, {args.frames} frames; grid {grid.n_windows} windows "
-          f"of {grid.size[0]}x{grid.size[1]} px; flow {args.flow}")
-    print(f"end to end: {args.frames / total:.2f} frames/s incl. start-up ({total:.1f} s); "
-          f"steady {steady:.2f} frames/s = {1000 / steady:.0f} ms/frame "
-          f"= {1000 / steady / grid.n_windows:.2f} ms per window pair")
+    print(
+        f"input {vid.name}: 2048x1024 H.264, {args.frames} frames; grid {grid.n_windows} windows "
+        f"of {grid.size[0]}x{grid.size[1]} px; flow {args.flow}"
+    )
+    print(
+        f"end to end: {args.frames / total:.2f} frames/s incl. start-up ({total:.1f} s); "
+        f"steady {steady:.2f} frames/s = {1000 / steady:.0f} ms/frame "
+        f"= {1000 / steady / grid.n_windows:.2f} ms per window pair"
+    )
     cpu = (cpu_stamps[-1] - cpu_stamps[0]) / (len(stamps) - 1)
-    print(f"CPU time {cpu * 1000:.0f} ms/frame (all threads); CPU-bound rate on 2 free cores "
-          f"<= {2 / cpu:.2f} frames/s (load average now {os.getloadavg()[0]:.1f}: other "
-          "processes share the 2 cores, so the wall-clock rate above is a lower bound)")
+    print(
+        f"CPU time {cpu * 1000:.0f} ms/frame (all threads); CPU-bound rate on 2 free cores "
+        f"<= {2 / cpu:.2f} frames/s (load average now {os.getloadavg()[0]:.1f}: other "
+        "processes share the 2 cores, so the wall-clock rate above is a lower bound)"
+    )
     print(f"ratio to goal ({GOAL_FPS:g} frames/s): {steady / GOAL_FPS:.2f}")
-    print(f"paper: {PAPER_S_PER_FRAME:.0f} s/frame (6 s per viewport-frame x 264); "
-          f"ours {1 / steady:.3f} s/frame: {PAPER_S_PER_FRAME * steady:,.0f}x faster")
+    print(
+        f"paper: {PAPER_S_PER_FRAME:.0f} s/frame (6 s per viewport-frame x 264); "
+        f"ours {1 / steady:.3f} s/frame: {PAPER_S_PER_FRAME * steady:,.0f}x faster"
+    )
 
     # Per-stage profile, one thread, mean over the frames.
     ex = WindowExtractor(grid, (2048, 1024))
@@ -99,8 +111,12 @@ def main(argv=None) -> int:
     t_flow /= n - 1
     t_red /= n - 1
     print("stage profile (CPU ms/frame, all threads; one caller thread):")
-    for name, v in (("decode (Y plane)", t_dec), ("extract 264 windows", t_ext), ("flow", t_flow),
-                    ("reduce (deg/s, px)", t_red)):
+    for name, v in (
+        ("decode (Y plane)", t_dec),
+        ("extract 264 windows", t_ext),
+        ("flow", t_flow),
+        ("reduce (deg/s, px)", t_red),
+    ):
         print(f"  {name:<22}{v * 1000:8.1f}")
     print(f"  {'sum':<22}{(t_dec + t_ext + t_flow + t_red) * 1000:8.1f}")
     return 0
