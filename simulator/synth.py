@@ -251,7 +251,8 @@ class SynthConfig:
     seed : int, varies the texture placement on the walls
     axis : (x, y, z), rotate: rotation axis in the camera frame (+y up = a yaw pan)
     omega_dps : float, rotate: rotation rate in deg/s (> 0); the panorama turns
-        right-handedly about ``axis`` (``axis = (0, 1, 0)`` moves the image to the left)
+        right-handedly about ``axis``: ``axis = (0, 1, 0)`` turns +z toward +x, so
+        the content moves right (toward +lon), as if the camera turned left
     speed_mps : float, forward: camera speed in m/s; coaster: mean speed along the path
     ipd_m : float, stereo eye separation in metres (64 mm)
     texture_m : float, metres covered by the texture's width on the walls

@@ -77,7 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=(0.0, 1.0, 0.0),
         metavar="X,Y,Z",
         help="rotate: rotation axis in the camera frame (+x right, +y up, +z forward); "
-        "default 0,1,0 (the panorama pans left)",
+        "default 0,1,0 (right-handed: the content moves right, toward +lon)",
     )
     p.add_argument(
         "--omega",
