@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-__all__ = ["ffmpeg_exe", "v360_filter", "v360_view", "v360_time_ms"]
+__all__ = ["ffmpeg_exe", "v360_filter", "v360_time_ms", "v360_view"]
 
 
 @functools.lru_cache(maxsize=1)
@@ -69,10 +69,25 @@ def v360_view(
         img = np.repeat(img[..., None], 3, axis=2)
     H, W = img.shape[:2]
     cmd = [
-        ffmpeg_exe(), "-v", "error", "-hide_banner",
-        "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{W}x{H}", "-i", "-",
-        "-vf", v360_filter(yaw_deg, pitch_deg, roll_deg, hfov_deg, vfov_deg, size, interp),
-        "-f", "rawvideo", "-pix_fmt", "rgb24", "-",
+        ffmpeg_exe(),
+        "-v",
+        "error",
+        "-hide_banner",
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-s",
+        f"{W}x{H}",
+        "-i",
+        "-",
+        "-vf",
+        v360_filter(yaw_deg, pitch_deg, roll_deg, hfov_deg, vfov_deg, size, interp),
+        "-f",
+        "rawvideo",
+        "-pix_fmt",
+        "rgb24",
+        "-",
     ]
     r = subprocess.run(cmd, input=img.tobytes(), capture_output=True, check=False)
     if r.returncode != 0:
@@ -106,8 +121,22 @@ def v360_time_ms(
 
         def run(vf: str) -> float:
             cmd = [
-                ffmpeg_exe(), "-v", "error", "-f", "rawvideo", "-pix_fmt", "rgb24",
-                "-s", f"{W}x{H}", "-i", raw, "-vf", vf, "-f", "null", "-",
+                ffmpeg_exe(),
+                "-v",
+                "error",
+                "-f",
+                "rawvideo",
+                "-pix_fmt",
+                "rgb24",
+                "-s",
+                f"{W}x{H}",
+                "-i",
+                raw,
+                "-vf",
+                vf,
+                "-f",
+                "null",
+                "-",
             ]
             best = float("inf")
             for _ in range(3):
@@ -119,3 +148,77 @@ def v360_time_ms(
         t_with = run(v360_filter(30.0, 10.0, 0.0, hfov_deg, vfov_deg, size))
         t_without = run("format=gbrp")
     return (t_with - t_without) / n * 1e3
+
+
+# ------------------------------------------------------------------------------ measures
+def psnr(a: np.ndarray, b: np.ndarray) -> float:
+    """PSNR in dB of two uint8 images (all pixels and channels; inf when identical)."""
+    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
+    return float("inf") if mse == 0 else 10.0 * np.log10(255.0**2 / mse)
+
+
+def tile_displacement(
+    a: np.ndarray, b: np.ndarray, *, tile: int = 32, min_std: float = 4.0
+) -> np.ndarray:
+    """Local displacement (px) of ``b`` relative to ``a`` by phase correlation on
+    ``tile x tile`` tiles (Hann window, OpenCV ``phaseCorrelate``) of the gray images.
+
+    Tiles with a gray-level standard deviation below ``min_std`` (flat sky, black bars:
+    no texture to correlate) are skipped. Returns ``(n, 2)`` ``(dx, dy)`` per tile.
+    """
+    import cv2
+
+    def gray(x):
+        return (cv2.cvtColor(x, cv2.COLOR_RGB2GRAY) if x.ndim == 3 else x).astype(np.float32)
+
+    ga, gb = gray(a), gray(b)
+    win = cv2.createHanningWindow((tile, tile), cv2.CV_32F)
+    out = []
+    for r in range(0, ga.shape[0] - tile + 1, tile):
+        for c in range(0, ga.shape[1] - tile + 1, tile):
+            ta, tb = ga[r : r + tile, c : c + tile], gb[r : r + tile, c : c + tile]
+            if ta.std() < min_std or tb.std() < min_std:
+                continue
+            (dx, dy), _ = cv2.phaseCorrelate(ta, tb, win)
+            out.append((dx, dy))
+    return np.array(out, float).reshape(-1, 2)
+
+
+def compare_with_v360(
+    img: np.ndarray,
+    yaw_deg: float,
+    pitch_deg: float,
+    roll_deg: float = 0.0,
+    *,
+    hfov_deg: float = 90.0,
+    size: tuple[int, int] = (256, 256),
+    interp: str = "lagrange",
+    roll_beyond_deg: float = 30.0,
+) -> dict:
+    """Our view and v360's of one orientation: PSNR (dB) and median tile displacement (px).
+
+    For ``|yaw| > roll_beyond_deg`` v360 drifts with yaw (a quirk of the reference,
+    measured in bench/v360_agreement.py), so the panorama is rolled by a whole number of
+    columns ``k = round(yaw / 360 * W)`` and v360 looks at yaw 0 while we look at the
+    exact yaw ``k * 360 / W`` of the unrolled panorama (the same view on the sphere).
+    """
+    from simulator.geometry import extract_view
+
+    W = img.shape[1]
+    ref_img, ref_yaw, our_yaw = img, yaw_deg, yaw_deg
+    if abs(yaw_deg) > roll_beyond_deg:
+        k = round(yaw_deg / 360.0 * W)
+        ref_img, ref_yaw, our_yaw = np.roll(img, -k, axis=1), 0.0, k * 360.0 / W
+    ref = v360_view(ref_img, ref_yaw, pitch_deg, roll_deg, hfov_deg=hfov_deg, size=size)
+    ours = extract_view(
+        img, our_yaw, pitch_deg, roll_deg, hfov_deg=hfov_deg, size=size, interp=interp
+    )
+    d = tile_displacement(ours, ref)
+    mag = np.hypot(d[:, 0], d[:, 1]) if len(d) else np.array([np.nan])
+    return {
+        "psnr_db": psnr(ours, ref),
+        "disp_px": float(np.median(mag)),
+        "n_tiles": len(d),
+        "ours": ours,
+        "ref": ref,
+    }

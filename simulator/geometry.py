@@ -52,29 +52,29 @@ from scipy.spatial.transform import Rotation
 from simulator.errors import InputError
 
 __all__ = [
-    "Layout",
-    "Eye",
-    "LAYOUTS",
     "EYES",
-    "head_rotation",
-    "head_angles_deg",
-    "lonlat_to_dir",
+    "GRID_PRESETS",
+    "INTERPS",
+    "LAYOUTS",
+    "Eye",
+    "Interp",
+    "Layout",
+    "WindowExtractor",
+    "WindowGrid",
+    "check_equirect_aspect",
     "dir_to_lonlat",
     "equirect_pixel_lonlat",
-    "lonlat_to_equirect_xy",
-    "perspective_rays",
-    "perspective_map",
-    "sample_equirect",
     "extract_view",
-    "rotate_equirect",
-    "split_eye",
-    "check_equirect_aspect",
-    "WindowGrid",
-    "GRID_PRESETS",
     "grid_preset",
-    "WindowExtractor",
-    "Interp",
-    "INTERPS",
+    "head_angles_deg",
+    "head_rotation",
+    "lonlat_to_dir",
+    "lonlat_to_equirect_xy",
+    "perspective_map",
+    "perspective_rays",
+    "rotate_equirect",
+    "sample_equirect",
+    "split_eye",
 ]
 
 Layout = Literal["mono", "top-bottom", "side-by-side"]
@@ -510,9 +510,9 @@ class WindowGrid:
             raise InputError(
                 f"grid pitch range must satisfy -90 <= min <= max <= 90; got {self.pitch_min_deg}..{self.pitch_max_deg}"
             )
-        yaw = self.yaw_start_deg + self.yaw_step_deg * np.arange(int(round(n_yaw)))
+        yaw = self.yaw_start_deg + self.yaw_step_deg * np.arange(round(n_yaw))
         yaw = (yaw + 180.0) % 360.0 - 180.0
-        n_p = int(math.floor((self.pitch_max_deg - self.pitch_min_deg) / self.pitch_step_deg + 1e-9)) + 1
+        n_p = math.floor((self.pitch_max_deg - self.pitch_min_deg) / self.pitch_step_deg + 1e-9) + 1
         pitch = self.pitch_min_deg + self.pitch_step_deg * np.arange(n_p)
         yaw.setflags(write=False)
         pitch.setflags(write=False)
@@ -553,8 +553,8 @@ class WindowGrid:
 
 
 GRID_PRESETS: dict[str, dict] = {
-    "default": dict(yaw_step_deg=15.0, pitch_step_deg=7.5, pitch_min_deg=-37.5, pitch_max_deg=37.5),
-    "paper-198": dict(yaw_step_deg=20.0, pitch_step_deg=7.5, pitch_min_deg=-37.5, pitch_max_deg=37.5),
+    "default": {"yaw_step_deg": 15.0, "pitch_step_deg": 7.5, "pitch_min_deg": -37.5, "pitch_max_deg": 37.5},
+    "paper-198": {"yaw_step_deg": 20.0, "pitch_step_deg": 7.5, "pitch_min_deg": -37.5, "pitch_max_deg": 37.5},
 }
 
 

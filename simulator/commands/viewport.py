@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from simulator.commands._types import fov_deg, nonneg_int, size_wxh
 from simulator.errors import InputError
 
-__all__ = ["register", "run", "DEFAULT_SIZE", "DEFAULT_FOV_DEG"]
+__all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
 
 #: Preview size (width, height) in pixels and FOV in degrees (HTC Vive Pro Eye: 107 x 107).
 DEFAULT_SIZE = (512, 512)
@@ -23,9 +24,13 @@ def _angle_deg(text: str) -> float:
     try:
         v = float(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an angle in degrees, e.g. -30.5; got {text!r}") from None
-    if v != v or abs(v) == float("inf"):
-        raise argparse.ArgumentTypeError(f"expected a finite angle in degrees, e.g. 30; got {text!r}")
+        raise argparse.ArgumentTypeError(
+            f"expected an angle in degrees, e.g. -30.5; got {text!r}"
+        ) from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(
+            f"expected a finite angle in degrees, e.g. 30; got {text!r}"
+        )
     return v
 
 
@@ -42,28 +47,70 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "See docs/geometry.md.",
     )
     p.add_argument("src", metavar="SRC", help="equirect image (.jpg, .png, ...) or video")
-    p.add_argument("-o", "--output", metavar="OUT.png", required=True, help="output PNG (written atomically)")
-    p.add_argument("--yaw", type=_angle_deg, required=True, metavar="D", help="degrees, + turns right")
-    p.add_argument("--pitch", type=_angle_deg, required=True, metavar="D", help="degrees, + looks up")
-    p.add_argument("--roll", type=_angle_deg, default=0.0, metavar="D", help="degrees, + right ear down (default 0)")
     p.add_argument(
-        "--fov", type=fov_deg, default=None, metavar="D",
+        "-o", "--output", metavar="OUT.png", required=True, help="output PNG (written atomically)"
+    )
+    p.add_argument(
+        "--yaw", type=_angle_deg, required=True, metavar="D", help="degrees, + turns right"
+    )
+    p.add_argument(
+        "--pitch", type=_angle_deg, required=True, metavar="D", help="degrees, + looks up"
+    )
+    p.add_argument(
+        "--roll",
+        type=_angle_deg,
+        default=0.0,
+        metavar="D",
+        help="degrees, + right ear down (default 0)",
+    )
+    p.add_argument(
+        "--fov",
+        type=fov_deg,
+        default=None,
+        metavar="D",
         help=f"horizontal and vertical FOV, degrees in (0, 180) (default {DEFAULT_FOV_DEG:g})",
     )
-    p.add_argument("--hfov", type=fov_deg, default=None, metavar="D", help="horizontal FOV, degrees (with --vfov)")
-    p.add_argument("--vfov", type=fov_deg, default=None, metavar="D", help="vertical FOV, degrees (with --hfov)")
     p.add_argument(
-        "--size", type=size_wxh, default=DEFAULT_SIZE, metavar="WxH",
+        "--hfov",
+        type=fov_deg,
+        default=None,
+        metavar="D",
+        help="horizontal FOV, degrees (with --vfov)",
+    )
+    p.add_argument(
+        "--vfov",
+        type=fov_deg,
+        default=None,
+        metavar="D",
+        help="vertical FOV, degrees (with --hfov)",
+    )
+    p.add_argument(
+        "--size",
+        type=size_wxh,
+        default=DEFAULT_SIZE,
+        metavar="WxH",
         help=f"output size in pixels, e.g. 1440x1600 (default {DEFAULT_SIZE[0]}x{DEFAULT_SIZE[1]})",
     )
-    p.add_argument("--frame", type=nonneg_int, default=0, metavar="N", help="video frame index from 0 (default 0)")
     p.add_argument(
-        "--layout", choices=_LAYOUTS, default="mono",
+        "--frame",
+        type=nonneg_int,
+        default=0,
+        metavar="N",
+        help="video frame index from 0 (default 0)",
+    )
+    p.add_argument(
+        "--layout",
+        choices=_LAYOUTS,
+        default="mono",
         help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left (default mono)",
     )
-    p.add_argument("--eye", choices=_EYES, default="left", help="eye of a stereo source (default left)")
     p.add_argument(
-        "--interp", choices=_INTERPS, default="cubic",
+        "--eye", choices=_EYES, default="left", help="eye of a stereo source (default left)"
+    )
+    p.add_argument(
+        "--interp",
+        choices=_INTERPS,
+        default="cubic",
         help="cubic = OpenCV bicubic (as the window grid); lagrange = ffmpeg v360's cubic (default cubic)",
     )
     p.set_defaults(func=run)
@@ -91,16 +138,26 @@ def run(args: argparse.Namespace) -> int:
     info = video.probe(args.src)
     w, h = info.eye_size(args.layout)  # checks 2:1 per eye (SAR-aware) and the layout
     if info.is_video and args.frame >= info.n_frames:
-        raise InputError(f"{args.src}: has {info.n_frames} frames; --frame {args.frame} is beyond the last")
+        raise InputError(
+            f"{args.src}: has {info.n_frames} frames; --frame {args.frame} is beyond the last"
+        )
     if not info.is_video and args.frame != 0:
         raise InputError(f"{args.src}: a still image has only frame 0; got --frame {args.frame}")
     eye = video.read_frame(args.src, args.frame, layout=args.layout, eye=args.eye)
     if eye.shape[:2] != (h, w):
-        raise InputError(f"{args.src}: decoded eye is {eye.shape[1]}x{eye.shape[0]}; expected {w}x{h}")
+        raise InputError(
+            f"{args.src}: decoded eye is {eye.shape[1]}x{eye.shape[0]}; expected {w}x{h}"
+        )
     view = geometry.extract_view(
-        eye, args.yaw, args.pitch, args.roll, hfov_deg=hfov, vfov_deg=vfov, size=args.size, interp=args.interp
+        eye,
+        args.yaw,
+        args.pitch,
+        args.roll,
+        hfov_deg=hfov,
+        vfov_deg=vfov,
+        size=args.size,
+        interp=args.interp,
     )
     with atomic_output(args.output) as tmp:
         Image.fromarray(view).save(tmp, format="PNG")
     return 0
-
