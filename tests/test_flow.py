@@ -1,0 +1,150 @@
+"""Flow backends: zero flow on identical frames, known translations, the TorchScript
+interface and its validation, backend parsing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from simulator.errors import InputError
+from simulator.flow import DISFlow, FarnebackFlow, TorchFlow, make_backend
+
+
+def _texture(h: int = 128, w: int = 128, seed: int = 0) -> np.ndarray:
+    """Smooth random texture (uint8), enough structure for any flow method."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    t = rng.random((h // 4, w // 4)).astype(np.float32)
+    t = cv2.resize(t, (w, h), interpolation=cv2.INTER_CUBIC)
+    t = cv2.GaussianBlur(t, (0, 0), 1.0)
+    return np.clip((t - t.min()) / (t.max() - t.min()) * 255, 0, 255).astype(np.uint8)
+
+
+def _shift(img: np.ndarray, dx: float, dy: float) -> np.ndarray:
+    """Content moved by (+dx right, +dy down) with sub-pixel bicubic sampling."""
+    import cv2
+
+    M = np.float32([[1, 0, dx], [0, 1, dy]])
+    return cv2.warpAffine(
+        img, M, img.shape[::-1], flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REFLECT
+    )
+
+
+@pytest.mark.parametrize(
+    "backend",
+    [DISFlow("ultrafast"), DISFlow("fast"), FarnebackFlow()],
+    ids=lambda b: b.describe().get("preset", b.name),
+)
+def test_identical_frames_give_zero_flow(backend):
+    a = np.stack([_texture(seed=1), _texture(seed=2)])
+    f = backend(a, a.copy())
+    assert f.shape == (2, 128, 128, 2) and f.dtype == np.float32
+    # Farneback's polynomial expansion leaves small values in the outermost rows/columns.
+    assert np.abs(f[:, 8:-8, 8:-8]).max() < 1e-3
+    assert np.abs(f).mean() < 1e-2
+
+
+@pytest.mark.parametrize(
+    "backend",
+    [DISFlow("ultrafast"), DISFlow("fast"), FarnebackFlow()],
+    ids=lambda b: b.describe().get("preset", b.name),
+)
+@pytest.mark.parametrize("dx,dy", [(1.5, 0.0), (-0.7, 2.2)])
+def test_known_translation(backend, dx, dy):
+    img = _texture()
+    f = backend(img[None], _shift(img, dx, dy)[None])[0]
+    inner = f[16:-16, 16:-16].reshape(-1, 2)
+    # Mean error of the recovered translation below 0.15 px (borders excluded).
+    assert np.abs(np.median(inner[:, 0]) - dx) < 0.15
+    assert np.abs(np.median(inner[:, 1]) - dy) < 0.15
+
+
+def test_dis_deterministic_and_thread_local():
+    import threading
+
+    img = _texture()
+    b = DISFlow()
+    ref = b(img[None], _shift(img, 1.0, 0.5)[None])
+    out = []
+    th = threading.Thread(target=lambda: out.append(b(img[None], _shift(img, 1.0, 0.5)[None])))
+    th.start()
+    th.join()
+    assert np.array_equal(ref, out[0])
+
+
+def test_bad_input_shapes():
+    with pytest.raises(ValueError, match="uint8"):
+        DISFlow()(np.zeros((1, 8, 8), np.float32), np.zeros((1, 8, 8), np.float32))
+
+
+@pytest.mark.parametrize("spec", ["lucas", "dis:slowest", "farneback:x", "torch:"])
+def test_make_backend_rejects(spec):
+    with pytest.raises(InputError):
+        make_backend(spec)
+
+
+def test_make_backend_names():
+    assert make_backend("dis").describe()["preset"] == "ultrafast"
+    assert make_backend("dis:fast").describe()["preset"] == "fast"
+    assert make_backend("farneback").name == "farneback"
+
+
+# ----------------------------------------------------------------------------- torch
+def _save_constant_model(path, dx: float, dy: float, channels: int = 2):
+    torch = pytest.importorskip("torch")
+
+    class Const(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.register_buffer("v", torch.tensor([dx, dy] + [0.0] * (channels - 2))[:channels])
+
+        def forward(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            n, _, h, w = a.shape
+            return self.v.view(1, -1, 1, 1).expand(n, -1, h, w) + 0.0 * (a[:, :1] - b[:, :1])
+
+    torch.jit.script(Const()).save(str(path))
+    return path
+
+
+def test_torch_constant_model(tmp_path):
+    p = _save_constant_model(tmp_path / "const.pt", 1.5, -0.5)
+    b = TorchFlow(p, device="cpu", batch=3)
+    a = np.stack([_texture(64, 96, s) for s in range(5)])
+    f = b(a, a)
+    assert f.shape == (5, 64, 96, 2)
+    assert np.allclose(f[..., 0], 1.5) and np.allclose(f[..., 1], -0.5)
+    assert b.describe()["method"] == "torch"
+
+
+def test_torch_conv_model_sees_input(tmp_path):
+    """A tiny traced conv net: flow = (mean of img2 - img1, 0); checks value range [0, 1]
+    and channel layout of what the backend feeds the model."""
+    torch = pytest.importorskip("torch")
+
+    class Diff(torch.nn.Module):
+        def forward(self, a, b):
+            d = (b - a).mean(dim=1, keepdim=True)
+            return torch.cat([d, torch.zeros_like(d)], dim=1)
+
+    p = tmp_path / "diff.pt"
+    torch.jit.trace(Diff(), (torch.zeros(1, 3, 8, 8), torch.zeros(1, 3, 8, 8))).save(str(p))
+    a = np.full((2, 16, 16), 51, np.uint8)
+    f = TorchFlow(p, device="cpu")(a, a + 51)
+    assert np.allclose(f[..., 0], 0.2, atol=1e-6) and np.allclose(f[..., 1], 0.0)
+
+
+def test_torch_not_a_flow_model(tmp_path):
+    p = _save_constant_model(tmp_path / "one.pt", 1.0, 0.0, channels=1)
+    with pytest.raises(InputError, match="not a flow model"):
+        TorchFlow(p, device="cpu")
+
+
+def test_torch_not_torchscript(tmp_path):
+    pytest.importorskip("torch")
+    p = tmp_path / "junk.pt"
+    p.write_bytes(b"this is not a model")
+    with pytest.raises(InputError, match="not a TorchScript model"):
+        TorchFlow(p, device="cpu")
+    with pytest.raises(InputError, match="not found"):
+        make_backend(f"torch:{tmp_path / 'missing.pt'}")
