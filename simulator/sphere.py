@@ -44,7 +44,6 @@ import queue
 import threading
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Literal
 
 import cv2
 import numpy as np
@@ -72,6 +71,7 @@ __all__ = [
     "field_from_frames",
     "field_from_video",
     "field_meta",
+    "preprocess_sphere",
     "require_field",
     "viewport_epof",
     "viewport_weights",
@@ -84,15 +84,9 @@ MAKE_FIELD_HINT = "vimsim preprocess VIDEO -o GRID.npz --method sphere"
 #: Cube faces as (yaw_deg, pitch_deg): front, right, back, left, up, down.
 _CUBE = ((0.0, 0.0), (90.0, 0.0), (180.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (0.0, -90.0))
 
-DisPreset = Literal["ultrafast", "fast", "medium"]
-_DIS_PRESETS = {
-    "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
-    "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
-    "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
-}
-
-#: A flow function: ``flow(prev, cur)`` with ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)``
-#: float32 pixel flow ``(dx, dy)`` from prev to cur (x right, y down).
+#: A flow function or backend (:class:`simulator.flow.FlowBackend`): ``flow(prev, cur)`` with
+#: ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)`` float32 pixel flow ``(dx, dy)`` from prev
+#: to cur (x right, y down).
 FlowFn = Callable[[NDArray[np.uint8], NDArray[np.uint8]], NDArray[np.float32]]
 
 
@@ -108,14 +102,16 @@ class SphereConfig:
         Side of each square tile.
     cell_deg : float, degrees
         Cell size of the lon/lat field; must divide 180.
-    dis_preset : "ultrafast" | "fast" | "medium"
-        OpenCV DIS preset (used when no flow function is given).
+    stride : int or None
+        Evaluate the flow on every ``stride``-th pixel of each tile. ``None``: 2 for DIS
+        ``ultrafast``/``fast`` (they compute flow at 1/4 resolution and upsample it, so
+        nothing is lost), else 1.
     """
 
     tile_fov_deg: float = 110.0
     tile_size: int = 192
     cell_deg: float = 4.0
-    dis_preset: DisPreset = "ultrafast"
+    stride: int | None = None
 
     def __post_init__(self) -> None:
         if not (90.0 < float(self.tile_fov_deg) < 150.0):
@@ -126,10 +122,8 @@ class SphereConfig:
             raise InputError(f"sphere tile size must be 16..1024 pixels; got {self.tile_size}")
         object.__setattr__(self, "tile_size", int(self.tile_size))
         CellGrid(self.cell_deg)  # validates
-        if self.dis_preset not in _DIS_PRESETS:
-            raise InputError(
-                f"unknown DIS preset {self.dis_preset!r}; expected one of {', '.join(_DIS_PRESETS)}"
-            )
+        if self.stride is not None and not (1 <= int(self.stride) <= 8):
+            raise InputError(f"sphere flow stride must be 1..8 pixels; got {self.stride}")
 
     def to_dict(self) -> dict:
         return {
@@ -137,7 +131,7 @@ class SphereConfig:
             "tile_size": self.tile_size,
             "tiles": "cube",
             "cell_deg": float(self.cell_deg),
-            "dis_preset": self.dis_preset,
+            "stride": self.stride,
         }
 
 
@@ -248,6 +242,14 @@ class Frustum:
                 raise InputError(f"{name} must be degrees in (0, 179]; got {v}")
         return cls(hfov_deg / 2.0, hfov_deg / 2.0, vfov_deg / 2.0, vfov_deg / 2.0)
 
+    @classmethod
+    def from_headset(cls, name: str, eye: str = "left") -> Frustum:
+        """The exact (asymmetric) per-eye frustum of a headset profile
+        (:mod:`simulator.headsets`)."""
+        from simulator.headsets import get_headset
+
+        return cls(*get_headset(name).half_angles_deg(eye))
+
     @property
     def hfov_deg(self) -> float:
         return self.left_deg + self.right_deg
@@ -275,7 +277,7 @@ class Frustum:
 class _TileGeometry:
     """Everything about the tiles that depends only on config and frame size."""
 
-    def __init__(self, cfg: SphereConfig, equirect_size: tuple[int, int]):
+    def __init__(self, cfg: SphereConfig, equirect_size: tuple[int, int], stride: int):
         W, H = equirect_size
         s, fov = cfg.tile_size, cfg.tile_fov_deg
         t = math.tan(math.radians(fov) / 2.0)
@@ -299,7 +301,7 @@ class _TileGeometry:
         self.m1, self.m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
         # Flow is evaluated on every ``stride``-th pixel (DIS presets with finest scale 2
         # compute flow at 1/4 resolution and upsample it: stride 2 loses nothing).
-        st = self.stride = 2 if cfg.dis_preset in ("ultrafast", "fast") else 1
+        st = self.stride = stride
         sel = np.arange(st // 2, s, st)
         self.sel = slice(st // 2, None, st)
         # Tile-plane coordinates (tan units) of the evaluated pixel centres, x right, y up.
@@ -308,6 +310,7 @@ class _TileGeometry:
         self.u0 = uu.astype(np.float32)
         self.v0 = vv.astype(np.float32)
         self.r2 = (1.0 + uu * uu + vv * vv).astype(np.float32)
+        self.u0f, self.v0f, self.r2f = (a.reshape(1, -1) for a in (self.u0, self.v0, self.r2))
         self.px_to_tan = np.float32(2.0 * t / s)
         # Blend weight: 1 inside the cube face each tile owns (max(|u|,|v|) <= 1), falling
         # smoothly to 0 at the tile border where flow is least reliable.
@@ -339,13 +342,16 @@ class _TileGeometry:
         flow is ``(N, s, s, 2)`` pixels (x right, y down) -> ``(N, s', s')``."""
         if self.stride > 1:
             flow = flow[:, self.sel, self.sel]
-        du = flow[..., 0] * self.px_to_tan
-        dv = flow[..., 1] * -self.px_to_tan
-        # a = (u0, v0, 1), b = a + (du, dv, 0): |a x b| and a . b in closed form.
-        cz = self.u0 * dv - self.v0 * du
-        cross = np.sqrt(du * du + dv * dv + cz * cz)
-        dot = self.r2 + self.u0 * du + self.v0 * dv
-        return np.arctan2(cross, dot)
+        du = np.ascontiguousarray(flow[..., 0]) * self.px_to_tan
+        dv = np.ascontiguousarray(flow[..., 1]) * -self.px_to_tan
+        # a = (u0, v0, 1), b = a + (du, dv, 0): |a x b| and a . b in closed form; OpenCV's
+        # vectorised magnitude/phase (relative error < 3e-4), as the paper-mode reducer.
+        n = du.shape[0]
+        du2, dv2 = du.reshape(n, -1), dv.reshape(n, -1)
+        cz = self.u0f * dv2 - self.v0f * du2
+        cross = cv2.magnitude(cv2.magnitude(du2, dv2), cz)
+        dot = self.r2f + self.u0f * du2 + self.v0f * dv2
+        return cv2.phase(dot, cross).reshape(du.shape)
 
 
 def _splat_matrix(idx: NDArray, w: NDArray, cells: CellGrid, dirs: NDArray) -> sparse.csr_matrix:
@@ -371,13 +377,21 @@ def _splat_matrix(idx: NDArray, w: NDArray, cells: CellGrid, dirs: NDArray) -> s
     return sparse.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(C, len(keep)))
 
 
-def _dis_flow(preset: DisPreset) -> FlowFn:
-    dis = cv2.DISOpticalFlow_create(_DIS_PRESETS[preset])
+def _backend(flow) -> tuple[FlowFn, int, dict]:
+    """``(flow function, default stride, description for meta)`` of a flow spec."""
+    from simulator.flow import DISFlow, FlowBackend, make_backend
 
-    def flow(prev: NDArray[np.uint8], cur: NDArray[np.uint8]) -> NDArray[np.float32]:
-        return np.stack([dis.calc(a, b, None) for a, b in zip(prev, cur)])
-
-    return flow
+    be = make_backend(flow) if isinstance(flow, str) else flow
+    if isinstance(be, DISFlow):
+        stride = 2 if be.preset in ("ultrafast", "fast") else 1
+    else:
+        stride = 1
+    desc = (
+        be.describe()
+        if isinstance(be, FlowBackend)
+        else {"method": getattr(be, "__name__", "custom")}
+    )
+    return be, stride, desc
 
 
 class FieldEstimator:
@@ -388,9 +402,10 @@ class FieldEstimator:
     equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
     fps : float, frames per second (converts per-frame angles to deg/s)
     config : SphereConfig
-    flow : FlowFn, optional
-        Pixel flow between two stacks of tiles; default OpenCV DIS with
-        ``config.dis_preset``.
+    flow : str or FlowBackend or FlowFn
+        Pixel flow between two stacks of tiles: a ``--flow`` text (``"dis"`` = OpenCV DIS
+        ultrafast, ``"dis:fast"``, ``"farneback"``, ``"torch:MODEL.pt"``), a
+        :class:`simulator.flow.FlowBackend`, or any function of that signature.
 
     Use :meth:`tiles` on each decoded gray frame, then :meth:`field` on consecutive tile
     stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.
@@ -402,7 +417,7 @@ class FieldEstimator:
         fps: float,
         config: SphereConfig = SphereConfig(),
         *,
-        flow: FlowFn | None = None,
+        flow: str | FlowFn = "dis",
     ):
         if not (fps > 0) or not math.isfinite(fps):
             raise InputError(f"frame rate must be > 0 frames/s; got {fps}")
@@ -415,8 +430,9 @@ class FieldEstimator:
         self.cells = CellGrid(config.cell_deg)
         self.fps = float(fps)
         self.equirect_size = (W, H)
-        self._geo = _tile_geometry(config, (W, H))
-        self._flow = flow or _dis_flow(config.dis_preset)
+        self._flow, stride, self.flow_desc = _backend(flow)
+        self.stride = int(config.stride or stride)
+        self._geo = _tile_geometry(config, (W, H), self.stride)
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
         """The 6 cube-face tiles ``(6, s, s)`` uint8 of a gray ``(H, W)`` frame."""
@@ -439,8 +455,8 @@ class FieldEstimator:
 
 
 @functools.lru_cache(maxsize=4)
-def _tile_geometry(cfg: SphereConfig, equirect_size: tuple[int, int]) -> _TileGeometry:
-    return _TileGeometry(cfg, equirect_size)
+def _tile_geometry(cfg: SphereConfig, equirect_size: tuple[int, int], stride: int) -> _TileGeometry:
+    return _TileGeometry(cfg, equirect_size, stride)
 
 
 def field_from_frames(
@@ -449,7 +465,7 @@ def field_from_frames(
     fps: float,
     config: SphereConfig = SphereConfig(),
     *,
-    flow: FlowFn | None = None,
+    flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
 ) -> NDArray[np.float32]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a sequence of gray equirect frames.
@@ -518,7 +534,7 @@ def field_from_video(
     eye: str = "left",
     start: int = 0,
     end: int | None = None,
-    flow: FlowFn | None = None,
+    flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
@@ -585,6 +601,18 @@ def viewport_weights(
     return w[0] if single else w
 
 
+def _weights_band(
+    cell_deg: float, R: NDArray, frustum: Frustum, lo: int, hi: int
+) -> NDArray[np.float64]:
+    """:func:`viewport_weights` of one rotation for the flat cells ``lo <= c < hi`` only."""
+    centre, e_half, n_half, sa, _ = _cell_geometry(cell_deg)
+    n = frustum.normals() @ R.T  # (4, 3) world
+    d0 = n @ centre[lo:hi].T
+    hw = np.abs(n @ e_half[lo:hi].T) + np.abs(n @ n_half[lo:hi].T) + 1e-9
+    cov = np.clip(0.5 + 0.5 * d0 / hw, 0.0, 1.0).prod(axis=0)
+    return cov * sa[lo:hi]
+
+
 def _rotations(yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
     return head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
 
@@ -599,7 +627,7 @@ def viewport_epof(
     frustum: Frustum | None = None,
     hfov_deg: float = 107.0,
     vfov_deg: float | None = None,
-    chunk: int = 256,
+    step_deg: float = 0.5,
 ) -> NDArray[np.float64]:
     """Exact EPOF (deg/s): mean angular speed over the actual viewport of each frame.
 
@@ -612,6 +640,8 @@ def viewport_epof(
         Head orientation at each frame (yaw + right, pitch + up, roll + right ear down).
     frustum : Frustum, optional
         The viewport; default ``Frustum.symmetric(hfov_deg, vfov_deg)``.
+    step_deg : float, degrees
+        Orientation resolution of the precomputed weights (:class:`ViewportQuery`).
 
     Returns
     -------
@@ -628,83 +658,137 @@ def viewport_epof(
     yaw, pitch, roll = (
         np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg)
     )
-    flat = f.reshape(T, -1)
-    out = np.empty(T)
-    for a in range(0, T, chunk):
-        b = min(T, a + chunk)
-        w = viewport_weights(cell_deg, _rotations(yaw[a:b], pitch[a:b], roll[a:b]), fr)
-        out[a:b] = np.einsum("mc,mc->m", flat[a:b].astype(np.float32), w) / w.sum(axis=1)
-    return out
+    q = _query(cells.cell_deg, fr, float(step_deg))
+    return q.many(f, yaw, pitch, roll)
+
+
+@functools.lru_cache(maxsize=8)
+def _query(cell_deg: float, frustum: Frustum, step_deg: float) -> ViewportQuery:
+    return ViewportQuery(cell_deg, frustum, step_deg=step_deg)
 
 
 class ViewportQuery:
-    """Fast single-viewport queries of one frame's field (a few tens of microseconds).
+    """Fast exact-EPOF queries: a few microseconds per viewport.
 
-    Precomputes the cell geometry and keeps the frustum's normals; each query rotates 4
-    normals, evaluates the coverage of the cells in the latitude band the viewport can
-    reach and returns the weighted mean.
+    The cells a viewport covers, and their weights, depend on pitch and roll only up to
+    a shift in longitude: a yaw turn by ``k`` cells moves the weight map by ``k`` columns.
+    Weights (:func:`viewport_weights`) are therefore computed once per (pitch, roll, yaw
+    mod one cell) bin of ``step_deg`` and kept (sparse, LRU-cached); a query rounds the
+    orientation to its bin, shifts the columns by ``floor(yaw / cell)`` and takes a dot
+    product of ~10^3 cells. Rounding moves the viewport edges by at most ``step_deg / 2``
+    (0.25 deg by default: < 0.5% of a 107 deg viewport's area).
 
     Parameters
     ----------
     cell_deg : float, degrees
     frustum : Frustum
+    step_deg : float, degrees; must divide ``cell_deg``
+    cache_size : int, number of bins kept
     """
 
-    def __init__(self, cell_deg: float, frustum: Frustum):
+    def __init__(
+        self, cell_deg: float, frustum: Frustum, *, step_deg: float = 0.5, cache_size: int = 8192
+    ):
         self.cells = CellGrid(cell_deg)
         self.frustum = frustum
-        centre, e_half, n_half, sa, _ = _cell_geometry(self.cells.cell_deg)
-        n_lat, n_lon = self.cells.shape
-        self._n_lon = n_lon
-        self._normals = frustum.normals()
-        # Angular radius of the viewport around its axis (corner direction), radians.
+        c = self.cells.cell_deg
+        n_sub = c / float(step_deg)
+        if not (step_deg > 0) or abs(n_sub - round(n_sub)) > 1e-6:
+            raise InputError(
+                f"query step must be degrees > 0 dividing the cell size {c}; got {step_deg}"
+            )
+        self.step_deg = float(step_deg)
+        self._n_sub = round(n_sub)
+        self._n_lat, self._n_lon = self.cells.shape
+        self._bins: dict[tuple[int, int, int], tuple[NDArray, NDArray, float]] = {}
+        # Angular radius of the viewport around its axis (corner ray) plus a cell, radians.
         tl, tr, td, tu = (
-            math.tan(math.radians(a))
-            for a in (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg)
+            math.tan(math.radians(x))
+            for x in (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg)
         )
-        self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(
-            self.cells.cell_deg
-        )
-        # Per-row stacks (3, 3 * n_lon) for a contiguous latitude band.
-        self._stack = np.stack(
-            [
-                np.concatenate(
-                    [
-                        centre[i * n_lon : (i + 1) * n_lon],
-                        e_half[i * n_lon : (i + 1) * n_lon],
-                        n_half[i * n_lon : (i + 1) * n_lon],
-                    ]
-                ).T
-                for i in range(n_lat)
-            ]
-        )  # (n_lat, 3, 3 n_lon)
-        self._sa = sa.reshape(n_lat, n_lon)
-        self._lat_c = self.cells.centres_lonlat()[1]
+        self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(c)
+        self._cache_size = int(cache_size)
 
-    def weights(
-        self, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0
-    ) -> tuple[slice, NDArray[np.float64]]:
-        """``(rows, w)``: the latitude rows the viewport can reach and the cell weights
-        there, ``w`` shape ``(n_rows, n_lon)`` (steradians)."""
-        R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
-        n = self._normals @ R.T  # (4, 3) world
+    def _bin(self, key: tuple[int, int, int]) -> tuple[NDArray, NDArray, float]:
+        b = self._bins.get(key)
+        if b is not None:
+            return b
+        ip, ir, isub = key
+        st = self.step_deg
+        R = head_rotation(isub * st, ip * st, ir * st).as_matrix()
+        # Only the latitude rows the viewport can reach (its axis latitude +- radius).
         axis_lat = math.asin(max(-1.0, min(1.0, R[1, 2])))
-        lo, hi = axis_lat - self._radius, axis_lat + self._radius
         c = math.radians(self.cells.cell_deg)
-        i0 = max(0, int((math.pi / 2 - hi) / c))
-        i1 = min(len(self._lat_c), int((math.pi / 2 - lo) / c) + 1)
-        st = self._stack[i0:i1]  # (r, 3, 3L)
-        d = (n @ st).reshape(i1 - i0, 4, 3, self._n_lon)  # broadcasting matmul: (r, 4, 3L)
-        hw = np.abs(d[:, :, 1]) + np.abs(d[:, :, 2]) + 1e-9
-        cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
-        return slice(i0, i1), cov * self._sa[i0:i1]
+        i0 = max(0, math.floor((math.pi / 2 - axis_lat - self._radius) / c))
+        i1 = min(self._n_lat, math.floor((math.pi / 2 - axis_lat + self._radius) / c) + 1)
+        lo, hi = i0 * self._n_lon, i1 * self._n_lon
+        w = _weights_band(self.cells.cell_deg, R, self.frustum, lo, hi)
+        nz = np.nonzero(w > w.max() * 1e-7)[0] + lo
+        w = w[nz - lo]
+        rows, cols = np.divmod(nz, self._n_lon)
+        # Index into a field row-doubled to (n_lat, 2 n_lon): no modulo at query time.
+        base = (rows * (2 * self._n_lon) + cols).astype(np.intp)
+        b = (base, w, float(w.sum()))
+        if len(self._bins) >= self._cache_size:
+            self._bins.pop(next(iter(self._bins)))
+        self._bins[key] = b
+        return b
+
+    def _key(
+        self, yaw_deg: float, pitch_deg: float, roll_deg: float
+    ) -> tuple[tuple[int, int, int], int]:
+        st = self.step_deg
+        y = round(yaw_deg / st) % (self._n_lon * self._n_sub)
+        shift, sub = divmod(y, self._n_sub)
+        p = round(max(-90.0, min(90.0, pitch_deg)) / st)
+        r = round(((roll_deg + 180.0) % 360.0 - 180.0) / st)
+        return (p, r, sub), shift
+
+    @staticmethod
+    def doubled(field_dps: NDArray) -> NDArray[np.float64]:
+        """A field ``(..., n_lat, n_lon)`` repeated along longitude, flattened per frame:
+        ``(..., n_lat * 2 n_lon)`` float64 (what :meth:`query` indexes)."""
+        f = np.asarray(field_dps, np.float64)
+        d = np.concatenate([f, f], axis=-1)
+        return d.reshape(*f.shape[:-2], -1)
+
+    def query(
+        self, doubled_field: NDArray, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0
+    ) -> float:
+        """Exact EPOF (deg/s) for one orientation of a field prepared by :meth:`doubled`."""
+        key, shift = self._key(yaw_deg, pitch_deg, roll_deg)
+        base, w, wsum = self._bin(key)
+        return float(doubled_field[base + shift] @ w) / wsum
 
     def __call__(
         self, field_dps: NDArray, yaw_deg: float, pitch_deg: float, roll_deg: float = 0.0
     ) -> float:
         """Exact EPOF (deg/s) of one ``(n_lat, n_lon)`` field for one head orientation."""
-        rows, w = self.weights(yaw_deg, pitch_deg, roll_deg)
-        return float((field_dps[rows] * w).sum() / w.sum())
+        return self.query(self.doubled(field_dps), yaw_deg, pitch_deg, roll_deg)
+
+    def many(self, field_dps: NDArray, yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
+        """Exact EPOF ``(T,)`` of fields ``(T, n_lat, n_lon)``, one orientation per frame
+        (or one field ``(n_lat, n_lon)`` for ``T`` orientations)."""
+        f = np.asarray(field_dps)
+        yaw, pitch, roll = np.broadcast_arrays(
+            np.asarray(yaw_deg, float), np.asarray(pitch_deg, float), np.asarray(roll_deg, float)
+        )
+        yaw, pitch, roll = yaw.ravel(), pitch.ravel(), roll.ravel()
+        if not (
+            np.all(np.isfinite(yaw)) and np.all(np.isfinite(pitch)) and np.all(np.isfinite(roll))
+        ):
+            raise InputError("head orientation has non-finite values")
+        d = self.doubled(f)
+        out = np.empty(len(yaw))
+        if d.ndim == 1:
+            for t in range(len(yaw)):
+                out[t] = self.query(d, yaw[t], pitch[t], roll[t])
+        else:
+            if d.shape[0] != len(yaw):
+                raise InputError(f"{d.shape[0]} field frames but {len(yaw)} orientations")
+            for t in range(len(yaw)):
+                out[t] = self.query(d[t], yaw[t], pitch[t], roll[t])
+        return out
 
 
 # ------------------------------------------------------------------- window matrix
@@ -821,3 +905,129 @@ def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
     if not np.all(np.isfinite(f)):
         raise InputError(f"{src}: field_dps has non-finite values")
     return f.astype(np.float32, copy=False), cells
+
+
+def preprocess_sphere(
+    video,
+    output,
+    *,
+    grid: WindowGrid,
+    config: SphereConfig = SphereConfig(),
+    flow: str | FlowFn = "dis",
+    layout: str = "mono",
+    eye: str = "left",
+    start_s: float = 0.0,
+    end_s: float | None = None,
+    field_dtype: str = "float16",
+    progress: bool = True,
+):
+    """``vimsim preprocess --method sphere``: the field of a video and, derived from it,
+    the window matrix of ``grid``, written as one grid file (atomic).
+
+    The grid file holds everything a paper-mode grid holds (``pof_dps``, ``pof_px`` of
+    ``grid``, any preset and FOV; ``pof_px`` approximate, see :func:`window_pof`) plus
+    ``field_dps`` (T, n_lat, n_lon) and ``meta["field"]`` (:func:`field_meta`).
+    No checkpoints: sphere mode runs at tens of frames per second.
+
+    Returns the output Path. InputError on bad input (nothing written).
+    """
+    import sys
+    from pathlib import Path
+
+    from simulator.gridfile import content_hash, save_grid
+    from simulator.video import probe
+
+    src = str(video)
+    info = probe(video)
+    if not info.is_video:
+        raise InputError(
+            f"{src}: is a still image; preprocess needs a video with at least 2 frames"
+        )
+    eye_w, eye_h = info.eye_size(layout)
+    if field_dtype not in ("float16", "float32"):
+        raise InputError(f"field dtype must be float16 or float32; got {field_dtype!r}")
+    fps = info.fps
+    if not (start_s >= 0 and math.isfinite(start_s)):
+        raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
+    start_f = round(start_s * fps)
+    end_f = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
+    if end_s is not None and not (end_s > start_s):
+        raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
+    if end_f - start_f < 2:
+        raise InputError(
+            f"{src}: {max(0, end_f - start_f)} frame(s) in the chosen range; flow needs at least 2 "
+            f"(video: {info.n_frames} frames at {fps:g} fps)"
+        )
+    est_desc = _backend(flow)[2] if isinstance(flow, str) else None
+    from tqdm import tqdm
+
+    bar = tqdm(
+        total=end_f - start_f,
+        unit="frame",
+        desc="preprocess (sphere)",
+        disable=not progress,
+        mininterval=0.5,
+        dynamic_ncols=True,
+        file=sys.stderr,
+    )
+    last = [0]
+
+    def tick(n: int) -> None:
+        bar.update(n - last[0])
+        last[0] = n
+
+    try:
+        field, _ = field_from_video(
+            video,
+            config,
+            layout=layout,
+            eye=eye,
+            start=start_f,
+            end=end_f,
+            flow=flow,
+            progress=tick,
+        )
+    finally:
+        bar.close()
+    if not np.all(np.isfinite(field)):
+        raise InputError(f"{src}: flow gave non-finite values")
+    cells = CellGrid(config.cell_deg)
+    dps, px = window_pof(field, cells.cell_deg, grid, fps)
+    T = field.shape[0]
+    if T != end_f - start_f:
+        print(
+            f"vimsim preprocess: warning: {src}: expected {end_f - start_f} frames, decoded {T}",
+            file=sys.stderr,
+        )
+    desc = est_desc or _backend(flow)[2]
+    meta = {
+        "method": "sphere",
+        "fps": fps,
+        "n_frames": T,
+        "flow": desc,
+        "layout": layout,
+        "eye": eye,
+        "start_frame": start_f,
+        "end_frame": start_f + T,
+        "start_s": start_f / fps,
+        "eye_size": [eye_w, eye_h],
+        "units": {
+            "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
+            "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
+            "field_dps": "deg/s of visual angle",
+        },
+        "frame0": "repeats frame 1",
+        "field": field_meta(config, field_dtype),
+        "video": {
+            "path": str(Path(video).resolve()),
+            "width": info.width,
+            "height": info.height,
+            "sar": info.sar,
+            "codec": info.codec,
+            "n_frames": info.n_frames,
+            "content_hash": content_hash(video),
+        },
+    }
+    out = Path(output)
+    save_grid(out, dps, px, grid, meta, field_dps=field.astype(field_dtype))
+    return out
