@@ -66,7 +66,10 @@ from scipy.spatial.transform import Rotation
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
 from simulator.geometry import (
+    WindowGrid,
     dir_to_lonlat,
+    head_rotation,
+    perspective_rays,
     equirect_pixel_lonlat,
     lonlat_to_dir,
     lonlat_to_equirect_xy,
@@ -85,6 +88,7 @@ __all__ = [
     "procedural_panorama",
     "synthesize",
     "truth_path_for",
+    "window_truth_dps",
 ]
 
 Scene = Literal["rotate", "forward", "coaster"]
@@ -596,6 +600,42 @@ class SynthScene:
         eyes = self.cfg.eyes
         imgs = [self.render_eye(t, e) for e in eyes]
         return imgs[0] if len(imgs) == 1 else np.concatenate(imgs, axis=0)
+
+
+def window_truth_dps(
+    scene: SynthScene,
+    grid: WindowGrid,
+    times_s: NDArray,
+    eye: str = "mono",
+    *,
+    rays: int = 24,
+) -> NDArray[np.float64]:
+    """Analytic POF of every window of ``grid``: the solid-angle-weighted mean of the true
+    angular speed over the window's rays (what ``pof_dps`` of a grid file estimates).
+
+    Parameters
+    ----------
+    scene : the scene (the equirect frame is its camera frame)
+    grid : window grid (centres, FOVs; ``rays x rays`` pixel-centre rays per window are
+        used, weighted by their solid angles, whatever ``grid.size``)
+    times_s : ndarray, shape (T,), seconds (e.g. :attr:`Truth.time_s`)
+    eye : ``"mono"``, ``"left"`` or ``"right"``
+
+    Returns
+    -------
+    ndarray, shape (T, P, Y), deg/s
+    """
+    dirs, sa = perspective_rays((rays, rays), grid.hfov_deg, grid.vfov_deg)
+    pitch, yaw = grid.centres_deg()
+    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()
+    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64)).reshape(-1, 3)
+    wts = np.broadcast_to(sa.astype(np.float64), (len(R), rays, rays)).reshape(len(R), -1)
+    P, Y = grid.shape
+    out = np.empty((len(times_s), P, Y))
+    for k, t in enumerate(np.asarray(times_s, float)):
+        s = scene.speed_dps(float(t), world, eye).reshape(len(R), -1)
+        out[k] = ((s * wts).sum(1) / wts.sum(1)).reshape(P, Y)
+    return out
 
 
 def make_scene(cfg: SynthConfig) -> SynthScene:
