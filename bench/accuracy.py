@@ -49,9 +49,12 @@ OBLIQUE = (1.0, 2.0, 0.5)
 
 
 def scenes(args) -> list[tuple[str, SynthConfig]]:
-    base = dict(seconds=args.seconds, fps=30.0, size=args.size)
+    base = {"seconds": args.seconds, "fps": 30.0, "size": args.size}
     out = [
-        ("rotate (oblique axis, 30 deg/s)", SynthConfig("rotate", axis=OBLIQUE, omega_dps=30.0, **base)),
+        (
+            "rotate (oblique axis, 30 deg/s)",
+            SynthConfig("rotate", axis=OBLIQUE, omega_dps=30.0, **base),
+        ),
         ("rotate (yaw, 90 deg/s)", SynthConfig("rotate", omega_dps=90.0, **base)),
         ("forward (2 m/s, tunnel)", SynthConfig("forward", speed_mps=2.0, **base)),
         ("coaster (mean 6 m/s)", SynthConfig("coaster", **base)),
@@ -122,7 +125,10 @@ def main(argv=None) -> int:
         tf = np.arange(cfg.n_frames) / cfg.fps
         exact = viewport_truth_dps(scene, hp, tf, tr.time_s)
         for be in backends:
-            out = OUT / f"{tag}_{w}x{h}_{args.window_size}_{be.replace(':', '_').replace('/', '_')}.npz"
+            out = (
+                OUT
+                / f"{tag}_{w}x{h}_{args.window_size}_{be.replace(':', '_').replace('/', '_')}.npz"
+            )
             t0 = time.perf_counter()
             preprocess_video(vid, out, grid=grid, flow=be, progress=False)
             dt = (time.perf_counter() - t0) / cfg.n_frames
@@ -141,7 +147,11 @@ def main(argv=None) -> int:
                 f"{xm:.3f} / {xp:.3f} | {np.median(truth):.1f} | {dt:.2f} |"
             )
             print(rows[-1], flush=True)
-            if be == backends[0] and "petra" not in name and name.split()[0] in ("rotate", "forward"):
+            if (
+                be == backends[0]
+                and "petra" not in name
+                and name.split()[0] in ("rotate", "forward")
+            ):
                 goal_ratios[name] = med / GOAL
     table = "\n".join(rows)
     print()
@@ -162,7 +172,9 @@ def main(argv=None) -> int:
             f"{args.seconds:g} s at 30 fps, H.264 crf 16; grid default (24 x 11 windows of "
             f"{args.window_size}x{args.window_size} px, 107 deg).\n\n{table}\n<!-- accuracy:end -->"
         )
-        text = re.sub(r"<!-- accuracy:begin.*?<!-- accuracy:end -->", lambda _m: block, text, flags=re.S)
+        text = re.sub(
+            r"<!-- accuracy:begin.*?<!-- accuracy:end -->", lambda _m: block, text, flags=re.DOTALL
+        )
         p.write_text(text)
         print(f"wrote the table into {p}")
     return 0

@@ -68,11 +68,11 @@ from simulator.fileio import atomic_output
 from simulator.geometry import (
     WindowGrid,
     dir_to_lonlat,
-    head_rotation,
-    perspective_rays,
     equirect_pixel_lonlat,
+    head_rotation,
     lonlat_to_dir,
     lonlat_to_equirect_xy,
+    perspective_rays,
 )
 
 __all__ = [
