@@ -44,6 +44,7 @@ __all__ = [
     "HeadPath",
     "RadiansWarning",
     "load_headpath",
+    "plot_headpath",
     "save_headpath_csv",
     "synth",
 ]
@@ -223,7 +224,7 @@ class HeadPath:
 # ------------------------------------------------------------------------------ writing
 def save_headpath_csv(path: str | os.PathLike, hp: HeadPath) -> None:
     """Write the canonical CSV ``time_s,yaw_deg,pitch_deg,roll_deg`` atomically."""
-    y, p, r = hp.angles_deg()
+    y, p, r = (np.round(a, 9) + 0.0 for a in hp.angles_deg())  # no 1e-16 noise, no -0
     buf = io.StringIO()
     buf.write(",".join(CANONICAL_COLUMNS) + "\n")
     for row in zip(hp.times_s, y, p, r):
@@ -845,3 +846,31 @@ def _synth_keyframes(seconds: float, rate_hz: float, g: dict) -> HeadPath:
     n = math.floor(end * rate_hz + 1e-9) + 1
     t = np.arange(n) / rate_hz
     return HeadPath(t, kf.sample(t, hold=True), f"synth:keyframes:{p}")
+
+
+def plot_headpath(path: str | os.PathLike, hp: HeadPath, *, title: str = "") -> None:
+    """Plot yaw, pitch and roll (degrees) over time into a PNG (atomic)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    y, p, r = hp.angles_deg()
+    fig, axs = plt.subplots(3, 1, figsize=(9, 5.5), dpi=110, sharex=True)
+    for ax, v, name in zip(
+        axs, (y, p, r), ("yaw (deg, + right)", "pitch (deg, + up)", "roll (deg)")
+    ):
+        if name.startswith("yaw"):  # break the line at the +-180 wrap
+            v = v.copy()
+            v[1:][np.abs(np.diff(v)) > 180] = np.nan
+        ax.plot(hp.times_s, v, lw=1.0)
+        ax.set_ylabel(name, fontsize=8)
+        ax.grid(alpha=0.3)
+    axs[0].set_ylim(-180, 180)
+    axs[1].set_ylim(-90, 90)
+    axs[-1].set_xlabel("time (s)")
+    axs[0].set_title(title or f"head path {hp.source}", fontsize=9)
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)

@@ -1,0 +1,153 @@
+"""``vimsim epof GRID.npz PATH.csv -o EPOF.csv``: EPOF and GRF opacity of one viewing."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from simulator.commands._types import fov_deg
+
+__all__ = ["register", "run"]
+
+
+def _pct(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a percentile in [0, 100], e.g. 10; got {text!r}"
+        ) from None
+    if not (0.0 <= v <= 100.0):
+        raise argparse.ArgumentTypeError(
+            f"expected a percentile in [0, 100], e.g. 10; got {text!r}"
+        )
+    return v
+
+
+def _pos_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer >= 1, e.g. 4; got {text!r}"
+        ) from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, e.g. 4; got {text!r}")
+    return v
+
+
+def _nonneg(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 0.5; got {text!r}") from None
+    if not (0.0 <= v < math.inf):
+        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 0.5; got {text!r}")
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``epof`` parser."""
+    from simulator.commands.headpath import add_reader_options
+
+    p = subparsers.add_parser(
+        "epof",
+        help="EPOF (deg/s) and GRF opacity of a viewing, one row per video frame",
+        description="Estimated perceived optical flow (paper 3.5): for every video frame, the "
+        "overlap-weighted mean of the flow of the windows the viewport overlaps (overlap = "
+        "fraction of the viewport's solid angle inside the window), and the GRF opacity "
+        "(0 at the 10th, 1 at the 90th percentile of the whole video's flow). Writes "
+        "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity.",
+    )
+    p.add_argument("grid", metavar="GRID.npz", help="grid file from vimsim preprocess")
+    p.add_argument(
+        "headpath", metavar="PATH.csv", help="head path (any format of vimsim headpath convert)"
+    )
+    p.add_argument("-o", "--output", required=True, metavar="EPOF.csv")
+    p.add_argument(
+        "--plot", default=None, metavar="EPOF.png", help="also plot EPOF and opacity over time"
+    )
+    p.add_argument(
+        "--fov",
+        type=fov_deg,
+        default=None,
+        metavar="D",
+        help="viewport FOV in degrees, both axes (default: the grid's window FOV)",
+    )
+    p.add_argument(
+        "--hfov", type=fov_deg, default=None, metavar="D", help="viewport horizontal FOV (degrees)"
+    )
+    p.add_argument(
+        "--vfov", type=fov_deg, default=None, metavar="D", help="viewport vertical FOV (degrees)"
+    )
+    p.add_argument(
+        "--top-k",
+        type=_pos_int,
+        default=None,
+        metavar="K",
+        help="use only the K largest overlaps (the paper's figure shows 4); default all",
+    )
+    p.add_argument(
+        "--hold-last",
+        action="store_true",
+        help="hold the first/last pose where the head path does not cover the video",
+    )
+    p.add_argument(
+        "--low-pct", type=_pct, default=10.0, metavar="P", help="opacity 0 at this percentile (10)"
+    )
+    p.add_argument(
+        "--high-pct", type=_pct, default=90.0, metavar="P", help="opacity 1 at this percentile (90)"
+    )
+    p.add_argument(
+        "--opacity-source",
+        choices=("grid", "viewing"),
+        default="grid",
+        help="percentiles of every window of every frame (grid, the paper) or of this viewing's EPOF",
+    )
+    p.add_argument(
+        "--smooth",
+        type=_nonneg,
+        default=0.0,
+        metavar="S",
+        help="causal exponential smoothing of the opacity, time constant S seconds (default 0 = off)",
+    )
+    add_reader_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
+    from simulator.commands.headpath import warnings_to_stderr
+    from simulator.epof import OpacityRule, compute_epof, plot_epof, write_epof_csv
+    from simulator.errors import InputError
+    from simulator.gridfile import load_grid
+    from simulator.headpath import load_headpath
+
+    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
+        raise InputError("give either --fov or --hfov/--vfov, not both")
+    hfov = args.fov if args.fov is not None else args.hfov
+    vfov = args.fov if args.fov is not None else args.vfov
+    if hfov is None and vfov is not None:
+        raise InputError("--vfov needs --hfov")
+    rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
+    with warnings_to_stderr("vimsim epof"):
+        grid = load_grid(args.grid)
+        hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
+    res = compute_epof(
+        grid, hp, hfov_deg=hfov, vfov_deg=vfov, top_k=args.top_k, rule=rule, hold=args.hold_last
+    )
+    if args.plot:
+        plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
+    write_epof_csv(args.output, res)
+    lo, hi = res.thresholds_dps
+    print(
+        f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "
+        f"opacity 0 at {lo:.3g}, 1 at {hi:.3g} deg/s"
+    )
+    return 0
+
+
+def _median(x):
+    import numpy as np
+
+    return np.median(x)

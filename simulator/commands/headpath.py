@@ -1,0 +1,251 @@
+"""``vimsim headpath``: scripted head paths, dataset conversion, plots.
+
+``synth KIND -o PATH.csv --seconds S``, ``convert IN -o PATH.csv [--format ...]``,
+``show PATH.csv -o PLOT.png``. Angles in degrees: positive yaw turns right, positive
+pitch looks up, positive roll tilts the head right ear down.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+
+from simulator.commands._types import positive_float
+
+__all__ = ["register", "run", "warnings_to_stderr"]
+
+_KINDS = ("static", "sweep", "sine", "look-around", "keyframes")  # = headpath.SYNTH_KINDS
+_FORMATS = (
+    "auto",
+    "canonical",
+    "quat",
+    "keyframes-json",
+    "corbillon",
+    "corbillon-euler",
+    "salient360-dyn",
+    "salient360-static",
+    "avtrack360",
+    "360vidstr",
+)  # = ("auto",) + headpath.FORMATS (light import)
+
+
+def _float(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, e.g. 30; got {text!r}") from None
+    if not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, e.g. 30; got {text!r}")
+    return v
+
+
+def _user(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected a user number >= 1, e.g. 1; got {text!r}"
+        ) from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a user number >= 1, e.g. 1; got {text!r}")
+    return v
+
+
+def add_reader_options(p: argparse.ArgumentParser) -> None:
+    """--format, --video, --user (shared with ``vimsim epof``)."""
+    p.add_argument(
+        "--format",
+        choices=_FORMATS,
+        default="auto",
+        help="head path format (default auto: detected from the content); see docs/headpath.md",
+    )
+    p.add_argument(
+        "--video",
+        default=None,
+        metavar="NAME",
+        help="AVTrack360 files hold one trace per video: which one, e.g. 6.mp4",
+    )
+    p.add_argument(
+        "--user",
+        type=_user,
+        default=None,
+        metavar="N",
+        help="360VidStr aggregated files hold one trace per user: which one (1-based)",
+    )
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``headpath`` parser and its ``synth``, ``convert`` and ``show`` subcommands."""
+    p = subparsers.add_parser(
+        "headpath",
+        help="make, convert and plot head paths (time_s,yaw_deg,pitch_deg,roll_deg CSV)",
+        description="Head paths: scripted (synth), converted from recorded datasets (convert) "
+        "or plotted (show). Canonical CSV: time_s,yaw_deg,pitch_deg,roll_deg; degrees, positive "
+        "yaw turns right, positive pitch looks up, positive roll = right ear down.",
+    )
+    sub = p.add_subparsers(dest="headpath_command", metavar="ACTION", parser_class=type(p))
+    p.set_defaults(func=lambda args: (p.print_help(sys.stderr), 2)[1])
+
+    s = sub.add_parser(
+        "synth",
+        help="a scripted head path",
+        description=(
+            "Write a scripted head path. static: fixed --yaw/--pitch/--roll. sweep: yaw turns at "
+            "--yaw-rate deg/s. sine: --yaw-amp/--yaw-freq, --pitch-amp/--pitch-freq around "
+            "--yaw/--pitch. look-around: seeded random exploration tuned to real viewers' speed "
+            "statistics. keyframes: --keyframes FILE (JSON or CSV of time_s,yaw_deg,pitch_deg,"
+            "roll_deg), Slerp between them."
+        ),
+    )
+    s.add_argument("kind", choices=_KINDS, metavar="KIND", help=", ".join(_KINDS))
+    s.add_argument("-o", "--output", required=True, metavar="PATH.csv")
+    s.add_argument(
+        "--seconds",
+        type=positive_float,
+        default=None,
+        metavar="S",
+        help="duration in seconds (required except for keyframes: default = last keyframe)",
+    )
+    s.add_argument(
+        "--rate",
+        type=positive_float,
+        default=60.0,
+        metavar="HZ",
+        help="samples per second (default 60)",
+    )
+    s.add_argument("--seed", type=int, default=0, metavar="N", help="random seed (look-around)")
+    s.add_argument(
+        "--yaw",
+        type=_float,
+        default=None,
+        metavar="D",
+        help="yaw in degrees (static, start of sweep, centre of sine); + turns right",
+    )
+    s.add_argument(
+        "--pitch",
+        type=_float,
+        default=None,
+        metavar="D",
+        help="pitch in degrees; + looks up (e.g. -70 stares at the ground)",
+    )
+    s.add_argument(
+        "--roll", type=_float, default=None, metavar="D", help="roll in degrees; + right ear down"
+    )
+    s.add_argument(
+        "--yaw-rate",
+        type=_float,
+        default=None,
+        metavar="DPS",
+        help="sweep: yaw speed in deg/s (default 30; negative turns left)",
+    )
+    s.add_argument(
+        "--yaw-amp", type=_float, default=None, metavar="D", help="sine: yaw amplitude (default 60)"
+    )
+    s.add_argument(
+        "--yaw-freq",
+        type=_float,
+        default=None,
+        metavar="HZ",
+        help="sine: yaw frequency (default 0.1)",
+    )
+    s.add_argument(
+        "--pitch-amp",
+        type=_float,
+        default=None,
+        metavar="D",
+        help="sine: pitch amplitude (default 20)",
+    )
+    s.add_argument(
+        "--pitch-freq",
+        type=_float,
+        default=None,
+        metavar="HZ",
+        help="sine: pitch frequency (default 0.15)",
+    )
+    s.add_argument(
+        "--keyframes",
+        default=None,
+        metavar="FILE",
+        help="keyframes: JSON list or CSV of time_s,yaw_deg,pitch_deg[,roll_deg]",
+    )
+    s.set_defaults(func=run, headpath_command="synth")
+
+    c = sub.add_parser(
+        "convert",
+        help="convert a recorded trace to the canonical CSV",
+        description="Read a head path (canonical CSV, quaternion CSV, Corbillon "
+        "MMSys'18, Salient360 raw, AVTrack360 JSON, 360VidStr aggregated) and "
+        "write the canonical CSV in our conventions.",
+    )
+    c.add_argument("input", metavar="IN")
+    c.add_argument("-o", "--output", required=True, metavar="PATH.csv")
+    add_reader_options(c)
+    c.set_defaults(func=run, headpath_command="convert")
+
+    w = sub.add_parser(
+        "show",
+        help="plot yaw/pitch/roll over time",
+        description="Plot a head path's yaw, pitch and roll (degrees) over time.",
+    )
+    w.add_argument("input", metavar="PATH.csv")
+    w.add_argument("-o", "--output", required=True, metavar="PLOT.png")
+    add_reader_options(w)
+    w.set_defaults(func=run, headpath_command="show")
+
+
+def warnings_to_stderr(prog: str):
+    """Context manager printing warnings as one line ``<prog>: warning: ...`` on stderr."""
+    import warnings
+
+    cm = warnings.catch_warnings()
+
+    class _Ctx:
+        def __enter__(self):
+            cm.__enter__()
+            warnings.simplefilter("always")
+            warnings.showwarning = lambda msg, *a, **k: print(
+                f"{prog}: warning: {msg}", file=sys.stderr
+            )
+            return self
+
+        def __exit__(self, *exc):
+            return cm.__exit__(*exc)
+
+    return _Ctx()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
+    from simulator import headpath as hp_mod
+
+    with warnings_to_stderr("vimsim headpath"):
+        if args.headpath_command == "synth":
+            params = {
+                "yaw": args.yaw,
+                "pitch": args.pitch,
+                "roll": args.roll,
+                "yaw_rate": args.yaw_rate,
+                "yaw_amp": args.yaw_amp,
+                "yaw_freq": args.yaw_freq,
+                "pitch_amp": args.pitch_amp,
+                "pitch_freq": args.pitch_freq,
+            }
+            if args.kind == "keyframes":
+                params = {"keyframes": args.keyframes}
+            elif args.seconds is None:
+                raise hp_mod.InputError(f"synth {args.kind}: --seconds is required")
+            hp = hp_mod.synth(
+                args.kind, args.seconds or 0.0, rate_hz=args.rate, seed=args.seed, **params
+            )
+            hp_mod.save_headpath_csv(args.output, hp)
+            print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
+            return 0
+        hp = hp_mod.load_headpath(args.input, args.format, video=args.video, user=args.user)
+        if args.headpath_command == "convert":
+            hp_mod.save_headpath_csv(args.output, hp)
+            print(f"wrote {args.output}: {hp.n} samples, {hp.start_s:.3f}..{hp.end_s:.3f} s")
+            return 0
+        hp_mod.plot_headpath(args.output, hp)
+        print(f"wrote {args.output}")
+        return 0
