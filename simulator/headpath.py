@@ -772,12 +772,12 @@ def synth(kind: str, seconds: float, rate_hz: float = 60.0, seed: int = 0, **par
 
 #: look-around model parameters (tuned against the real traces, see docs/headpath.md).
 _LOOK = {
-    "dwell_mean_s": 1.6,  # mean dwell between head turns (exponential, + 0.3 s minimum)
-    "turn_yaw_scale_deg": 35.0,  # |yaw step| ~ exponential with this scale (+ 5 deg)
-    "turn_peak_dps": 55.0,  # typical peak angular speed of a turn (scaled by sqrt of size)
-    "pitch_sd_deg": 14.0,  # target pitch ~ N(-3, sd), clipped to +-75
-    "drift_sd_dps": 3.5,  # slow drift while dwelling (OU on velocity)
-    "roll_sd_deg": 3.0,
+    "dwell_mean_s": 1.1,  # mean dwell between head turns (exponential, + 0.3 s minimum)
+    "turn_yaw_scale_deg": 35.0,  # |yaw step| ~ 5 deg + exponential with this scale
+    "turn_peak_dps": 45.0,  # peak angular speed of a 30 deg turn (scales with sqrt of size)
+    "pitch_sd_deg": 22.0,  # target pitch ~ N(-2, sd), clipped to +-75
+    "drift_sd_dps": 7.0,  # slow drift (OU velocity, deg/s; pitch 0.6x and leaky)
+    "roll_sd_deg": 3.0,  # slow roll sway amplitude
 }
 
 
@@ -786,7 +786,7 @@ def _synth_look_around(t: NDArray, rng: np.random.Generator, yaw0: float, g: dic
     c.update({k: v for k, v in g.items() if k in c})
     T = t[-1]
     # Key poses: alternate dwell and turn segments.
-    kt, ky, kp = [0.0], [yaw0], [float(np.clip(rng.normal(-3.0, c["pitch_sd_deg"] / 2), -75, 75))]
+    kt, ky, kp = [0.0], [yaw0], [float(np.clip(rng.normal(-2.0, c["pitch_sd_deg"]), -75, 75))]
     now = 0.0
     while now < T:
         dwell = 0.3 + rng.exponential(c["dwell_mean_s"])
@@ -795,7 +795,7 @@ def _synth_look_around(t: NDArray, rng: np.random.Generator, yaw0: float, g: dic
         ky.append(ky[-1])
         kp.append(kp[-1])
         dy = (5.0 + rng.exponential(c["turn_yaw_scale_deg"])) * rng.choice([-1.0, 1.0])
-        tp = float(np.clip(rng.normal(-3.0, c["pitch_sd_deg"]), -75, 75))
+        tp = float(np.clip(rng.normal(-2.0, c["pitch_sd_deg"]), -75, 75))
         amp = math.hypot(dy, tp - kp[-1])
         # Minimum-jerk peak speed = 1.875 amp / duration; bigger turns are faster.
         peak = c["turn_peak_dps"] * math.sqrt(max(amp, 1.0) / 30.0) * rng.uniform(0.7, 1.3)
@@ -813,17 +813,22 @@ def _synth_look_around(t: NDArray, rng: np.random.Generator, yaw0: float, g: dic
     # Drift: integrated Ornstein-Uhlenbeck velocity (deg/s), correlation time 0.5 s.
     dt = np.diff(t, prepend=t[0])
 
-    def ou(sd: float) -> NDArray:
-        v = np.zeros_like(t)
+    def drift(sd: float, leak_s: float) -> NDArray:
+        # Smooth drift (deg): OU velocity (sd deg/s, correlation 0.5 s) integrated with a
+        # leak back to 0 (time constant leak_s; inf = plain integration).
         a = np.exp(-dt / 0.5)
         e = rng.normal(0.0, 1.0, t.size)
+        v = 0.0
+        x = np.zeros_like(t)
         for i in range(1, t.size):
-            v[i] = a[i] * v[i - 1] + sd * math.sqrt(1 - a[i] ** 2) * e[i]
-        return np.cumsum(v * dt)
+            v = a[i] * v + sd * math.sqrt(1 - a[i] ** 2) * e[i]
+            x[i] = x[i - 1] + dt[i] * (v - x[i - 1] / leak_s)
+        return x
 
-    yaw = yaw + ou(c["drift_sd_dps"])
-    pitch = np.clip(pitch + ou(c["drift_sd_dps"] * 0.6), -85, 85)
-    roll = c["roll_sd_deg"] * np.sin(2 * np.pi * 0.05 * t + rng.uniform(0, 2 * np.pi)) + ou(1.0)
+    yaw = yaw + drift(c["drift_sd_dps"], math.inf)
+    pitch = np.clip(pitch + drift(c["drift_sd_dps"] * 0.6, 2.0), -85, 85)
+    roll = c["roll_sd_deg"] * np.sin(2 * np.pi * 0.05 * t + rng.uniform(0, 2 * np.pi))
+    roll = roll + drift(1.0, 2.0)
     return HeadPath.from_angles_deg(t, yaw, pitch, roll, source="synth:look-around")
 
 
