@@ -122,7 +122,8 @@ class GrainBuckets:
 
     bands : ndarray, shape (n_bands, 2), int32 (first cell, cell count)
     cell_start : ndarray, shape (n_cells + 1,), int32
-    entries : ndarray, shape (n_entries, 4), float32 (x, y, z world unit vector, radius rad)
+    entries : ndarray, shape (n_entries, 4), float32 (x, y, z world unit vector, chord
+        radius ``2 sin(r / 2)`` of the disc edge)
     """
 
     cell_rad: float
@@ -158,9 +159,9 @@ class GrainField:
 
         ``margin_rad`` grows each disc for the lookup (half a pixel's angular footprint
         plus slack, so that antialiased edges find their grain); ``cell_deg`` defaults to
-        the grain diameter.
+        half the grain diameter (about 2 grains per cell for the paper's GRF).
         """
-        cell = math.radians(cell_deg if cell_deg is not None else self.config.grain_deg)
+        cell = math.radians(cell_deg if cell_deg is not None else self.config.grain_deg / 2.0)
         return _buckets(self.centers, self.radius_rad + float(margin_rad), self.radius_rad, cell)
 
 
@@ -228,7 +229,7 @@ def _buckets(centers: NDArray, reach: float, radius: float, cell: float) -> Grai
     cell_start = np.concatenate([[0], np.cumsum(counts)]).astype(np.int32)
     entries = np.empty((gid.size, 4), np.float32)
     entries[:, :3] = centers[gid]
-    entries[:, 3] = radius
+    entries[:, 3] = 2.0 * math.sin(radius / 2.0)  # chord radius: |p - c| at the disc edge
     out = GrainBuckets(cell, bands.astype(np.int32), cell_start, entries)
     for a in (out.bands, out.cell_start, out.entries):
         a.setflags(write=False)

@@ -47,8 +47,10 @@ __all__ = [
     "EyeRenderer",
     "RenderConfig",
     "ShaderError",
+    "VideoRenderResult",
     "create_context",
     "load_shader_source",
+    "render_video",
     "render_view",
 ]
 
@@ -181,6 +183,51 @@ def _check_gl(ctx, where: str) -> None:
         raise RuntimeError(f"OpenGL error {err} {where}")
 
 
+def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
+    """Render the GRF's world-fixed grain coverage once, as a mipmapped equirect R8
+    texture (``shaders/grf_mask.frag``), fine enough that a texel is at most 0.6 of the
+    eye's largest pixel (capped at 8192 x 4096)."""
+    import moderngl
+
+    limit = min(8192, _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"))
+    w = int(math.ceil(2.0 * math.pi / (0.6 * pixel_angle_rad)))
+    w = min(max(512, w + (w % 2)), limit)
+    h = w // 2
+    field_ = GrainField.from_config(grf)
+    # Lookup reach: half a texel row (the antialiasing ramp) plus slack for float32 edges.
+    b = field_.buckets(0.5 * math.pi / h + 1e-4)
+    prog = _program(ctx, "fullscreen.vert", "grf_mask.frag", {})
+    vao = ctx.vertex_array(prog, [])
+    ssbos = [
+        ctx.buffer(np.ascontiguousarray(arr).tobytes())
+        for arr in (b.bands, b.cell_start, b.entries)
+    ]
+    tex = ctx.texture((w, h), 1, dtype="f1")
+    fbo = ctx.framebuffer(color_attachments=[tex])
+    try:
+        for i, sb in enumerate(ssbos):
+            sb.bind_to_storage_buffer(i)
+        prog["u_size"].value = (float(w), float(h))
+        prog["u_cell"].value = b.cell_rad
+        prog["u_n_bands"].value = b.n_bands
+        fbo.use()
+        fbo.viewport = (0, 0, w, h)
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        tex.repeat_x = True
+        tex.repeat_y = False
+        tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        tex.build_mipmaps()
+    finally:
+        outer_fbo.use()
+        fbo.release()
+        for sb in ssbos:
+            sb.release()
+        vao.release()
+        prog.release()
+    _check_gl(ctx, "after rendering the grain mask")
+    return tex
+
+
 class EyeRenderer:
     """Renders eye views of equirect frames into an offscreen framebuffer.
 
@@ -228,17 +275,10 @@ class EyeRenderer:
         )
         self._set("u_size", (float(w), float(h)))
         self._set("u_equirect", 0)
-        self._ssbos = []
+        self.grain_mask = None
         if grf is not None:
-            field_ = GrainField.from_config(grf)
-            # Lookup reach: half the largest pixel footprint, plus slack for float32 edges.
-            b = field_.buckets(0.5 * config.pixel_angle_rad + 1e-4)
-            for i, arr in enumerate((b.bands, b.cell_start, b.entries)):
-                ssbo = ctx.buffer(np.ascontiguousarray(arr).tobytes())
-                ssbo.bind_to_storage_buffer(i)
-                self._ssbos.append(ssbo)
-            self._set("u_cell", b.cell_rad)
-            self._set("u_n_bands", b.n_bands)
+            self.grain_mask = _grain_mask(ctx, grf, config.pixel_angle_rad, self._outer_fbo)
+            self._set("u_grains", 1)
             self._set("u_cutout", (math.radians(grf.inner_deg), math.radians(grf.outer_deg)))
             self._set("u_eye_offset", (0.0, 0.0, 0.0))
             self._set("u_opacity", 0.0)
@@ -306,6 +346,8 @@ class EyeRenderer:
             self.prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
             self.prog["u_eye_offset"].value = tuple(float(v) for v in eye_offset)
         tex.use(0)
+        if self.grain_mask is not None:
+            self.grain_mask.use(1)
         self.fbo.use()
         self.vao.render(self._moderngl.TRIANGLES, vertices=3)
         slot = 0 if eye == "left" else 1
@@ -326,8 +368,8 @@ class EyeRenderer:
     def release(self) -> None:
         for t in self._tex.values():
             t.release()
-        for b in self._ssbos:
-            b.release()
+        if self.grain_mask is not None:
+            self.grain_mask.release()
         self._outer_fbo.use()
         self.fbo.release()
         self.vao.release()
@@ -356,3 +398,224 @@ def render_view(
         return np.array(r.render(R, opacity=opacity))
     finally:
         r.release()
+
+
+# --------------------------------------------------------------------------- videos
+@dataclass(frozen=True)
+class VideoRenderResult:
+    """What :func:`render_video` did: frames written per eye and wall-clock seconds."""
+
+    n_frames: int
+    eye_size: tuple[int, int]
+    fps: float
+    timings_s: dict[str, float]
+
+    @property
+    def frames_per_s(self) -> float:
+        t = self.timings_s.get("total", 0.0)
+        return self.n_frames / t if t > 0 else float("nan")
+
+
+class _Worker:
+    """A thread draining a bounded queue into ``fn``; errors resurface in :meth:`join`."""
+
+    def __init__(self, fn, maxsize: int = 3, name: str = "worker"):
+        import queue
+        import threading
+
+        self.q: queue.Queue = queue.Queue(maxsize=maxsize)
+        self.fn = fn
+        self.error: BaseException | None = None
+        self.busy_s = 0.0
+        self.t = threading.Thread(target=self._run, name=name, daemon=True)
+        self.t.start()
+
+    def _run(self) -> None:
+        import time
+
+        while True:
+            item = self.q.get()
+            if item is None:
+                return
+            if self.error is not None:
+                continue  # drain after a failure
+            t0 = time.perf_counter()
+            try:
+                self.fn(item)
+            except BaseException as e:  # noqa: BLE001 - re-raised in join()
+                self.error = e
+            self.busy_s += time.perf_counter() - t0
+
+    def put(self, item) -> None:
+        if self.error is not None:
+            raise self.error
+        self.q.put(item)
+
+    def join(self) -> None:
+        self.q.put(None)
+        self.t.join()
+        if self.error is not None:
+            raise self.error
+
+
+def _prefetch(it, maxsize: int = 3):
+    """Iterate ``it`` in a background thread (decoding overlaps rendering)."""
+    import queue
+    import threading
+
+    q: queue.Queue = queue.Queue(maxsize=maxsize)
+    done = object()
+    err: list[BaseException] = []
+    stop = threading.Event()
+
+    def run() -> None:
+        try:
+            for x in it:
+                if stop.is_set():
+                    return
+                q.put(np.array(x))  # decoder buffers are reused: copy
+        except BaseException as e:  # noqa: BLE001 - re-raised in the consumer
+            err.append(e)
+        finally:
+            q.put(done)
+
+    t = threading.Thread(target=run, name="decode", daemon=True)
+    t.start()
+    try:
+        while True:
+            x = q.get()
+            if x is done:
+                if err:
+                    raise err[0]
+                return
+            yield x
+    finally:
+        stop.set()
+        while t.is_alive():  # unblock a producer waiting on a full queue
+            try:
+                q.get_nowait()
+            except queue.Empty:
+                t.join(0.05)
+
+
+def render_video(
+    ctx,
+    video_path: str,
+    out_paths: tuple[str, str],
+    angles_deg: NDArray[np.float64],
+    *,
+    opacity: NDArray[np.float64] | None = None,
+    config: RenderConfig = RenderConfig(),
+    layout: str = "mono",
+    fps: float | None = None,
+    n_frames: int | None = None,
+    preset: str = "veryfast",
+    crf: int = 18,
+    progress: bool = True,
+) -> VideoRenderResult:
+    """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context from :func:`create_context`
+    video_path : equirect video (or image: one frame)
+    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename)
+    angles_deg : ndarray, shape (N, 3), float64
+        (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
+        beyond N hold the last pose
+    opacity : ndarray, shape (N,), GRF opacity 0..1 per frame (ignored without ``config.grf``)
+    layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
+        ``side-by-side`` (left eye left)
+    fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
+    preset, crf : x264 speed preset and quality
+
+    Returns
+    -------
+    VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``, ``render``
+    (draw + readback of both eyes), ``encode_wait`` (blocked on the encoders),
+    ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
+    """
+    import contextlib
+    import time
+
+    from simulator.geometry import split_eye
+    from simulator.video import VideoWriter, iter_frames, probe
+
+    info = probe(video_path)
+    fps = float(fps or info.fps)
+    total = int(n_frames or info.n_frames)
+    ang = np.asarray(angles_deg, float).reshape(-1, 3)
+    if ang.shape[0] < 1:
+        raise InputError(f"{video_path}: no head orientations to render")
+    op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
+    rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
+    stereo = layout != "mono"
+    renderer = EyeRenderer(ctx, config)
+    w, h = config.eye_size
+    timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
+    t_start = time.perf_counter()
+    n = 0
+    try:
+        with contextlib.ExitStack() as stack:
+            writers = [
+                stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
+                for p in out_paths
+            ]
+            workers = [_Worker(wr.write, name=f"encode-{i}") for i, wr in enumerate(writers)]
+            try:
+                from tqdm import tqdm
+
+                frames = _prefetch(iter_frames(video_path, layout="mono"))
+                bar = tqdm(
+                    total=total, unit="frame", disable=not progress, desc="render", leave=False
+                )
+                t0 = time.perf_counter()
+                for frame in frames:
+                    t1 = time.perf_counter()
+                    timings["decode_wait"] += t1 - t0
+                    i = min(n, len(rots) - 1)
+                    if stereo:
+                        renderer.upload(split_eye(frame, layout, "left", source=video_path), "left")
+                        renderer.upload(
+                            split_eye(frame, layout, "right", source=video_path), "right"
+                        )
+                    else:
+                        renderer.upload(frame, "left")
+                    t2 = time.perf_counter()
+                    o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
+                    outs = []
+                    for eye in ("left", "right"):
+                        img = renderer.render(
+                            rots[i],
+                            eye,
+                            source=eye if stereo else "left",
+                            opacity=o,
+                            eye_offset=renderer.eye_offset(rots[i], eye),
+                        )
+                        outs.append(np.ascontiguousarray(img))  # copy: the buffer is reused
+                    t3 = time.perf_counter()
+                    for wk, img in zip(workers, outs):
+                        wk.put(img)
+                    t0 = time.perf_counter()
+                    timings["upload"] += t2 - t1
+                    timings["render"] += t3 - t2
+                    timings["encode_wait"] += t0 - t3
+                    n += 1
+                    bar.update(1)
+                bar.close()
+            finally:
+                errors = []
+                for wk in workers:
+                    try:
+                        wk.join()
+                    except BaseException as e:  # noqa: BLE001
+                        errors.append(e)
+                timings["encode_busy"] = sum(wk.busy_s for wk in workers)
+            if errors:
+                raise errors[0]
+            if n == 0:
+                raise InputError(f"{video_path}: no frames decoded")
+    finally:
+        renderer.release()
+    timings["total"] = time.perf_counter() - t_start
+    return VideoRenderResult(n, (w, h), fps, timings)
