@@ -106,25 +106,58 @@ class WindowFlowReducer:
         # Pixel steps of u and v: +x right = +u, +y down = -v.
         self._cx = np.float32(2.0 * tx / w)
         self._cy = np.float32(-2.0 * ty / h)
-        self._wt = (sa.astype(np.float64) / sa.astype(np.float64).sum()).ravel()
+        self._wt32 = (sa.astype(np.float64) / sa.astype(np.float64).sum()).astype(np.float32)
+        self._local = threading.local()
+
+    def _buffers(self) -> list[NDArray[np.float32]]:
+        """Six (h, w) float32 scratch arrays of the calling thread (reused: fresh 256 KB
+        temporaries cost a page-faulting mmap each, more than the arithmetic)."""
+        bufs = getattr(self._local, "bufs", None)
+        if bufs is None:
+            w, h = self.size
+            bufs = [np.empty((h, w), np.float32) for _ in range(6)]
+            self._local.bufs = bufs
+        return bufs
+
+    def _one(self, f: NDArray[np.float32], out_angles: bool = False):
+        """``(sum of weighted angles (rad), sum of |f| (px))`` of one window's flow."""
+        fx, fy, du, dv, t, u = self._buffers()
+        np.copyto(fx, f[..., 0])
+        np.copyto(fy, f[..., 1])
+        np.multiply(fx, fx, out=t)
+        np.multiply(fy, fy, out=u)
+        np.add(t, u, out=du)
+        np.sqrt(du, out=du)
+        # float64 pairwise sums: the order does not depend on memory alignment or threads
+        # (BLAS dot and cv2.mean/magnitude do), so results are bit-reproducible (--resume).
+        px_sum = float(np.sum(du, dtype=np.float64))
+        np.multiply(fx, self._cx, out=du)
+        np.multiply(fy, self._cy, out=dv)
+        # |r0 x r1|^2 = du^2 + dv^2 + (u0 dv - v0 du)^2 with r = (u, v, 1)
+        np.multiply(t, self._cx * self._cx, out=t)
+        np.multiply(u, self._cy * self._cy, out=u)
+        np.add(t, u, out=t)
+        np.multiply(self._u0, dv, out=u)
+        np.multiply(self._v0, du, out=fx)
+        np.subtract(u, fx, out=u)
+        np.multiply(u, u, out=u)
+        np.add(t, u, out=t)
+        np.sqrt(t, out=t)
+        # r0 . r1 = 1 + u0^2 + v0^2 + u0 du + v0 dv
+        np.multiply(self._u0, du, out=u)
+        np.multiply(self._v0, dv, out=fy)
+        np.add(u, fy, out=u)
+        np.add(u, self._a, out=u)
+        ang = cv2.phase(u, t, fx)  # atan2(|cross|, dot) in [0, pi]
+        if out_angles:
+            return ang.copy()
+        np.multiply(ang, self._wt32, out=fy)
+        return float(np.sum(fy, dtype=np.float64)), px_sum
 
     def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
         """Per-pixel angle in **radians** between each ray and its flow target's ray,
         ``(h, w)`` float32, for one window's flow ``(h, w, 2)``."""
-        du = flow[..., 0] * self._cx
-        dv = flow[..., 1] * self._cy
-        c3 = self._u0 * dv
-        c3 -= self._v0 * du
-        # numpy, not cv2.magnitude: the latter's result depends on memory alignment in
-        # the last bit (SIMD body vs scalar tail), which would break bit-exact --resume.
-        cross = du * du
-        cross += dv * dv
-        cross += c3 * c3
-        np.sqrt(cross, out=cross)
-        dot = self._u0 * du
-        dot += self._v0 * dv
-        dot += self._a
-        return cv2.phase(dot, cross)
+        return self._one(np.asarray(flow, np.float32), out_angles=True)
 
     def __call__(
         self, flow: NDArray[np.float32], fps: float
@@ -140,14 +173,9 @@ class WindowFlowReducer:
         k = math.degrees(1.0) * float(fps)
         npx = float(self.size[0] * self.size[1])
         for i in range(n):
-            f = flow[i]
-            # Sums in float64 with numpy's pairwise summation: the order does not depend on
-            # memory alignment or threads (BLAS dot and cv2.mean do), so results are
-            # bit-reproducible, which --resume relies on.
-            dps[i] = float(np.sum(self.angles(f).ravel() * self._wt)) * k
-            fx = f[..., 0]
-            fy = f[..., 1]
-            px[i] = float(np.sum(np.sqrt(fx * fx + fy * fy), dtype=np.float64)) / npx
+            a, m = self._one(flow[i])
+            dps[i] = a * k
+            px[i] = m / npx
         return dps, px
 
 
