@@ -275,7 +275,7 @@ class SynthConfig:
     speed_mps: float | None = None
     ipd_m: float = 0.064
     texture_m: float = 3.0
-    truth_cell_deg: float = 2.0
+    truth_cell_deg: float = 4.0
 
     def __post_init__(self) -> None:
         if self.scene not in SCENES:

@@ -249,4 +249,4 @@ def test_cli_synth_writes_clip(tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     info = probe(out)
     assert (info.width, info.height, info.n_frames, info.fps) == (64, 32, 2, 8.0)
-    assert load_truth(truth_path_for(out)).speed_dps.shape == (2, 90, 180)
+    assert load_truth(truth_path_for(out)).speed_dps.shape == (2, 45, 90)

@@ -96,9 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--truth-cell",
         type=positive_float,
-        default=2.0,
+        default=4.0,
         metavar="DEG",
-        help="cell size of the truth grid, degrees dividing 180 (default 2)",
+        help="cell size of the truth grid, degrees dividing 180 (default 4)",
     )
     p.add_argument(
         "--crf", type=nonneg_int, default=16, help="x264 quality, lower is better (default 16)"
