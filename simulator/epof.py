@@ -59,6 +59,7 @@ __all__ = [
     "plot_epof",
     "read_epof_csv",
     "viewport_overlaps",
+    "weighted_epof",
     "write_epof_csv",
 ]
 
@@ -390,6 +391,27 @@ class ViewportOverlaps:
         if shape == ():
             return float(out[0])
         return out.reshape(shape)
+
+
+def weighted_epof(pof, overlaps, *, top_k: int | None = None) -> float:
+    """The paper's eq. (section 3.5) for one viewport: sum POF_n OL_n / sum OL_n.
+
+    ``pof`` and ``overlaps`` (fractions of the viewport, 0..1) have the same shape (any);
+    ``top_k`` keeps the k largest overlaps. The paper's example: flows 16, 15.5, 16.8, 17
+    with overlaps 0.90, 0.88, 0.85, 0.80 give 16.3. (:meth:`ViewportOverlaps.epof` is the
+    vectorised form of this.)
+    """
+    f = np.asarray(pof, np.float64).ravel()
+    w = np.asarray(overlaps, np.float64).ravel()
+    if f.shape != w.shape:
+        raise InputError(f"pof and overlaps differ in size: {f.size} vs {w.size}")
+    if top_k is not None and top_k < w.size:
+        keep = np.argsort(w, kind="stable")[-int(top_k) :]
+        f, w = f[keep], w[keep]
+    den = w.sum()
+    if den <= 0:
+        raise InputError("the viewport overlaps no window")
+    return float((f * w).sum() / den)
 
 
 @functools.lru_cache(maxsize=8)
