@@ -150,6 +150,15 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.threads is not None and args.threads < 1:
         raise InputError(f"--threads must be >= 1; got {args.threads}")
+    import signal
+
+    def _term(signum, frame):  # SIGTERM (batch schedulers) behaves like Ctrl-C
+        raise KeyboardInterrupt
+
+    try:
+        old_term = signal.signal(signal.SIGTERM, _term)
+    except ValueError:  # not the main thread
+        old_term = None
     try:
         out = preprocess_video(
             args.video,
@@ -168,5 +177,8 @@ def run(args: argparse.Namespace) -> int:
     except PreprocessInterrupted as e:
         print(f"vimsim preprocess: {e.message}", file=sys.stderr)
         return 130
+    finally:
+        if old_term is not None:
+            signal.signal(signal.SIGTERM, old_term)
     print(f"wrote {out}")
     return 0
