@@ -406,3 +406,39 @@ def test_bad_input_one_line_exit_2_no_output(tmp_path, capsys, case, match):
     assert match in err
     assert not out.exists() and not checkpoint_path(out).exists()
     assert not [p for p in tmp_path.iterdir() if p.suffix == ".npz"]
+
+
+def test_torch_backend_end_to_end(tmp_path, videos):
+    """A TorchScript model returning constant flow (1.5, -0.5) px: pof_px is its length in
+    every window, pof_dps the reduction of that field (same for every window)."""
+    torch = pytest.importorskip("torch")
+
+    class Const(torch.nn.Module):
+        def forward(self, a, b):
+            n, _, h, w = a.shape
+            v = torch.tensor([1.5, -0.5], device=a.device).view(1, 2, 1, 1)
+            return v.expand(n, 2, h, w) + 0.0 * (a[:, :2] - b[:, :2])
+
+    model = tmp_path / "const.pt"
+    torch.jit.script(Const()).save(str(model))
+    out = tmp_path / "g.npz"
+    assert (
+        _cli(
+            videos["long"],
+            "-o",
+            out,
+            "--grid",
+            "paper-198",
+            "--window-size",
+            32,
+            "--flow",
+            f"torch:{model}",
+        )
+        == 0
+    )
+    g = load_grid(out)
+    assert g.meta["flow"]["method"] == "torch"
+    assert np.allclose(g.pof_px, np.hypot(1.5, 0.5), rtol=1e-6)
+    field = np.broadcast_to(np.float32([1.5, -0.5]), (1, 32, 32, 2))
+    dps, _ = WindowFlowReducer((32, 32), 107.0, 107.0)(field, FPS)
+    assert np.allclose(g.pof_dps, dps[0], rtol=1e-6)
