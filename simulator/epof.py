@@ -315,7 +315,7 @@ class ViewportOverlaps:
         g = pof2d.reshape(-1)[self._perm[k % self.shape[1]]]
         return float(ol @ g) / den
 
-    def epof(self, pof, yaw_deg, pitch_deg, roll_deg=0.0, frames=None, *, top_k=None, chunk=2048):
+    def epof(self, pof, yaw_deg, pitch_deg, roll_deg=0.0, frames=None, *, top_k=None, chunk=1024):
         """EPOF (same unit as ``pof``) of each query.
 
         Parameters
