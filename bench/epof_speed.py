@@ -20,9 +20,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from simulator.epof import epof_from_grid, viewport_overlaps  # noqa: E402
-from simulator.geometry import grid_preset  # noqa: E402
-from simulator.gridfile import load_grid, save_grid  # noqa: E402
+from simulator.epof import epof_from_grid, viewport_overlaps
+from simulator.geometry import grid_preset
+from simulator.gridfile import load_grid, save_grid
 
 FRAME_BUDGET_US = 1e6 / 90.0
 SINGLE_TARGET_US = 50.0

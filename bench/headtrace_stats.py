@@ -73,10 +73,10 @@ def main(argv=None) -> int:
             import json
 
             names = [e["filename"] for e in json.loads(f.read_text())["data"]]
-            jobs = [(f"{f.parent.name}/{f.name}:{v}", dict(video=v)) for v in names]
+            jobs = [(f"{f.parent.name}/{f.name}:{v}", {"video": v}) for v in names]
         elif fmt == "360vidstr":
             n_users = (sum(1 for ln in f.read_text().splitlines() if ln.strip()) - 1) // 2
-            jobs = [(f"{f.name}:user{u}", dict(user=u)) for u in range(1, n_users + 1)]
+            jobs = [(f"{f.name}:user{u}", {"user": u}) for u in range(1, n_users + 1)]
         else:
             jobs = [(f"{f.parent.name[:16]}/{f.name}", {})]
         per_file = []
