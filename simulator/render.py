@@ -185,12 +185,13 @@ def _check_gl(ctx, where: str) -> None:
 
 def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
     """Render the GRF's world-fixed grain coverage once, as a mipmapped equirect R8
-    texture (``shaders/grf_mask.frag``), fine enough that a texel is at most 0.6 of the
-    eye's largest pixel (capped at 8192 x 4096)."""
+    texture (``shaders/grf_mask.frag``), with texels no larger than the eye's largest
+    pixel (capped at 8192 x 4096); magnified bilinearly, its 1-texel antialiased edges
+    stay within about a pixel."""
     import moderngl
 
     limit = min(8192, _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"))
-    w = int(math.ceil(2.0 * math.pi / (0.6 * pixel_angle_rad)))
+    w = int(math.ceil(2.0 * math.pi / pixel_angle_rad))
     w = min(max(512, w + (w % 2)), limit)
     h = w // 2
     field_ = GrainField.from_config(grf)
@@ -299,17 +300,21 @@ class EyeRenderer:
                 f"equirect frame {w}x{h} exceeds this OpenGL's texture limit of {self._max_tex} pixels"
             )
         tex = self._tex.get(eye)
-        if tex is None or tex.size != (w, h):
+        # Mipmaps only when some pixel is larger than a texel row (minification).
+        mips = self.config.pixel_angle_rad > 0.95 * math.pi / h
+        if tex is None or tex.size != (w, h) or tex.extra != mips:
             if tex is not None:
                 tex.release()
             mgl = self._moderngl
             tex = self.ctx.texture((w, h), 3, dtype="f1", alignment=1)
             tex.repeat_x = True  # longitude wraps at the seam
             tex.repeat_y = False  # latitude is clamped at the poles
-            tex.filter = (mgl.LINEAR_MIPMAP_LINEAR, mgl.LINEAR)
+            tex.filter = (mgl.LINEAR_MIPMAP_LINEAR if mips else mgl.LINEAR, mgl.LINEAR)
+            tex.extra = mips
             self._tex[eye] = tex
         tex.write(np.ascontiguousarray(frame))
-        tex.build_mipmaps()
+        if mips:
+            tex.build_mipmaps()
 
     def render(
         self,
@@ -529,6 +534,9 @@ def render_video(
     fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
     preset, crf : x264 speed preset and quality
 
+    A mono video with grains at infinity gives the same image to both eyes: it is
+    rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``.
+
     Returns
     -------
     VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``, ``render``
@@ -550,6 +558,10 @@ def render_video(
     op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
     rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
     stereo = layout != "mono"
+    # Mono video with grains at infinity: both eyes see exactly the same image, so it is
+    # rendered and encoded once and the file copied (halves the work; same output).
+    same = not stereo and (config.grf is None or config.grf.distance_m is None)
+    eyes = ("left",) if same else ("left", "right")
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
@@ -559,7 +571,7 @@ def render_video(
         with contextlib.ExitStack() as stack:
             writers = [
                 stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
-                for p in out_paths
+                for p in out_paths[: len(eyes)]
             ]
             workers = [_Worker(wr.write, name=f"encode-{i}") for i, wr in enumerate(writers)]
             try:
@@ -584,7 +596,7 @@ def render_video(
                     t2 = time.perf_counter()
                     o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
                     outs = []
-                    for eye in ("left", "right"):
+                    for eye in eyes:
                         img = renderer.render(
                             rots[i],
                             eye,
@@ -615,6 +627,13 @@ def render_video(
                 raise errors[0]
             if n == 0:
                 raise InputError(f"{video_path}: no frames decoded")
+        if same:
+            import shutil
+
+            from simulator.fileio import atomic_output
+
+            with atomic_output(out_paths[1]) as tmp:
+                shutil.copyfile(out_paths[0], tmp)
     finally:
         renderer.release()
     timings["total"] = time.perf_counter() - t_start

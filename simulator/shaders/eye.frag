@@ -33,28 +33,33 @@ vec4 cubic_weights(float t) {
 }
 
 // Bicubic (Lagrange, as v360 interp=cubic) at continuous equirect pixel coordinates xy
-// (pixel centres at +0.5), for magnification. Per axis the two inner weights are both
-// >= 0, so taps 0 and 1 of the inner pair merge into one bilinear fetch at
-// offset w2 / (w1 + w2): 3 x 3 bilinear fetches instead of 16 texel fetches. Longitude
-// wraps through the sampler (s repeats); latitude clamps at the pole rows.
+// (pixel centres at +0.5), for magnification: 16 texel fetches of level 0 with longitude
+// wrap-around at the +-180 deg seam and continuation across the poles (a row beyond a
+// pole is the mirrored row on the meridian 180 deg away, as simulator.geometry pads).
+// Indices are computed once per axis (faster on llvmpipe than 9 merged bilinear taps).
 vec3 sample_cubic(vec2 xy) {
-    vec2 tsz = vec2(textureSize(u_equirect, 0));
+    ivec2 sz = textureSize(u_equirect, 0);
     vec2 p = xy - 0.5;
     vec2 f = floor(p);
     vec2 t = p - f;
+    ivec2 b = ivec2(f);
     vec4 wx = cubic_weights(t.x);
     vec4 wy = cubic_weights(t.y);
-    vec3 w_x = vec3(wx.x, wx.y + wx.z, wx.w);
-    vec3 w_y = vec3(wy.x, wy.y + wy.z, wy.w);
-    // Texel-centre coordinates (normalised) of tap -1, the merged pair, tap 2.
-    vec3 cx = (f.x + vec3(-0.5, 0.5 + wx.z / w_x.y, 2.5)) / tsz.x;
-    vec3 cy = (f.y + vec3(-0.5, 0.5 + wy.z / w_y.y, 2.5)) / tsz.y;
+    ivec4 xr = ivec4(b.x - 1, b.x, b.x + 1, b.x + 2) + sz.x;
+    ivec4 xs = xr % sz.x;                   // columns
+    ivec4 xo = (xr + sz.x / 2) % sz.x;      // the same columns on the opposite meridian
+    ivec4 yr = ivec4(b.y - 1, b.y, b.y + 1, b.y + 2);
+    bvec4 over = bvec4(yr.x < 0 || yr.x >= sz.y, yr.y < 0 || yr.y >= sz.y,
+                       yr.z < 0 || yr.z >= sz.y, yr.w < 0 || yr.w >= sz.y);
+    ivec4 ys = min(max(yr, -1 - yr), 2 * sz.y - 1 - yr);   // mirror rows across each pole
     vec3 acc = vec3(0.0);
-    for (int j = 0; j < 3; ++j) {
-        vec3 row = w_x.x * textureLod(u_equirect, vec2(cx.x, cy[j]), 0.0).rgb
-                 + w_x.y * textureLod(u_equirect, vec2(cx.y, cy[j]), 0.0).rgb
-                 + w_x.z * textureLod(u_equirect, vec2(cx.z, cy[j]), 0.0).rgb;
-        acc += w_y[j] * row;
+    for (int j = 0; j < 4; ++j) {
+        ivec4 c = over[j] ? xo : xs;
+        vec3 row = wx.x * texelFetch(u_equirect, ivec2(c.x, ys[j]), 0).rgb
+                 + wx.y * texelFetch(u_equirect, ivec2(c.y, ys[j]), 0).rgb
+                 + wx.z * texelFetch(u_equirect, ivec2(c.z, ys[j]), 0).rgb
+                 + wx.w * texelFetch(u_equirect, ivec2(c.w, ys[j]), 0).rgb;
+        acc += wy[j] * row;
     }
     return acc;
 }
