@@ -284,14 +284,17 @@ class _TileGeometry:
         # Pyramid level: halve the equirect while its pixels stay finer than a tile's
         # centre pixel (anti-aliasing for the linear remap, and a cheaper remap).
         centre_px_deg = math.degrees(2.0 * math.atan(t / s))
-        level, w = 0, W
+        # Stored pixels may be non-square (e.g. SAR 9:8): lon and lat steps are checked apart.
+        level, w, h = 0, W, H
         while (
-            w % 2 == 0 and (w // 2) % 2 == 0 and 360.0 / (w // 2) <= centre_px_deg and w // 2 >= 64
+            w % 4 == 0
+            and max(360.0 / (w // 2), 180.0 / ((h + 1) // 2)) <= centre_px_deg
+            and min(w // 2, (h + 1) // 2) >= 32
         ):
-            w //= 2
+            w, h = w // 2, (h + 1) // 2  # cv2.pyrDown's output size
             level += 1
         self.level = level
-        self.small_size = (W >> level, H >> level)
+        self.small_size = (w, h)
         dirs, sa = perspective_rays((s, s), fov, fov)
         R = head_rotation(
             [a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0
@@ -422,9 +425,12 @@ class FieldEstimator:
         if not (fps > 0) or not math.isfinite(fps):
             raise InputError(f"frame rate must be > 0 frames/s; got {fps}")
         W, H = int(equirect_size[0]), int(equirect_size[1])
-        if W != 2 * H or W % 4:
+        # The 2:1 display aspect (with the sample aspect ratio) is the caller's check
+        # (MediaInfo.eye_size); stored pixels may be non-square.
+        if W % 2 or W < 64 or H < 32 or not (0.8 <= W / H <= 4.5):
             raise InputError(
-                f"sphere mode needs a 2:1 equirect frame with width divisible by 4; got {W}x{H}"
+                f"sphere mode needs an equirect frame with an even width >= 64 and about 2:1 "
+                f"(stored pixels may be non-square); got {W}x{H}"
             )
         self.config = config
         self.cells = CellGrid(config.cell_deg)
