@@ -115,6 +115,8 @@ def _shader_error(err: Exception, files: dict[str, str]) -> ShaderError:
     if m:
         line = int(next(g for g in m.groups() if g))
         lines = files.get(name, "").splitlines()
+        if len(lines) > 1 and lines[1] == "#line 2":
+            del lines[1]  # the marker load_shader_source adds: back to the file's numbering
         quoted = lines[line - 1].strip() if 0 < line <= len(lines) else "?"
         return ShaderError(f"shaders/{name}:{line}: {detail} -- `{quoted}`")
     return ShaderError(f"shaders/{name}: {detail}")
@@ -191,7 +193,7 @@ def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
     import moderngl
 
     limit = min(8192, _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"))
-    w = int(math.ceil(2.0 * math.pi / pixel_angle_rad))
+    w = math.ceil(2.0 * math.pi / pixel_angle_rad)
     w = min(max(512, w + (w % 2)), limit)
     h = w // 2
     field_ = GrainField.from_config(grf)
