@@ -92,12 +92,21 @@ def main(argv=None) -> int:
     OUT.mkdir(parents=True, exist_ok=True)
     img = np.asarray(Image.open(PANO).convert("RGB").resize((2048, 1024), Image.LANCZOS))
     grid = grid_preset("default", size=(args.window_size, args.window_size))
-    cases = [("yaw", (0.0, 1.0, 0.0), 15.0), ("yaw", (0.0, 1.0, 0.0), 60.0),
-             ("oblique", OBLIQUE, 15.0), ("oblique", OBLIQUE, 60.0), ("still", (0.0, 1.0, 0.0), 0.0)]
-    print(f"panorama {PANO.name} 2048x1024, {args.frames} frames at {args.fps:g} fps, H.264 crf 18; "
-          f"grid default {grid.shape[0]}x{grid.shape[1]} windows of {grid.size[0]}x{grid.size[1]} px, 107 deg")
-    print(f"{'case':<18}{'preset':<11}{'median rel':>11}{'p90 rel':>9}{'ratio to 10%':>14}"
-          f"{'median dps':>12}{'s/frame':>9}")
+    cases = [
+        ("yaw", (0.0, 1.0, 0.0), 15.0),
+        ("yaw", (0.0, 1.0, 0.0), 60.0),
+        ("oblique", OBLIQUE, 15.0),
+        ("oblique", OBLIQUE, 60.0),
+        ("still", (0.0, 1.0, 0.0), 0.0),
+    ]
+    print(
+        f"panorama {PANO.name} 2048x1024, {args.frames} frames at {args.fps:g} fps, H.264 crf 18; "
+        f"grid default {grid.shape[0]}x{grid.shape[1]} windows of {grid.size[0]}x{grid.size[1]} px, 107 deg"
+    )
+    print(
+        f"{'case':<18}{'preset':<11}{'median rel':>11}{'p90 rel':>9}{'ratio to 10%':>14}"
+        f"{'median dps':>12}{'s/frame':>9}"
+    )
     for name, axis, omega in cases:
         vid = OUT / f"rot_{name}_{omega:g}_{args.frames}f.mp4"
         if not vid.exists():
@@ -111,14 +120,18 @@ def main(argv=None) -> int:
             est = g.pof_dps[1:].astype(np.float64)  # row 0 repeats row 1
             label = f"{name} {omega:g} deg/s"
             if omega == 0:
-                print(f"{label:<18}{preset:<11}{'':>11}{'':>9}{np.max(est) / GOAL_STILL_DPS:>14.3f}"
-                      f"{np.median(est):>12.4f}{dt:>9.2f}   (max {np.max(est):.4f} deg/s; goal < 0.5)")
+                print(
+                    f"{label:<18}{preset:<11}{'':>11}{'':>9}{np.max(est) / GOAL_STILL_DPS:>14.3f}"
+                    f"{np.median(est):>12.4f}{dt:>9.2f}   (max {np.max(est):.4f} deg/s; goal < 0.5)"
+                )
                 continue
             truth = window_truth_dps(grid, axis, omega)[None]
             rel = np.abs(est - truth) / truth
             med, p90 = np.median(rel), np.percentile(rel, 90)
-            print(f"{label:<18}{preset:<11}{med:>11.4f}{p90:>9.4f}{med / GOAL_REL:>14.3f}"
-                  f"{np.median(est):>12.3f}{dt:>9.2f}   (median truth {np.median(truth):.3f})")
+            print(
+                f"{label:<18}{preset:<11}{med:>11.4f}{p90:>9.4f}{med / GOAL_REL:>14.3f}"
+                f"{np.median(est):>12.3f}{dt:>9.2f}   (median truth {np.median(truth):.3f})"
+            )
     return 0
 
 
