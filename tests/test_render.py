@@ -473,3 +473,67 @@ def test_cli_render_grid_from_another_video(ctx, tmp_path, capsys):
     )
     err = capsys.readouterr().err
     assert rc == 2 and "512x256" in err
+
+
+def test_no_egl_names_debian_packages(monkeypatch):
+    import moderngl
+
+    from simulator.render import create_context
+
+    def fail(*a, **k):
+        raise Exception("eglGetDisplay failed")  # noqa: TRY002 - glcontext raises plain Exception
+
+    monkeypatch.setattr(moderngl, "create_context", fail)
+    with pytest.raises(InputError, match="libegl1 libgl1-mesa-dri"):
+        create_context()
+
+
+def test_cli_output_dir_not_creatable(ctx, tmp_path, capsys):
+    from simulator.cli import main
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=2)
+    _path_csv(tmp_path / "p.csv", 1.0)
+    (tmp_path / "file").write_text("x")
+    rc = main(
+        [
+            "render",
+            str(vid),
+            str(tmp_path / "p.csv"),
+            "-o",
+            str(tmp_path / "file" / "o"),
+            "--eye-size",
+            "32x32",
+            "--no-progress",
+        ]
+    )
+    assert rc == 2 and "output directory" in capsys.readouterr().err
+
+
+def test_interrupted_render_leaves_no_mp4(ctx, tmp_path, monkeypatch):
+    import simulator.render as R
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, "top-bottom", n=5)
+    calls = {"n": 0}
+    orig = R.EyeRenderer.render
+
+    def flaky(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 5:
+            raise KeyboardInterrupt
+        return orig(self, *a, **k)
+
+    monkeypatch.setattr(R.EyeRenderer, "render", flaky)
+    outs = (str(tmp_path / "left.mp4"), str(tmp_path / "right.mp4"))
+    with pytest.raises(KeyboardInterrupt):
+        R.render_video(
+            ctx,
+            str(vid),
+            outs,
+            np.zeros((5, 3)),
+            config=R.RenderConfig(eye_size=(32, 32), grf=None),
+            layout="top-bottom",
+            progress=False,
+        )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.mp4"]
