@@ -363,6 +363,9 @@ def preprocess_video(
     start_f, end_f = _frame_range(info, float(start_s), end_s, src)
     backend = flow if isinstance(flow, FlowBackend) else make_backend(flow)
     out = Path(output)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise InputError(f"{out}: output directory {parent} does not exist or is not writable")
     ckpt = checkpoint_path(out)
     identity = {
         "video": {

@@ -372,6 +372,7 @@ def _not_flow_model(path):
         ("not_flow_model", "not a flow model"),
         ("still_image", "still image"),
         ("start_past_end", "past the end"),
+        ("no_out_dir", "does not exist"),
     ],
 )
 def test_bad_input_one_line_exit_2_no_output(tmp_path, capsys, case, match):
@@ -398,7 +399,7 @@ def test_bad_input_one_line_exit_2_no_output(tmp_path, capsys, case, match):
             flow = _not_flow_model(tmp_path / "one.pt")
         elif case == "start_past_end":
             extra = ["--start", "5"]
-    out = tmp_path / "g.npz"
+    out = tmp_path / ("missing/g.npz" if case == "no_out_dir" else "g.npz")
     rc = _cli(src, "-o", out, "--window-size", 32, "--flow", flow, *extra)
     err = capsys.readouterr().err.strip()
     assert rc == 2
