@@ -435,13 +435,15 @@ def preprocess_video(
     )
     last_ckpt = time.monotonic()
     prev_win: NDArray | None = None
+    windows = None
     row = first_row - 1
     pool = ThreadPoolExecutor(n_threads) if len(chunks) > 1 or not backend.thread_safe else None
     try:
         frames = iter_frames(
             video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
         )
-        for win in _prefetch(frames, lambda f: extractor(f).reshape(n_win, h, w)):
+        windows = _prefetch(frames, lambda f: extractor(f).reshape(n_win, h, w))
+        for win in windows:
             if prev_win is None:
                 prev_win = win
                 continue
@@ -488,6 +490,8 @@ def preprocess_video(
         ) from None
     finally:
         bar.close()
+        if windows is not None:
+            windows.close()  # stops the decoding thread now, not when garbage-collected
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
 
