@@ -284,3 +284,34 @@ def test_headset_bad_input_and_resolve_fov():
         resolve_fov(headset="quest-2", fov_deg=90)
     with pytest.raises(InputError, match="hfov"):
         resolve_fov(hfov_deg=-5)
+
+
+# ------------------------------------------- integration (once the issue 7 patches land)
+def _patched(fn, name: str) -> bool:
+    import inspect
+
+    return name in inspect.signature(fn).parameters
+
+
+def test_compute_epof_uses_the_field(tmp_path):
+    from simulator.epof import compute_epof
+    from simulator.headpath import synth
+
+    if not _patched(compute_epof, "method"):
+        pytest.skip("issue 7 patch /tmp/sphere_patches/simulator_epof.py.diff not applied")
+    grid = grid_preset("default")
+    f = _smooth_field(2, T=4)
+    dps, px = S.window_pof(f, CELL, grid, 30.0)
+    meta = {**_meta(), "n_frames": 4, "field": S.field_meta(S.SphereConfig(cell_deg=CELL))}
+    save_grid(tmp_path / "s.npz", dps, px, grid, meta, field_dps=f)
+    g = load_grid(tmp_path / "s.npz")
+    hp = synth("sine", 1.0, rate_hz=60.0)
+    auto = compute_epof(g, hp, hfov_deg=90.0, vfov_deg=70.0)
+    yaw, pitch, roll = hp.sample_angles_deg(np.arange(4) / 30.0)
+    exact = S.viewport_epof(f, CELL, yaw, pitch, roll, hfov_deg=90.0, vfov_deg=70.0)
+    assert np.allclose(auto.epof_dps, exact, rtol=1e-9) and auto.meta["method"] == "sphere"
+    assert compute_epof(g, hp, method="paper").meta["method"] == "paper"
+    z = np.zeros((4, *grid.shape), np.float32)
+    save_grid(tmp_path / "p.npz", z, z, grid, {**_meta(), "n_frames": 4})
+    with pytest.raises(InputError, match="--method sphere"):
+        compute_epof(load_grid(tmp_path / "p.npz"), hp, method="sphere")
