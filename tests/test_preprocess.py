@@ -472,3 +472,22 @@ def test_top_bottom_stereo_eyes(tmp_path, real_dir, capsys):
     # Mono is refused for a 1:1 frame with a hint.
     assert _cli(src, "-o", tmp_path / "m.npz", "--window-size", 32) == 2
     assert "top-bottom" in capsys.readouterr().err
+
+
+def test_fov_options(tmp_path, videos, capsys):
+    out = tmp_path / "g.npz"
+    assert _cli(videos["long"], "-o", out, "--fov", 90, "--hfov", 80) == 2
+    assert "either --fov or --hfov" in capsys.readouterr().err
+    assert not out.exists()
+    assert (
+        _cli(
+            videos["long"], "-o", out, "--hfov", 90, "--vfov", 60, "--window-size", 24, "--end", 0.1
+        )
+        == 0
+    )
+    m = load_grid(out).meta
+    assert (m["grid"]["hfov_deg"], m["grid"]["vfov_deg"], m["grid"]["size"]) == (
+        90.0,
+        60.0,
+        [24, 24],
+    )
