@@ -43,7 +43,7 @@ def compare(ctx, img, yaw, pitch, roll, *, size, fov) -> tuple[float, float]:
     W = img.shape[1]
     ref_img, ref_yaw, our_yaw = img, float(yaw), float(yaw)
     if yaw != 0:  # v360 drifts with yaw: look at yaw 0 of the panorama rolled by k columns
-        k = int(round(yaw / 360.0 * W))
+        k = round(yaw / 360.0 * W)
         ref_img, ref_yaw, our_yaw = np.roll(img, -k, axis=1), 0.0, k * 360.0 / W
     ref = v360_view(ref_img, ref_yaw, pitch, roll, hfov_deg=fov, size=size)
     r = EyeRenderer(ctx, RenderConfig(eye_size=size, hfov_deg=fov, vfov_deg=fov, grf=None))
