@@ -43,7 +43,7 @@ import math
 import queue
 import threading
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -1031,7 +1031,9 @@ def preprocess_sphere(
             "field_dps": "deg/s of visual angle",
         },
         "frame0": "repeats frame 1",
-        "field": field_meta(config, field_dtype),
+        "field": field_meta(
+            replace(config, stride=config.stride or _backend(flow)[1]), field_dtype
+        ),
         "video": {
             "path": str(Path(video).resolve()),
             "width": info.width,
