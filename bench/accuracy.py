@@ -116,7 +116,7 @@ def main(argv=None) -> int:
     hp = synth_headpath("look-around", args.seconds + 0.5, rate_hz=60.0, seed=0)
 
     header = (
-        "| scene | backend | window median | window p90 | |pitch|<=15 median | "
+        "| scene | backend | window median | window p90 | window median, \\|pitch\\| <= 15 | "
         "EPOF vs truth grid (median / p90) | EPOF vs exact viewport (median / p90) | "
         "truth-grid EPOF vs exact (method only) | worst pitch row: median | "
         "median truth (deg/s) | s/frame |"
