@@ -129,12 +129,12 @@ def head_angles_deg(rot: Rotation) -> tuple[NDArray[np.float64], NDArray[np.floa
 
 # ------------------------------------------------------------------- sphere <-> equirect
 def lonlat_to_dir(lon, lat) -> NDArray[np.float64]:
-    """Unit directions, shape ``(..., 3)``, from longitude/latitude in **radians**.
+    """Unit directions, shape ``(..., 3)``, from longitude/latitude in **radians**
+    (broadcast against each other).
 
     World frame: +x right, +y up, +z forward (lon = 0, lat = 0).
     """
-    lon = np.asarray(lon, float)
-    lat = np.asarray(lat, float)
+    lon, lat = np.broadcast_arrays(np.asarray(lon, float), np.asarray(lat, float))
     c = np.cos(lat)
     return np.stack([c * np.sin(lon), np.sin(lat), c * np.cos(lon)], axis=-1)
 

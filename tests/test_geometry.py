@@ -333,3 +333,17 @@ def test_agrees_with_v360_on_petra(v360, real_dir, yaw, pitch, roll):
 
 THRESH_PSNR_DB = 42.0  # measured 44.7..48.1 dB
 THRESH_DISP_PX = 0.1  # measured 0.050..0.069 px
+
+
+def test_rotate_equirect_yaw_is_column_roll():
+    """Rotating the scene by +90 deg about +y (yaw) moves content toward +lon by W/4
+    columns; the rotation must broadcast lon/lat grids (regression: it raised)."""
+    from scipy.spatial.transform import Rotation
+
+    from simulator.geometry import rotate_equirect
+
+    rng = np.random.default_rng(3)
+    img = (rng.random((32, 64)) * 255).astype(np.uint8)
+    out = rotate_equirect(img, Rotation.from_euler("y", 90, degrees=True), interp="nearest")
+    assert out.shape == img.shape
+    np.testing.assert_array_equal(out, np.roll(img, 16, axis=1))

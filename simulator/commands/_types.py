@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["size_wxh", "fov_deg", "positive_float", "nonneg_int", "unit_interval"]
+__all__ = ["fov_deg", "nonneg_int", "positive_float", "size_wxh", "unit_interval"]
 
 
 def size_wxh(text: str) -> tuple[int, int]:
