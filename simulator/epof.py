@@ -572,25 +572,56 @@ def compute_epof(
     top_k: int | None = None,
     rule: OpacityRule = OpacityRule(),
     hold: bool = False,
+    method: str = "auto",
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
     The head path must cover every frame time (0 .. (T-1)/fps) unless ``hold`` holds its
     first/last pose (InputError otherwise, saying where it ends).
+
+    ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
+    ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual
+    viewport (:func:`simulator.sphere.viewport_epof`; any FOV, roll included; InputError
+    naming the command that makes a field if the grid has none); ``"auto"`` (default) =
+    sphere when the grid has a field and ``top_k`` is not given, else paper.
     """
+    if method not in ("auto", "paper", "sphere"):
+        raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
+    sphere = method == "sphere" or (
+        method == "auto" and grid.field_dps is not None and top_k is None
+    )
+    if sphere and top_k is not None:
+        raise InputError(
+            "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
+            "field over the viewport: drop --top-k or use --method paper"
+        )
     t = grid.frame_times_s()
     hp.check_covers(
         float(t[-1]), hold=hold, video=grid.meta.get("video", {}).get("path", "") or grid.path
     )
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
     frames = np.arange(grid.n_frames)
-    e = epof_from_grid(
-        grid, yaw, pitch, roll, frames, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
-    )
+    if sphere:
+        from simulator.sphere import require_field, viewport_epof
+
+        field, cells = require_field(grid)
+        h, v = _fov(grid, hfov_deg, vfov_deg)
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
+    else:
+        e = epof_from_grid(
+            grid, yaw, pitch, roll, frames, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
+        )
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
     h, v = _fov(grid, hfov_deg, vfov_deg)
-    meta = {"hfov_deg": h, "vfov_deg": v, "top_k": top_k, "rule": rule, "fps": grid.fps}
+    meta = {
+        "hfov_deg": h,
+        "vfov_deg": v,
+        "top_k": top_k,
+        "rule": rule,
+        "fps": grid.fps,
+        "method": "sphere" if sphere else "paper",
+    }
     return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
 
 

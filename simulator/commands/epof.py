@@ -81,6 +81,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--vfov", type=fov_deg, default=None, metavar="D", help="viewport vertical FOV (degrees)"
     )
     p.add_argument(
+        "--headset",
+        default=None,
+        metavar="NAME",
+        help="viewport FOV of a headset profile (per eye): vive-pro-eye (107 x 107, the paper), "
+        "vive-focus-3, pimax-crystal, quest-2; see simulator/headsets.py",
+    )
+    p.add_argument(
+        "--method",
+        choices=("auto", "paper", "sphere"),
+        default="auto",
+        help="paper: overlap-weighted window POFs (paper 3.5); sphere: exact EPOF, the field of a "
+        "'vimsim preprocess --method sphere' grid integrated over the actual viewport (any FOV); "
+        "auto (default): sphere when the grid has a field",
+    )
+    p.add_argument(
         "--top-k",
         type=_pos_int,
         default=None,
@@ -129,12 +144,23 @@ def run(args: argparse.Namespace) -> int:
     vfov = args.fov if args.fov is not None else args.vfov
     if hfov is None and vfov is not None:
         raise InputError("--vfov needs --hfov")
+    if args.headset is not None:
+        from simulator.headsets import resolve_fov
+
+        hfov, vfov = resolve_fov(headset=args.headset, hfov_deg=hfov)
     rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
     with warnings_to_stderr("vimsim epof"):
         grid = load_grid(args.grid)
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
     res = compute_epof(
-        grid, hp, hfov_deg=hfov, vfov_deg=vfov, top_k=args.top_k, rule=rule, hold=args.hold_last
+        grid,
+        hp,
+        hfov_deg=hfov,
+        vfov_deg=vfov,
+        top_k=args.top_k,
+        rule=rule,
+        hold=args.hold_last,
+        method=args.method,
     )
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
