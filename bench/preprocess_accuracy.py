@@ -40,20 +40,6 @@ GOAL_STILL_DPS = 0.5
 OBLIQUE = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
 
 
-def rotate_equirect(img: np.ndarray, rot: Rotation) -> np.ndarray:
-    """geometry.rotate_equirect, with a local fallback while its lon/lat broadcast bug
-    (``lonlat_to_dir(lon[None, :], lat[:, None])`` fails in np.stack) is open."""
-    try:
-        return geometry.rotate_equirect(img, rot)
-    except ValueError:
-        H, W = img.shape[:2]
-        lon, lat = geometry.equirect_pixel_lonlat(W, H)
-        lon, lat = np.broadcast_arrays(lon[None, :], lat[:, None])
-        src = rot.inv().apply(geometry.lonlat_to_dir(lon, lat).reshape(-1, 3)).reshape(H, W, 3)
-        mx, my = geometry._equirect_remap_coords(src, W, H)
-        return geometry.sample_equirect(img, mx, my)
-
-
 def make_rotation_video(path: Path, img: np.ndarray, axis, omega_dps: float, fps: float, n: int):
     """Encode ``n`` frames of ``img`` rotated by ``omega_dps * t`` about unit ``axis``."""
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -61,7 +47,7 @@ def make_rotation_video(path: Path, img: np.ndarray, axis, omega_dps: float, fps
     with VideoWriter(path, fps, (W, H), crf=18) as vw:
         for i in range(n):
             rot = Rotation.from_rotvec(axis * np.radians(omega_dps * i / fps))
-            vw.write(rotate_equirect(img, rot))
+            vw.write(geometry.rotate_equirect(img, rot))
 
 
 def window_truth_dps(grid, axis, omega_dps: float) -> np.ndarray:

@@ -34,26 +34,15 @@ TINY = grid_preset("paper-198", size=(32, 32))
 
 
 # ------------------------------------------------------------------------- helpers
-def _rotate_equirect(img, rot):
-    """geometry.rotate_equirect, with a local fallback while its broadcast bug is open."""
-    try:
-        return geometry.rotate_equirect(img, rot)
-    except ValueError:
-        H, W = img.shape[:2]
-        lon, lat = geometry.equirect_pixel_lonlat(W, H)
-        lon, lat = np.broadcast_arrays(lon[None, :], lat[:, None])
-        src = rot.inv().apply(geometry.lonlat_to_dir(lon, lat).reshape(-1, 3)).reshape(H, W, 3)
-        mx, my = geometry._equirect_remap_coords(src, W, H)
-        return geometry.sample_equirect(img, mx, my)
-
-
 def _rotation_video(path, img, axis, omega_dps, n):
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
     H, W = img.shape[:2]
     with VideoWriter(path, FPS, (W, H)) as vw:
         for i in range(n):
             vw.write(
-                _rotate_equirect(img, Rotation.from_rotvec(axis * np.radians(omega_dps * i / FPS)))
+                geometry.rotate_equirect(
+                    img, Rotation.from_rotvec(axis * np.radians(omega_dps * i / FPS))
+                )
             )
     return path
 
