@@ -46,8 +46,8 @@ class DemoConfig:
 
     seconds: float = 3.0
     fps: float = 30.0
-    eye_size: tuple[int, int] = (640, 320)
-    window: int = 96
+    eye_size: tuple[int, int] = (768, 384)
+    window: int = 128
     render_size: tuple[int, int] = (480, 480)
     seed: int = 0
     render: bool = True

@@ -741,9 +741,19 @@ def synthesize(
         from tqdm import tqdm
 
         it = tqdm(it, desc=f"synth {cfg.scene}", unit="frame", leave=False)
-    with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw:
+    # Frames are independent: render a few ahead on worker threads (numpy and cv2 release
+    # the GIL for most of the work), write them in order.
+    from concurrent.futures import ThreadPoolExecutor
+
+    workers = max(1, min(4, os.cpu_count() or 1))
+    with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw, ThreadPoolExecutor(workers) as pool:
+        pending = []
         for k in it:
-            vw.write(scene.render(k / cfg.fps))
+            pending.append(pool.submit(scene.render, k / cfg.fps))
+            if len(pending) > 2 * workers:
+                vw.write(pending.pop(0).result())
+        for f in pending:
+            vw.write(f.result())
 
     # Truth on the coarse grid (cell centres), per eye, per frame interval.
     c = cfg.truth_cell_deg
