@@ -113,6 +113,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="stop before S seconds (default: the end)",
     )
     p.add_argument(
+        "--method",
+        choices=("paper", "sphere"),
+        default="paper",
+        help="paper: flow per window (the paper, default); sphere: flow once per frame on 6 cube "
+        "tiles, stored as an angular-speed field on lon/lat cells (field_dps) from which the "
+        "window matrix of --grid/--fov is derived; epof/render then integrate the field over any "
+        "viewport FOV. Real time; no checkpoints. See docs/sphere.md",
+    )
+    p.add_argument(
+        "--cell",
+        type=positive_float,
+        default=4.0,
+        metavar="D",
+        help="sphere mode: field cell size in degrees, dividing 180 (default 4)",
+    )
+    p.add_argument(
         "--resume",
         action="store_true",
         help="continue an interrupted run from GRID.npz.partial.npz (same video and options)",
@@ -150,6 +166,27 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.threads is not None and args.threads < 1:
         raise InputError(f"--threads must be >= 1; got {args.threads}")
+    if args.method == "sphere":
+        from simulator.sphere import SphereConfig, preprocess_sphere
+
+        if args.resume:
+            raise InputError(
+                "--resume is for --method paper; sphere mode runs in real time and keeps no checkpoint"
+            )
+        out = preprocess_sphere(
+            args.video,
+            args.output,
+            grid=grid,
+            config=SphereConfig(cell_deg=args.cell),
+            flow=args.flow,
+            layout=args.layout,
+            eye=args.eye,
+            start_s=args.start,
+            end_s=args.end,
+            progress=not args.no_progress,
+        )
+        print(f"wrote {out}")
+        return 0
     import signal
 
     def _term(signum, frame):  # SIGTERM (batch schedulers) behaves like Ctrl-C
