@@ -94,9 +94,22 @@ class GridFile:
             )
         if abs(float(self.meta["fps"]) - info.fps) > 1e-3 * info.fps:
             raise InputError(f"{src}: grid is for a {self.meta['fps']} fps video; {info.path} is {info.fps:g} fps")
-        if abs(int(self.meta["n_frames"]) - info.n_frames) > 1:
+        n_video = int(v.get("n_frames", self.meta["n_frames"]))
+        if abs(n_video - info.n_frames) > 1:
             raise InputError(
-                f"{src}: grid has {self.meta['n_frames']} frames; {info.path} has {info.n_frames}: made from another video?"
+                f"{src}: grid was made from a video of {n_video} frames; {info.path} has {info.n_frames}: made from another video?"
+            )
+        want = v.get("content_hash")
+        if want and Path(info.path).is_file() and content_hash(info.path) != want:
+            raise InputError(
+                f"{src}: grid was made from another video than {info.path} (content hash differs); "
+                f"run vimsim preprocess on it"
+            )
+        start, end = int(self.meta.get("start_frame", 0)), int(self.meta.get("end_frame", n_video))
+        if start != 0 or self.n_frames < n_video - 1:
+            raise InputError(
+                f"{src}: grid covers frames {start}..{end} of {info.path} only (made with --start/--end); "
+                f"this needs a grid of the whole video"
             )
 
 
