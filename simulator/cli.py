@@ -48,14 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser.add_argument("--version", action="version", version=f"vimsim {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
-    for name, module in COMMANDS.items():
-        try:
-            mod = importlib.import_module(f"simulator.commands.{module}")
-        except ModuleNotFoundError as e:
-            if e.name == f"simulator.commands.{module}":
-                continue  # subcommand not built yet
-            raise
-        mod.register(sub)
+    for module in COMMANDS.values():
+        importlib.import_module(f"simulator.commands.{module}").register(sub)
     return parser
 
 

@@ -7,7 +7,7 @@ turns it into one line on stderr and exit status 2. Anything else is an internal
 
 from __future__ import annotations
 
-__all__ = ["VimsimError", "InputError"]
+__all__ = ["InputError", "VimsimError"]
 
 
 class VimsimError(Exception):

@@ -38,7 +38,7 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
 from simulator.geometry import WindowGrid
 
-__all__ = ["FORMAT", "VERSION", "GridFile", "load_grid", "save_grid", "content_hash"]
+__all__ = ["FORMAT", "VERSION", "GridFile", "content_hash", "load_grid", "save_grid"]
 
 FORMAT = "vimsim-grid"
 VERSION = 1
@@ -137,18 +137,17 @@ def save_grid(
     missing = [k for k in _REQUIRED_META if k not in m]
     if missing:
         raise ValueError(f"grid meta lacks {missing}")
-    arrays = dict(
-        pof_dps=pof_dps,
-        pof_px=pof_px,
-        yaw_deg=np.asarray(grid.yaw_deg, np.float64),
-        pitch_deg=np.asarray(grid.pitch_deg, np.float64),
-        meta=np.array(json.dumps(m, sort_keys=True)),
-    )
+    arrays = {
+        "pof_dps": pof_dps,
+        "pof_px": pof_px,
+        "yaw_deg": np.asarray(grid.yaw_deg, np.float64),
+        "pitch_deg": np.asarray(grid.pitch_deg, np.float64),
+        "meta": np.array(json.dumps(m, sort_keys=True)),
+    }
     if field_dps is not None:
         arrays["field_dps"] = np.asarray(field_dps)
-    with atomic_output(path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
+    with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+        np.savez_compressed(fh, **arrays)
 
 
 def load_grid(path: str | os.PathLike) -> GridFile:

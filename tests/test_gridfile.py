@@ -14,11 +14,11 @@ from simulator.video import MediaInfo
 
 
 def _meta(video_path, n=5, **video):
-    v = dict(path=str(video_path), width=64, height=32, sar=1.0, n_frames=n,
-             content_hash=content_hash(video_path))
+    v = {"path": str(video_path), "width": 64, "height": 32, "sar": 1.0, "n_frames": n,
+             "content_hash": content_hash(video_path)}
     v.update(video)
-    return dict(fps=30.0, n_frames=n, flow={"method": "dis"}, layout="mono", eye="left",
-                video=v, start_frame=0, end_frame=n)
+    return {"fps": 30.0, "n_frames": n, "flow": {"method": "dis"}, "layout": "mono", "eye": "left",
+                "video": v, "start_frame": 0, "end_frame": n}
 
 
 @pytest.fixture()
