@@ -18,13 +18,21 @@ equirect frame:
   longitude near the poles anyway).
 
 Granulated rest frames (:mod:`simulator.grf`) are drawn in the same pass: world-fixed
-black discs looked up per pixel in a lat-band bucket grid (shader storage buffers),
-antialiased over the pixel's angular footprint, times the head-fixed cutout and the
-frame's opacity.
+grain coverage, rendered once per renderer into an equirect texture from a lat-band
+bucket grid of the grains (shader storage buffers, ``shaders/grf_mask.frag``) and looked
+up per pixel, times the head-fixed cutout and the frame's opacity.
 
-Images are ``(H, W, 3)`` uint8 RGB, origin top-left; the GL readback (origin
-bottom-left) is flipped once, in :meth:`EyeRenderer.render`. The EGL context is created
-in exactly one function, :func:`create_context`.
+The shader is compiled in variants (defines) so that llvmpipe, which runs both sides of
+a branch, never pays for a path that cannot be taken: cubic only when no pixel minifies,
+no grain-mask mip level when no pixel outside the cutout is larger than a mask texel, no
+parallax ray for grains at infinity. For the encoder the same pass writes the luma (Y)
+plane and ``shaders/chroma420.frag`` the U and V planes, so that frames leave the GPU as
+yuv420p (no CPU flip, alpha drop or swscale conversion per frame).
+
+Images are ``(H, W, 3)`` uint8 RGB, origin top-left; the one flip is at the framebuffer
+boundary: eye.frag draws image row 0 into GL row 0, so the readback (GL row 0 first)
+comes out top row first. The EGL context is created in exactly one function,
+:func:`create_context`.
 """
 
 from __future__ import annotations
@@ -186,16 +194,26 @@ def _check_gl(ctx, where: str) -> None:
 
 
 def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
-    """Render the GRF's world-fixed grain coverage once, as a mipmapped equirect R8
-    texture (``shaders/grf_mask.frag``), with texels no larger than the eye's largest
-    pixel (capped at 8192 x 4096); magnified bilinearly, its 1-texel antialiased edges
-    stay within about a pixel."""
+    """Render the GRF's world-fixed grain coverage once, as an equirect R8 texture
+    (``shaders/grf_mask.frag``), with texels no larger than the eye's largest pixel
+    (capped at 8192 x 4096, at least 512 x 256); magnified bilinearly, its 1-texel
+    antialiased edges stay within about a pixel.
+
+    Returns ``(texture, lod)``. ``lod``: some pixel where grains can show (eccentricity
+    >= ``grf.inner_deg``) may be larger than a texel row (small eyes, against the
+    512-texel floor), so the texture is mipmapped and eye.frag picks the level from the
+    pixel's footprint; otherwise (e.g. 1440 px eyes) every such pixel magnifies and level
+    0 alone gives the same result. A perspective pixel at eccentricity e spans at most
+    ``pixel_angle_rad * cos(e)``; 1 deg of slack covers llvmpipe's per-quad derivatives.
+    """
     import moderngl
 
     limit = min(8192, _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"))
     w = math.ceil(2.0 * math.pi / pixel_angle_rad)
     w = min(max(512, w + (w % 2)), limit)
     h = w // 2
+    reach = math.radians(max(grf.inner_deg - 1.0, 0.0))
+    lod = pixel_angle_rad * math.cos(reach) > 0.99 * math.pi / h
     field_ = GrainField.from_config(grf)
     # Lookup reach: half a texel row (the antialiasing ramp) plus slack for float32 edges.
     b = field_.buckets(0.5 * math.pi / h + 1e-4)
@@ -218,8 +236,11 @@ def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
         vao.render(moderngl.TRIANGLES, vertices=3)
         tex.repeat_x = True
         tex.repeat_y = False
-        tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        tex.build_mipmaps()
+        if lod:
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            tex.build_mipmaps()
+        else:
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
     finally:
         outer_fbo.use()
         fbo.release()
@@ -228,7 +249,7 @@ def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
         vao.release()
         prog.release()
     _check_gl(ctx, "after rendering the grain mask")
-    return tex
+    return tex, lod
 
 
 class EyeRenderer:
@@ -262,34 +283,61 @@ class EyeRenderer:
                 f"eye size {w}x{h} exceeds this OpenGL's limit of {limit} pixels per side"
             )
         self._max_tex = _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE")
-        grf = config.grf
-        self.prog = _program(ctx, "fullscreen.vert", "eye.frag", {"GRF": int(grf is not None)})
-        self.vao = ctx.vertex_array(self.prog, [])
-        self.fbo = ctx.simple_framebuffer((w, h), components=4, dtype="f1")
-        self._buf = np.empty((2, h, w, 4), np.uint8)  # readback: preallocated, one per eye
-        self._tex: dict[str, object] = {}
         self._moderngl = moderngl
-        self._set(
-            "u_tan_half",
-            (
-                math.tan(math.radians(config.hfov_deg) / 2),
-                math.tan(math.radians(config.vfov_deg) / 2),
-            ),
-        )
-        self._set("u_size", (float(w), float(h)))
-        self._set("u_equirect", 0)
+        grf = config.grf
         self.grain_mask = None
+        grain_lod = False
         if grf is not None:
-            self.grain_mask = _grain_mask(ctx, grf, config.pixel_angle_rad, self._outer_fbo)
-            self._set("u_grains", 1)
-            self._set("u_cutout", (math.radians(grf.inner_deg), math.radians(grf.outer_deg)))
-            self._set("u_eye_offset", (0.0, 0.0, 0.0))
-            self._set("u_opacity", 0.0)
+            self.grain_mask, grain_lod = _grain_mask(
+                ctx, grf, config.pixel_angle_rad, self._outer_fbo
+            )
+        self._defines = {
+            "GRF": int(grf is not None),
+            "GRAIN_LOD": int(grain_lod),
+            "GRAIN_PARALLAX": int(grf is not None and grf.distance_m is not None),
+        }
+        # Keyed by MIPMAP; the general variant (cubic or trilinear per pixel) is built now,
+        # the cubic-only one on the first frame that needs no mipmaps.
+        self._progs: dict[bool, tuple] = {}
+        self._program(True)
+        # eye.frag's outputs: RGB (a texture: chroma420.frag reads it) and luma (Y plane).
+        self._color = ctx.texture((w, h), 4, dtype="f1")
+        self._luma = ctx.renderbuffer((w, h), 1, dtype="f1")
+        self.fbo = ctx.framebuffer(color_attachments=[self._color, self._luma])
+        self._buf = np.empty((2, h, w, 4), np.uint8)  # readback: preallocated, one per eye
+        self._yuv = None  # chroma pass and yuv420p buffers, built on first use
+        self._tex: dict[str, object] = {}
         _check_gl(ctx, "after setting up the eye renderer")
 
-    def _set(self, name: str, value) -> None:
-        if name in self.prog:
-            self.prog[name].value = value
+    def _program(self, mipmap: bool):
+        """eye.frag for ``MIPMAP = mipmap`` with its constant uniforms set: (program, vao)."""
+        pv = self._progs.get(mipmap)
+        if pv is not None:
+            return pv
+        cfg, grf = self.config, self.config.grf
+        prog = _program(
+            self.ctx, "fullscreen.vert", "eye.frag", {**self._defines, "MIPMAP": int(mipmap)}
+        )
+        values = {
+            "u_tan_half": (
+                math.tan(math.radians(cfg.hfov_deg) / 2),
+                math.tan(math.radians(cfg.vfov_deg) / 2),
+            ),
+            "u_size": (float(cfg.eye_size[0]), float(cfg.eye_size[1])),
+            "u_equirect": 0,
+        }
+        if grf is not None:
+            values |= {
+                "u_grains": 1,
+                "u_cutout": (math.radians(grf.inner_deg), math.radians(grf.outer_deg)),
+                "u_eye_offset": (0.0, 0.0, 0.0),
+                "u_opacity": 0.0,
+            }
+        for name, value in values.items():
+            if name in prog:
+                prog[name].value = value
+        pv = self._progs[mipmap] = (prog, self.ctx.vertex_array(prog, []))
+        return pv
 
     def upload(self, frame: NDArray[np.uint8], eye: EyeName = "left") -> None:
         """Upload one eye's equirect frame ``(h, w, 3)`` uint8 RGB (top row first) and
@@ -318,6 +366,37 @@ class EyeRenderer:
         if mips:
             tex.build_mipmaps()
 
+    def _draw(self, rotation, eye, source, opacity, eye_offset) -> None:
+        tex = self._tex.get(source or eye)
+        if tex is None:
+            raise RuntimeError(f"no frame uploaded for eye {source or eye!r}")
+        prog, vao = self._program(bool(tex.extra))
+        R = np.asarray(rotation, np.float32).reshape(3, 3)
+        prog["u_head"].write(R.T.tobytes())  # GLSL mat3 is column-major
+        if self.config.grf is not None:
+            prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
+            if "u_eye_offset" in prog:
+                prog["u_eye_offset"].value = tuple(float(v) for v in eye_offset)
+        tex.use(0)
+        if self.grain_mask is not None:
+            self.grain_mask.use(1)
+        self.fbo.use()
+        vao.render(self._moderngl.TRIANGLES, vertices=3)
+
+    def _yuv_pass(self):
+        if self._yuv is None:
+            w, h = self.config.eye_size
+            if w % 2 or h % 2:
+                raise InputError(f"yuv420p needs an even eye size, e.g. 1440x1440; got {w}x{h}")
+            prog = _program(self.ctx, "fullscreen.vert", "chroma420.frag", {})
+            prog["u_rgb"].value = 0
+            vao = self.ctx.vertex_array(prog, [])
+            planes = [self.ctx.renderbuffer((w // 2, h // 2), 1, dtype="f1") for _ in range(2)]
+            fbo = self.ctx.framebuffer(color_attachments=planes)
+            bufs = np.empty((2, h * 3 // 2, w), np.uint8)
+            self._yuv = (prog, vao, fbo, planes, bufs)
+        return self._yuv
+
     def render(
         self,
         rotation: NDArray,
@@ -326,6 +405,7 @@ class EyeRenderer:
         source: EyeName | None = None,
         opacity: float = 0.0,
         eye_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        pix_fmt: Literal["rgb24", "yuv420p"] = "rgb24",
     ) -> NDArray[np.uint8]:
         """Render one eye and read it back.
 
@@ -339,28 +419,38 @@ class EyeRenderer:
         opacity : GRF opacity (0..1) for this frame
         eye_offset : eye position in the world frame in units of the grain distance
             (parallax of finite-distance grains; zeros = grains at infinity)
+        pix_fmt : ``"rgb24"``, or ``"yuv420p"`` (even eye sizes): converted on the GL
+            side (Y from ``eye.frag``, U and V from ``shaders/chroma420.frag``; BT.601
+            limited range, 2 x 2 chroma means, as swscale's rgb24 -> yuv420p) into the
+            planar layout of ``av.VideoFrame.from_ndarray(..., format="yuv420p")``
 
         Returns
         -------
-        ndarray, shape (height, width, 3), uint8, a view (rows top first)
+        rgb24: ndarray, shape (height, width, 3), uint8, a view (rows top first);
+        yuv420p: ndarray, shape (height * 3 // 2, width), uint8, contiguous (Y rows, then
+        U, then V, each top first)
         """
-        tex = self._tex.get(source or eye)
-        if tex is None:
-            raise RuntimeError(f"no frame uploaded for eye {source or eye!r}")
-        R = np.asarray(rotation, np.float32).reshape(3, 3)
-        self.prog["u_head"].write(R.T.tobytes())  # GLSL mat3 is column-major
-        if self.config.grf is not None:
-            self.prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
-            self.prog["u_eye_offset"].value = tuple(float(v) for v in eye_offset)
-        tex.use(0)
-        if self.grain_mask is not None:
-            self.grain_mask.use(1)
-        self.fbo.use()
-        self.vao.render(self._moderngl.TRIANGLES, vertices=3)
+        if pix_fmt not in ("rgb24", "yuv420p"):
+            raise ValueError(f"pix_fmt must be 'rgb24' or 'yuv420p'; got {pix_fmt!r}")
+        self._draw(rotation, eye, source, opacity, eye_offset)
         slot = 0 if eye == "left" else 1
+        # eye.frag draws image row 0 into GL row 0 (the one flip), so the readback, bottom
+        # GL row first, comes out top row first.
+        if pix_fmt == "yuv420p":
+            _prog, vao, fbo, _, bufs = self._yuv_pass()
+            w, h = self.config.eye_size
+            out = bufs[slot]
+            self.fbo.read_into(out, components=1, attachment=1, alignment=1)  # Y
+            self._color.use(0)
+            fbo.use()
+            vao.render(self._moderngl.TRIANGLES, vertices=3)
+            for k in (0, 1):  # U, V
+                fbo.read_into(
+                    out, components=1, attachment=k, alignment=1, write_offset=w * h * (4 + k) // 4
+                )
+            return out
         self.fbo.read_into(self._buf[slot], components=4, alignment=1)
-        # The one flip: GL rows are bottom first, images top first.
-        return self._buf[slot, ::-1, :, :3]
+        return self._buf[slot, :, :, :3]
 
     def eye_offset(self, rotation: NDArray, eye: EyeName) -> tuple[float, float, float]:
         """World-frame eye offset / grain distance for stereo grain parallax (zeros when the
@@ -379,8 +469,18 @@ class EyeRenderer:
             self.grain_mask.release()
         self._outer_fbo.use()
         self.fbo.release()
-        self.vao.release()
-        self.prog.release()
+        self._color.release()
+        self._luma.release()
+        if self._yuv is not None:
+            prog, vao, fbo, planes, _ = self._yuv
+            fbo.release()
+            for rb in planes:
+                rb.release()
+            vao.release()
+            prog.release()
+        for prog, vao in self._progs.values():
+            vao.release()
+            prog.release()
 
 
 def render_view(
@@ -421,6 +521,23 @@ class VideoRenderResult:
     def frames_per_s(self) -> float:
         t = self.timings_s.get("total", 0.0)
         return self.n_frames / t if t > 0 else float("nan")
+
+
+def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
+    """Encode one frame already in yuv420p (``(h * 3 // 2, w)`` uint8, the layout of
+    :meth:`EyeRenderer.render` ``pix_fmt="yuv420p"``) with a ``simulator.video.VideoWriter``,
+    skipping its rgb24 -> yuv420p conversion (the stream is yuv420p: x264 takes it as is)."""
+    import av
+
+    w, h = writer.size
+    if frame.shape != (h * 3 // 2, w) or frame.dtype != np.uint8:
+        raise ValueError(
+            f"frame must be ({h * 3 // 2}, {w}) uint8 yuv420p; got {frame.shape} {frame.dtype}"
+        )
+    vf = av.VideoFrame.from_ndarray(frame, format="yuv420p")
+    for pkt in writer._stream.encode(vf):
+        writer._container.mux(pkt)
+    writer.n_written += 1
 
 
 class _Worker:
@@ -537,15 +654,18 @@ def render_video(
     preset, crf : x264 speed preset and quality
 
     A mono video with grains at infinity gives the same image to both eyes: it is
-    rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``.
+    rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``. Frames are
+    converted to yuv420p on the GL side (:meth:`EyeRenderer.render` ``pix_fmt``) and
+    handed to x264 as they are.
 
     Returns
     -------
     VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``, ``render``
-    (draw + readback of both eyes), ``encode_wait`` (blocked on the encoders),
+    (draw, yuv420p conversion and readback of both eyes), ``encode_wait`` (blocked on the encoders),
     ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
     """
     import contextlib
+    import functools
     import time
 
     from simulator.geometry import split_eye
@@ -575,7 +695,10 @@ def render_video(
                 stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
                 for p in out_paths[: len(eyes)]
             ]
-            workers = [_Worker(wr.write, name=f"encode-{i}") for i, wr in enumerate(writers)]
+            workers = [
+                _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
+                for i, wr in enumerate(writers)
+            ]
             try:
                 from tqdm import tqdm
 
@@ -605,8 +728,9 @@ def render_video(
                             source=eye if stereo else "left",
                             opacity=o,
                             eye_offset=renderer.eye_offset(rots[i], eye),
+                            pix_fmt="yuv420p",
                         )
-                        outs.append(np.ascontiguousarray(img))  # copy: the buffer is reused
+                        outs.append(img.copy())  # the buffer is reused
                     t3 = time.perf_counter()
                     for wk, img in zip(workers, outs):
                         wk.put(img)

@@ -6,19 +6,35 @@
 // its centre x + 0.5 maps to lon = (x + 0.5) / W * 2 pi - pi; row 0 is the top (lat + pi/2).
 // The texture holds the frame as uploaded: texel row 0 = image row 0 (top), so
 // t = 0.5 - lat / pi. Output pixel (col i, row j), row 0 at the top of the image, is
-// i + 0.5 = gl_FragCoord.x and j + 0.5 = u_size.y - gl_FragCoord.y; the readback is
-// flipped once in render.py so that rows come out top first.
+// i + 0.5 = gl_FragCoord.x and j + 0.5 = gl_FragCoord.y: the image is drawn upside down
+// in GL's terms, which is the one flip (at the framebuffer boundary): GL reads rows back
+// bottom (GL row 0) first, so they come out top first, with no CPU copy.
 //
-// Defines injected by render.py: GRF (0 or 1). With GRF, the world-fixed grain coverage
-// (an equirect texture rendered once by grf_mask.frag) is looked up along each ray with
-// the same footprint rule as the video, times the head-fixed cutout and the opacity.
+// Outputs: the RGB colour (location 0, RGBA8) and its luma as yuv420p's Y plane
+// (location 1, R8: BT.601 limited range, 16 + 219 (0.299 R + 0.587 G + 0.114 B), the
+// conversion swscale applies to rgb24 -> yuv420p without a colour space), so that the
+// encoder gets Y without a CPU conversion; chroma420.frag makes U and V.
+//
+// Defines injected by render.py (each 0 or 1; a branch that cannot be taken costs
+// llvmpipe nearly as much as one that is, so the variants are compiled apart):
+//   MIPMAP         u_equirect has mipmaps (some pixel minifies): choose cubic or trilinear
+//                  per pixel; 0: every pixel magnifies (render.py checks): cubic only.
+//   GRF            draw the grains: the world-fixed grain coverage (an equirect texture
+//                  rendered once by grf_mask.frag) is looked up along each ray, times the
+//                  head-fixed cutout and the opacity.
+//   GRAIN_LOD      the coverage texture has mipmaps and some pixel outside the cutout's
+//                  inner radius is larger than its texels: same footprint rule as the
+//                  video; 0: level 0, bilinear (what that rule gives there anyway).
+//   GRAIN_PARALLAX grains at a finite distance (eye offset); 0: at infinity, the ray
+//                  from the eye is the view ray and the video's lon/lat are reused.
 
 uniform sampler2D u_equirect;      // the eye's equirect frame, mipmapped, RGB8, s repeats
 uniform mat3 u_head;               // head -> world rotation (geometry.head_rotation)
 uniform vec2 u_tan_half;           // tan(hfov / 2), tan(vfov / 2)
 uniform vec2 u_size;               // eye image size, pixels (width, height)
 
-out vec4 frag_color;
+layout(location = 0) out vec4 frag_color;
+layout(location = 1) out float frag_luma;
 
 const float PI = 3.14159265358979;
 
@@ -36,7 +52,9 @@ vec4 cubic_weights(float t) {
 // (pixel centres at +0.5), for magnification: 16 texel fetches of level 0 with longitude
 // wrap-around at the +-180 deg seam and continuation across the poles (a row beyond a
 // pole is the mirrored row on the meridian 180 deg away, as simulator.geometry pads).
-// Indices are computed once per axis (faster on llvmpipe than 9 merged bilinear taps).
+// Indices are computed once per axis (faster on llvmpipe than 9 merged bilinear taps),
+// wrapped with compares, not %: llvmpipe has no vector integer division and
+// scalarises it (the modulo cost more than the 16 fetches, measured).
 vec3 sample_cubic(vec2 xy) {
     ivec2 sz = textureSize(u_equirect, 0);
     vec2 p = xy - 0.5;
@@ -45,9 +63,11 @@ vec3 sample_cubic(vec2 xy) {
     ivec2 b = ivec2(f);
     vec4 wx = cubic_weights(t.x);
     vec4 wy = cubic_weights(t.y);
-    ivec4 xr = ivec4(b.x - 1, b.x, b.x + 1, b.x + 2) + sz.x;
-    ivec4 xs = xr % sz.x;                   // columns
-    ivec4 xo = (xr + sz.x / 2) % sz.x;      // the same columns on the opposite meridian
+    ivec4 xr = ivec4(b.x - 1, b.x, b.x + 1, b.x + 2);            // b.x in [-1, W - 1]
+    ivec4 xs = xr + sz.x * (ivec4(lessThan(xr, ivec4(0)))          // columns, wrapped
+                            - ivec4(greaterThanEqual(xr, ivec4(sz.x))));
+    ivec4 xo = xs + sz.x / 2;               // the same columns on the opposite meridian
+    xo -= sz.x * ivec4(greaterThanEqual(xo, ivec4(sz.x)));
     ivec4 yr = ivec4(b.y - 1, b.y, b.y + 1, b.y + 2);
     bvec4 over = bvec4(yr.x < 0 || yr.x >= sz.y, yr.y < 0 || yr.y >= sz.y,
                        yr.z < 0 || yr.z >= sz.y, yr.w < 0 || yr.w >= sz.y);
@@ -68,12 +88,14 @@ vec3 sample_cubic(vec2 xy) {
 uniform sampler2D u_grains;        // GRF coverage on the sphere, equirect, mipmapped (grf_mask.frag)
 uniform float u_opacity;           // EPOF-driven GRF opacity, 0..1
 uniform vec2 u_cutout;             // inner, outer cutout radius, radians
+#if GRAIN_PARALLAX
 uniform vec3 u_eye_offset;         // eye position in the world frame / grain distance
+#endif
 #endif
 
 void main() {
     // Pixel centre on the image plane z = 1 (geometry.perspective_rays).
-    vec2 ij = vec2(gl_FragCoord.x, u_size.y - gl_FragCoord.y);
+    vec2 ij = gl_FragCoord.xy;
     vec2 uv = vec2((ij.x / u_size.x * 2.0 - 1.0) * u_tan_half.x,
                    (1.0 - ij.y / u_size.y * 2.0) * u_tan_half.y);
     vec3 d_head = normalize(vec3(uv, 1.0));
@@ -94,12 +116,16 @@ void main() {
     float footprint_max = max(length(ddx), length(ddy));
     float rho = footprint_max / (PI / tsz.y);                // texels per pixel
 
+#if MIPMAP
     vec3 color;
     if (rho <= 1.0) {
         color = sample_cubic(xy);                     // magnification: v360's cubic
     } else {
         color = textureLod(u_equirect, xy / tsz, log2(rho)).rgb;  // minification: trilinear mips
     }
+#else
+    vec3 color = sample_cubic(xy);                    // magnification everywhere
+#endif
 
 #if GRF
     float ecc = atan(length(d_head.xy), d_head.z);
@@ -107,15 +133,24 @@ void main() {
     float k = cut * u_opacity;
     if (k > 0.0) {
         // Ray from the eye (offset o, in grain-distance units) to the grain sphere |p| = 1.
+#if GRAIN_PARALLAX
         vec3 o = u_eye_offset;
         float b = dot(o, d);
         float tt = -b + sqrt(max(b * b - dot(o, o) + 1.0, 0.0));
         vec3 p = normalize(o + tt * d);
         vec2 gst = vec2(atan(p.x, p.z) / (2.0 * PI) + 0.5, 0.5 - asin(clamp(p.y, -1.0, 1.0)) / PI);
+#else
+        vec2 gst = st;                                      // p = d: grains at infinity
+#endif
+#if GRAIN_LOD
         float grho = footprint_max / (PI / float(textureSize(u_grains, 0).y));
         float cov = textureLod(u_grains, gst, log2(max(grho, 1e-6))).r;
+#else
+        float cov = textureLod(u_grains, gst, 0.0).r;
+#endif
         color *= 1.0 - k * cov;                             // black grains, "over"
     }
 #endif
     frag_color = vec4(color, 1.0);
+    frag_luma = (16.0 + 219.0 * dot(clamp(color, 0.0, 1.0), vec3(0.299, 0.587, 0.114))) / 255.0;
 }
