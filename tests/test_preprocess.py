@@ -466,7 +466,7 @@ def test_top_bottom_stereo_eyes(tmp_path, real_dir, capsys):
 def test_fov_options(tmp_path, videos, capsys):
     out = tmp_path / "g.npz"
     assert _cli(videos["long"], "-o", out, "--fov", 90, "--hfov", 80) == 2
-    assert "either --fov or --hfov" in capsys.readouterr().err
+    assert "give only one of --fov, --hfov/--vfov" in capsys.readouterr().err
     assert not out.exists()
     assert (
         _cli(

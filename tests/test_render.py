@@ -432,7 +432,9 @@ def test_cli_render_mono_default_grf_off(ctx, tmp_path, capsys):
         (["--eye-size", "33x32"], 1.0, "even"),
         (["--eye-size", "32"], 1.0, "WxH"),
         (["--opacity", "auto", "--grf", "on"], 1.0, "needs --grid"),
-        (["--hfov", "90"], 1.0, "both --hfov and --vfov"),
+        (["--vfov", "90"], 1.0, "--vfov needs --hfov"),
+        (["--headset", "quest-2", "--fov", "90"], 1.0, "give only one of --headset, --fov"),
+        (["--headset", "no-such-hmd"], 1.0, "no-such-hmd"),
     ],
 )
 def test_cli_render_bad_input(ctx, tmp_path, capsys, extra, end_s, match):

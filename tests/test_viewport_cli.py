@@ -115,12 +115,12 @@ def test_bad_inputs(pano, tmp_path, capsys):
     _bad(capsys, tmp_path, [str(src), *yp, "--fov", "180"], "FOV must be degrees in (0, 180)")
     _bad(capsys, tmp_path, [str(src), *yp, "--fov", "0"], "FOV must be degrees in (0, 180)")
     _bad(capsys, tmp_path, [str(src), *yp, "--hfov", "-5", "--vfov", "90"], "FOV must be")
-    _bad(capsys, tmp_path, [str(src), *yp, "--hfov", "90"], "--hfov and --vfov go together")
+    _bad(capsys, tmp_path, [str(src), *yp, "--vfov", "90"], "--vfov needs --hfov")
     _bad(
         capsys,
         tmp_path,
         [str(src), *yp, "--fov", "90", "--hfov", "90", "--vfov", "90"],
-        "either --fov",
+        "give only one of --fov, --hfov/--vfov",
     )
     _bad(capsys, tmp_path, [str(src), *yp, "--size", "640"], "WxH")
     _bad(capsys, tmp_path, [str(src), *yp, "--size", "0x10"], "size must be")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from simulator.commands._types import fov_deg
+from simulator.commands._types import add_fov_arguments, fov_from_args
 
 __all__ = ["register", "run"]
 
@@ -67,26 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--plot", default=None, metavar="EPOF.png", help="also plot EPOF and opacity over time"
     )
-    p.add_argument(
-        "--fov",
-        type=fov_deg,
-        default=None,
-        metavar="D",
-        help="viewport FOV in degrees, both axes (default: the grid's window FOV)",
-    )
-    p.add_argument(
-        "--hfov", type=fov_deg, default=None, metavar="D", help="viewport horizontal FOV (degrees)"
-    )
-    p.add_argument(
-        "--vfov", type=fov_deg, default=None, metavar="D", help="viewport vertical FOV (degrees)"
-    )
-    p.add_argument(
-        "--headset",
-        default=None,
-        metavar="NAME",
-        help="viewport FOV of a headset profile (per eye): vive-pro-eye (107 x 107, the paper), "
-        "vive-focus-3, pimax-crystal, quest-2; see simulator/headsets.py",
-    )
+    add_fov_arguments(p, what="viewport", default="the grid's window FOV")
     p.add_argument(
         "--method",
         choices=("auto", "paper", "sphere"),
@@ -134,20 +115,10 @@ def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
     from simulator.commands.headpath import warnings_to_stderr
     from simulator.epof import OpacityRule, compute_epof, plot_epof, write_epof_csv
-    from simulator.errors import InputError
     from simulator.gridfile import load_grid
     from simulator.headpath import load_headpath
 
-    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
-        raise InputError("give either --fov or --hfov/--vfov, not both")
-    hfov = args.fov if args.fov is not None else args.hfov
-    vfov = args.fov if args.fov is not None else args.vfov
-    if hfov is None and vfov is not None:
-        raise InputError("--vfov needs --hfov")
-    if args.headset is not None:
-        from simulator.headsets import resolve_fov
-
-        hfov, vfov = resolve_fov(headset=args.headset, hfov_deg=hfov)
+    hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
     with warnings_to_stderr("vimsim epof"):
         grid = load_grid(args.grid)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._types import fov_deg, positive_float
+from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float
 
 __all__ = ["register", "run"]
 
@@ -59,19 +59,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="default",
         help="window grid: default (15 deg yaw steps, 264 windows) or paper-198 (20 deg, 198)",
     )
-    p.add_argument(
-        "--fov",
-        type=fov_deg,
-        default=None,
-        metavar="D",
-        help="window FOV in degrees, horizontal = vertical (default 107)",
-    )
-    p.add_argument(
-        "--hfov", type=fov_deg, default=None, metavar="D", help="horizontal window FOV, degrees"
-    )
-    p.add_argument(
-        "--vfov", type=fov_deg, default=None, metavar="D", help="vertical window FOV, degrees"
-    )
+    add_fov_arguments(p, what="window", default="107")
     p.add_argument(
         "--window-size",
         type=_window_size,
@@ -157,10 +145,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.geometry import grid_preset
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
 
-    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
-        raise InputError("give either --fov or --hfov/--vfov, not both")
-    hfov = args.hfov if args.hfov is not None else (args.fov if args.fov is not None else 107.0)
-    vfov = args.vfov if args.vfov is not None else (args.fov if args.fov is not None else hfov)
+    hfov, vfov = fov_from_args(args, (107.0, 107.0))
     grid = grid_preset(
         args.grid, hfov_deg=hfov, vfov_deg=vfov, size=(args.window_size, args.window_size)
     )

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._types import fov_deg, nonneg_int, size_wxh
+from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
 
 __all__ = ["register", "run"]
 
@@ -63,15 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="WxH",
         help="pixels per eye, even numbers (default 1440x1440, e.g. 480x480 for previews)",
     )
-    p.add_argument(
-        "--fov", type=fov_deg, metavar="D", help="horizontal = vertical FOV, degrees (default 107)"
-    )
-    p.add_argument(
-        "--hfov", type=fov_deg, metavar="D", help="exact horizontal FOV, degrees (with --vfov)"
-    )
-    p.add_argument(
-        "--vfov", type=fov_deg, metavar="D", help="exact vertical FOV, degrees (with --hfov)"
-    )
+    add_fov_arguments(p, what="eye", default="107")
     p.add_argument(
         "--grf",
         choices=("on", "off"),
@@ -159,12 +151,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.video import probe
 
     t0 = time.perf_counter()
-    if (args.hfov is None) != (args.vfov is None):
-        raise InputError("give both --hfov and --vfov (or --fov D for both)")
-    if args.fov is not None and args.hfov is not None:
-        raise InputError("give --fov D or --hfov/--vfov, not both")
-    hfov = args.hfov if args.hfov is not None else (args.fov or 107.0)
-    vfov = args.vfov if args.vfov is not None else (args.fov or 107.0)
+    hfov, vfov = fov_from_args(args, (107.0, 107.0))
     w, h = args.eye_size
     if w % 2 or h % 2:
         raise InputError(

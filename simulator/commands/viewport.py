@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
-from simulator.commands._types import fov_deg, nonneg_int, size_wxh
+from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
 from simulator.errors import InputError
 
 __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
@@ -63,27 +63,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="D",
         help="degrees, + right ear down (default 0)",
     )
-    p.add_argument(
-        "--fov",
-        type=fov_deg,
-        default=None,
-        metavar="D",
-        help=f"horizontal and vertical FOV, degrees in (0, 180) (default {DEFAULT_FOV_DEG:g})",
-    )
-    p.add_argument(
-        "--hfov",
-        type=fov_deg,
-        default=None,
-        metavar="D",
-        help="horizontal FOV, degrees (with --vfov)",
-    )
-    p.add_argument(
-        "--vfov",
-        type=fov_deg,
-        default=None,
-        metavar="D",
-        help="vertical FOV, degrees (with --hfov)",
-    )
+    add_fov_arguments(p, what="view", default="107")
     p.add_argument(
         "--size",
         type=size_wxh,
@@ -116,17 +96,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _fovs(args: argparse.Namespace) -> tuple[float, float]:
-    if args.fov is not None and (args.hfov is not None or args.vfov is not None):
-        raise InputError("give either --fov or --hfov with --vfov, not both")
-    if (args.hfov is None) != (args.vfov is None):
-        raise InputError("--hfov and --vfov go together (or use --fov for both)")
-    if args.hfov is not None:
-        return args.hfov, args.vfov
-    fov = DEFAULT_FOV_DEG if args.fov is None else args.fov
-    return fov, fov
-
-
 def run(args: argparse.Namespace) -> int:
     """Write the view; InputError (exit 2, no output) on bad input."""
     from PIL import Image
@@ -134,7 +103,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator import geometry, video
     from simulator.fileio import atomic_output
 
-    hfov, vfov = _fovs(args)
+    hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
     info = video.probe(args.src)
     w, h = info.eye_size(args.layout)  # checks 2:1 per eye (SAR-aware) and the layout
     if info.is_video and args.frame >= info.n_frames:
