@@ -15,8 +15,15 @@ Same run, same clips, same head path:
 3. FOV transfer: a sphere grid made at 107 deg gives windows (and paper-style EPOF) at
    80 deg and at the Quest 2 per-eye FOV; compared with a paper-mode grid made directly
    at that FOV (like with like: window means vs window means). Goal: within 5%.
+4. ``--diagnose``: why sphere and paper differ on pano.mp4 (docs/sphere.md, "real
+   video"): (a) a forward ride through a box tunnel with sparse, low-texture walls, where
+   the truth is known: paper and sphere against it; (b) DIS flow against the truth as a
+   function of the position inside its image (paper windows vs cube tiles); (c) the
+   floor for any field on pano.mp4: the paper's *own* per-pixel flows of all 264 windows,
+   splatted into one field and integrated back over the windows, against the paper's
+   windows; (d) paper mode against itself with the grid shifted by 2 deg yaw, 1 deg pitch.
 
-    .venv/bin/python bench/sphere_accuracy.py [--seconds 1.0] [--pano-seconds 2.0]
+    .venv/bin/python bench/sphere_accuracy.py [--seconds 1.0] [--pano-seconds 2.0] [--diagnose]
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import cv2
 import numpy as np
 
 from simulator import sphere as S
@@ -36,8 +44,9 @@ from simulator.geometry import grid_preset, head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.headpath import synth as synth_headpath
 from simulator.headsets import get_headset
-from simulator.preprocess import preprocess_video
+from simulator.preprocess import WindowFlowReducer, preprocess_video
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
+from simulator.video import iter_frames
 
 REPO = Path(__file__).resolve().parents[1]
 PANO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "pano.mp4"
@@ -100,11 +109,141 @@ def transfer_rows(name, vid, tag, sphere_grid, hp, fovs, *, end_s=None):
     return rows
 
 
+def sparse_texture(path: Path) -> Path:
+    """A low-texture wall texture (flat gray, soft shading, a few cables and bolts): the
+    tunnel walls of pano.mp4 in caricature."""
+    rng = np.random.default_rng(1)
+    h, w = 512, 1024
+    img = np.full((h, w), 150.0, np.float32)
+    img += 12 * cv2.resize(
+        rng.normal(0, 1, (4, 8)).astype(np.float32), (w, h), interpolation=cv2.INTER_CUBIC
+    )
+    for _ in range(6):
+        y = int(rng.integers(0, h))
+        cv2.line(img, (0, y), (w, y + int(rng.integers(-20, 20))), 60, int(rng.integers(2, 5)))
+    for _ in range(40):
+        cv2.circle(
+            img, (int(rng.integers(0, w)), int(rng.integers(0, h))), int(rng.integers(2, 6)), 70, -1
+        )
+    img += rng.normal(0, 1.5, img.shape).astype(np.float32)
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    cv2.imwrite(str(path), np.clip(img, 0, 255).astype(np.uint8))
+    return path
+
+
+def window_flows(vid: Path, grid, *, end=None):
+    """Per frame pair: ``(angles (N, h, w) rad, world rays (N, h, w, 3))`` of DIS ultrafast
+    on the paper's windows (what paper mode averages), as a generator."""
+    from simulator.flow import DISFlow
+    from simulator.geometry import WindowExtractor
+
+    ext = None
+    flow = DISFlow()
+    red = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg)
+    prev = None
+    for fr in iter_frames(vid, fmt="gray", end=end):
+        if ext is None:
+            ext = WindowExtractor(grid, (fr.shape[1], fr.shape[0]))
+        win = ext(fr).reshape(-1, grid.size[1], grid.size[0])
+        if prev is not None:
+            fl = flow(prev, win)
+            yield np.stack([red.angles(f) for f in fl])
+        prev = win
+
+
+def diagnose(grid, pano_seconds: float) -> list[str]:
+    """Section 4 (see the module docstring); returns the printed lines."""
+    from simulator.geometry import dir_to_lonlat
+
+    out = []
+
+    def say(line):
+        out.append(line)
+        print(line, flush=True)
+
+    # (a) sparse-texture forward ride, truth known
+    tex = sparse_texture(OUT / "sparse_wall.png")
+    cfg = SynthConfig(
+        "forward", speed_mps=2.0, seconds=1.0, fps=30.0, size=(1024, 512), texture=str(tex)
+    )
+    vid = OUT / "forward_sparse_1024x512_30f.mp4"
+    if not (vid.exists() and vid.with_name(vid.stem + ".truth.npz").exists()):
+        synthesize(cfg, vid)
+    tr = load_truth(vid.with_name(vid.stem + ".truth.npz"))
+    scene = make_scene(cfg)
+    wt = window_truth_dps(scene, grid, tr.time_s, "mono")[1:]
+    p, s, _, _ = grids_for(vid, "forward_sparse", grid)
+    ratio = lambda a, b: float(np.mean(a) / np.mean(b))
+    say(
+        "(a) forward 2 m/s, sparse low-texture walls, vs truth (median / p90, mean ratio): "
+        f"paper {rel(p.pof_dps[1:], wt)[0]:.3f} / {rel(p.pof_dps[1:], wt)[1]:.3f}, {ratio(p.pof_dps[1:], wt):.3f}; "
+        f"sphere {rel(s.pof_dps[1:], wt)[0]:.3f} / {rel(s.pof_dps[1:], wt)[1]:.3f}, {ratio(s.pof_dps[1:], wt):.3f}"
+    )
+    # (b) flow / truth by position in the image: 10 bins of max(|x|, |y|) from centre to border
+    pitch, yaw = grid.centres_deg()
+    dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
+    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()
+    w, h = grid.size
+    u = (np.arange(w) + 0.5) / w * 2 - 1
+    v = (np.arange(h) + 0.5) / h * 2 - 1
+    bins = np.minimum((np.maximum(*np.meshgrid(np.abs(u), np.abs(v))) * 10).astype(int), 9)
+    sub = slice(None, None, 6)  # every 6th window: enough for a profile
+    world = np.einsum("nij,hwj->nhwi", R[sub], dirs.astype(np.float64))
+    num, den = np.zeros(10), np.zeros(10)
+    for k, ang in enumerate(window_flows(vid, grid)):
+        a = ang[sub] * np.degrees(1.0) * cfg.fps
+        t = scene.speed_dps(float(tr.time_s[k + 1]), world.reshape(-1, 3)).reshape(a.shape)
+        num += np.bincount(np.broadcast_to(bins, a.shape).ravel(), a.ravel(), 10)
+        den += np.bincount(np.broadcast_to(bins, a.shape).ravel(), t.ravel(), 10)
+    say(
+        "(b) paper windows, DIS flow / truth by position (centre -> border, 10 bins): "
+        + " ".join(f"{x:.2f}" for x in num / den)
+    )
+    # (c) the floor on pano.mp4: the paper's own flows as one field
+    if PANO.is_file():
+        pg = OUT / f"pano_paper_{grid.hfov_deg:g}.npz"
+        if not pg.exists():
+            preprocess_video(PANO, pg, grid=grid, end_s=pano_seconds, progress=False)
+        paper = load_grid(pg)
+        cells = S.CellGrid(4.0)
+        world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
+        idx = cells.index(*dir_to_lonlat(world)).ravel()
+        _, sa = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
+        wsa = np.broadcast_to(sa, world.shape[:3]).ravel().astype(np.float64)
+        den = np.bincount(idx, wsa, cells.n_cells)
+        fields = []
+        for ang in window_flows(PANO, grid, end=paper.n_frames):
+            fields.append(
+                np.bincount(idx, wsa * ang.ravel(), cells.n_cells) / np.maximum(den, 1e-12)
+            )
+        F = np.stack(fields).reshape(-1, *cells.shape) * np.degrees(1.0) * paper.fps
+        dps, _ = S.window_pof(F, cells.cell_deg, grid, paper.fps)
+        m, q = rel(dps, paper.pof_dps[1:])
+        say(
+            f"(c) pano.mp4: field made of the paper's own window flows vs the paper's windows: median {m:.3f} / p90 {q:.3f}"
+        )
+        # (d) paper vs itself, grid shifted
+        g2 = replace(
+            grid,
+            yaw_start_deg=grid.yaw_start_deg + 2.0,
+            pitch_min_deg=grid.pitch_min_deg + 1.0,
+            pitch_max_deg=grid.pitch_max_deg + 1.0,
+        )
+        p2 = OUT / "pano_paper_shifted.npz"
+        preprocess_video(PANO, p2, grid=g2, end_s=pano_seconds, progress=False)
+        m, q = rel(load_grid(p2).pof_dps[1:], paper.pof_dps[1:])
+        say(
+            f"(d) pano.mp4: paper mode, grid shifted 2 deg yaw / 1 deg pitch, vs paper: median {m:.3f} / p90 {q:.3f}"
+        )
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=1.0)
     ap.add_argument("--pano-seconds", type=float, default=2.0)
     ap.add_argument("--size", default="1024x512")
+    ap.add_argument("--diagnose", action="store_true", help="only section 4 (the pano gap)")
     args = ap.parse_args(argv)
     w, h = (int(x) for x in args.size.lower().split("x"))
     OUT.mkdir(parents=True, exist_ok=True)
@@ -118,6 +257,10 @@ def main(argv=None) -> int:
         (f"quest-2 {q2.hfov_deg:g} x {q2.vfov_deg:g}", (q2.hfov_deg, q2.vfov_deg)),
     ]
     print(f"load average {os.getloadavg()[0]:.1f}; sphere config {S.SphereConfig()}")
+    if args.diagnose:
+        print("\n4. Why sphere and paper differ on pano.mp4")
+        diagnose(grid, args.pano_seconds)
+        return 0
 
     base = {"seconds": args.seconds, "fps": 30.0, "size": (w, h)}
     scenes = [
