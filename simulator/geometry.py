@@ -71,6 +71,7 @@ __all__ = [
     "lonlat_to_dir",
     "lonlat_to_equirect_xy",
     "perspective_map",
+    "check_fov",
     "perspective_rays",
     "rotate_equirect",
     "sample_equirect",
@@ -176,10 +177,25 @@ def lonlat_to_equirect_xy(lon, lat, width: int, height: int) -> tuple[NDArray, N
 
 
 # -------------------------------------------------------------------- perspective views
-def _check_fov(hfov_deg: float, vfov_deg: float) -> None:
+def check_fov(hfov_deg: float, vfov_deg: float | None = None, *, source: str = "") -> tuple[float, float]:
+    """The one FOV rule: ``(hfov_deg, vfov_deg)`` as floats, each in degrees strictly
+    inside (0, 180) (NaN and inf refused); ``vfov_deg`` defaults to ``hfov_deg``.
+    InputError (prefixed by ``source`` when given) otherwise."""
+    vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
+    out = []
     for name, v in (("hfov", hfov_deg), ("vfov", vfov_deg)):
-        if not (0.0 < float(v) < 180.0) or not math.isfinite(float(v)):
-            raise InputError(f"{name} must be degrees in (0, 180); got {v}")
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            f = float("nan")
+        if not (0.0 < f < 180.0):  # also False for NaN
+            pre = f"{source}: " if source else ""
+            raise InputError(f"{pre}{name} must be degrees in (0, 180); got {v}")
+        out.append(f)
+    return out[0], out[1]
+
+
+_check_fov = check_fov
 
 
 def _check_size(size: tuple[int, int]) -> tuple[int, int]:
@@ -449,6 +465,11 @@ def check_equirect_aspect(
         if width % 2:
             raise InputError(f"{source}: side-by-side stereo needs an even width; got {width}x{height}")
         w = width // 2
+    if w % 2 or h < _PAD:
+        raise InputError(
+            f"{source}: equirect width must be even (to cross the poles) and at least {_PAD} rows "
+            f"per eye; got {w}x{h}"
+        )
     aspect = w * sar / h
     # Stereo is also stored "half": each eye squeezed so the whole frame displays as 2:1
     # (three.js MaryOculus.mp4: side-by-side, 1:1 per eye). Longitude and latitude are

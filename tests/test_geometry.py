@@ -347,3 +347,20 @@ def test_rotate_equirect_yaw_is_column_roll():
     out = rotate_equirect(img, Rotation.from_euler("y", 90, degrees=True), interp="nearest")
     assert out.shape == img.shape
     np.testing.assert_array_equal(out, np.roll(img, 16, axis=1))
+
+
+def test_check_fov_one_rule():
+    from simulator.geometry import check_fov
+
+    assert check_fov(107) == (107.0, 107.0)
+    assert check_fov(90, 60) == (90.0, 60.0)
+    for bad in (0, 180, -5, float("nan"), float("inf"), "x"):
+        with pytest.raises(InputError, match="must be degrees in"):
+            check_fov(bad)
+
+
+def test_odd_width_equirect_is_refused_with_the_file_name():
+    from simulator.geometry import check_equirect_aspect
+
+    with pytest.raises(InputError, match="pano.png: equirect width must be even"):
+        check_equirect_aspect(2049, 1024, source="pano.png")
