@@ -154,6 +154,8 @@ def load_grid(path: str | os.PathLike) -> GridFile:
     """Read and validate a grid file; InputError (one line) if it is not a vimsim grid
     of this version or its arrays are inconsistent."""
     p = check_input_file(path, "grid")
+    if not zipfile.is_zipfile(p):
+        raise InputError(f"{p}: not a vimsim grid file (expected a .npz made by vimsim preprocess)")
     try:
         with np.load(p, allow_pickle=False) as z:
             names = set(z.files)

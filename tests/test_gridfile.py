@@ -81,3 +81,10 @@ def test_check_video(tmp_path, video):
     with pytest.raises(InputError, match="--start/--end"):
         load_grid(tmp_path / "part.npz").check_video(
             MediaInfo(str(video), 64, 32, 1.0, 30.0, 10, True, "h264"))
+
+
+def test_text_file_is_not_a_grid(tmp_path):
+    p = tmp_path / "path.csv"
+    p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n")
+    with pytest.raises(InputError, match=r"not a vimsim grid file \(expected a \.npz"):
+        load_grid(p)
