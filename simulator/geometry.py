@@ -62,16 +62,18 @@ __all__ = [
     "WindowExtractor",
     "WindowGrid",
     "check_equirect_aspect",
+    "check_fov",
     "dir_to_lonlat",
     "equirect_pixel_lonlat",
+    "equirect_remap_coords",
     "extract_view",
     "grid_preset",
     "head_angles_deg",
     "head_rotation",
     "lonlat_to_dir",
     "lonlat_to_equirect_xy",
+    "pad_equirect",
     "perspective_map",
-    "check_fov",
     "perspective_rays",
     "rotate_equirect",
     "sample_equirect",
@@ -252,12 +254,30 @@ def perspective_rays(size: tuple[int, int], hfov_deg: float, vfov_deg: float | N
     return _perspective_rays_cached(w, h, float(hfov_deg), float(vfov_deg))
 
 
-def _equirect_remap_coords(dirs_world: NDArray, width: int, height: int) -> tuple[NDArray, NDArray]:
-    """Array-index coordinates (OpenCV convention, pixel centres at integers) into the
-    padded equirect frame (see :func:`_pad_equirect`) of world directions ``(..., 3)``."""
-    lon, lat = dir_to_lonlat(dirs_world)
+def equirect_remap_coords(
+    dirs: NDArray, width: int, height: int
+) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+    """Where world directions fall in a padded equirect frame, as ``cv2.remap`` maps.
+
+    Parameters
+    ----------
+    dirs : ndarray, shape (..., 3)
+        Directions in the world frame (+x right, +y up, +z forward; need not be unit).
+    width, height : int, pixels of the (unpadded) equirect frame
+
+    Returns
+    -------
+    map_x, map_y : ndarray, shape (...), float32
+        Array-index coordinates (OpenCV convention: pixel centres at integers) into the
+        frame padded by :func:`pad_equirect`: pixel column ``x`` (centre ``x + 0.5`` in the
+        continuous convention of the module docstring) sits at ``x + PAD``.
+    """
+    lon, lat = dir_to_lonlat(dirs)
     x, y = lonlat_to_equirect_xy(lon, lat, width, height)
     return (x - 0.5 + _PAD).astype(np.float32), (y - 0.5 + _PAD).astype(np.float32)
+
+
+_equirect_remap_coords = equirect_remap_coords
 
 
 def perspective_map(
@@ -293,9 +313,22 @@ def perspective_map(
     return _equirect_remap_coords(world, W, H)
 
 
-def _pad_equirect(img: NDArray) -> NDArray:
-    """Pad an equirect frame by ``_PAD`` pixels: columns wrap around the seam; rows beyond
-    a pole continue on the meridian 180 deg away (rows mirrored, columns shifted by W/2)."""
+def pad_equirect(img: NDArray) -> NDArray:
+    """An equirect frame padded for sampling across the seam and the poles.
+
+    Parameters
+    ----------
+    img : ndarray, shape (H, W) or (H, W, C)
+        One eye's equirect frame; ``W`` even (crossing a pole shifts by ``W / 2``).
+
+    Returns
+    -------
+    ndarray, shape (H + 2 PAD, W + 2 PAD[, C]), same dtype, C-contiguous
+        ``PAD = 4`` pixels on every side (enough for a 4x4 bicubic kernel): columns wrap
+        around the +-180 deg seam; rows beyond a pole continue on the meridian 180 deg
+        away (rows mirrored, columns shifted by ``W / 2``). Index it with the maps of
+        :func:`equirect_remap_coords`. InputError for an odd width or fewer than PAD rows.
+    """
     H, W = img.shape[:2]
     p = _PAD
     if W % 2 or H < p:
@@ -304,6 +337,9 @@ def _pad_equirect(img: NDArray) -> NDArray:
     bottom = np.roll(img[: H - p - 1 : -1], W // 2, axis=1)
     tall = np.concatenate([top, img, bottom], axis=0)
     return np.concatenate([tall[:, -p:], tall, tall[:, :p]], axis=1)
+
+
+_pad_equirect = pad_equirect
 
 
 def sample_equirect(
