@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import contextlib
 import os
-from collections.abc import Iterator
+import queue
+import threading
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Literal
+from typing import Literal, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -33,12 +35,14 @@ __all__ = [
     "MediaInfo",
     "VideoWriter",
     "iter_frames",
+    "prefetch",
     "probe",
     "read_frame",
 ]
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png", ".bmp", ".tif", ".tiff", ".webp")
 PixelFormat = Literal["rgb24", "gray"]
+_T = TypeVar("_T")
 
 
 @dataclass(frozen=True)
@@ -207,6 +211,68 @@ def iter_frames(
             raise InputError(
                 f"{p}: unreadable video stream at frame {i + 1} ({e.strerror or e})"
             ) from None
+
+
+def prefetch(iterable: Iterable[_T], depth: int = 2) -> Iterator[_T]:
+    """Iterate ``iterable`` in a background thread, up to ``depth`` items ahead.
+
+    For decode pipelines: PyAV decoding, ``cv2.remap`` and most numpy work release the
+    GIL, so producing item t+1 (e.g. ``(extract(f) for f in iter_frames(...))``) overlaps
+    the caller's work on item t. Items arrive in order. An exception raised while
+    producing is re-raised here (with its traceback) at the item where it happened.
+    Closing the returned generator (``close()``, ``break`` out of a ``for`` loop that
+    then drops it, an exception in the caller) stops the thread, closes ``iterable``'s
+    iterator if it has ``close`` (a generator: its ``finally``/``with`` blocks run, e.g.
+    the video file is closed) and returns only when the thread has ended.
+
+    Parameters
+    ----------
+    iterable : any iterable; iterated only in the background thread
+    depth : int >= 1, items produced ahead of the consumer (memory bound)
+    """
+    if int(depth) < 1:
+        raise ValueError(f"prefetch depth must be >= 1; got {depth}")
+    q: queue.Queue = queue.Queue(maxsize=int(depth))
+    stop = threading.Event()
+    end = object()
+    it = iter(iterable)
+
+    def put(item) -> bool:
+        while not stop.is_set():
+            try:
+                q.put(item, timeout=0.05)
+                return True
+            except queue.Full:
+                continue
+        return False
+
+    def produce() -> None:
+        try:
+            try:
+                for x in it:
+                    if not put((x, None)):
+                        return
+            finally:
+                close = getattr(it, "close", None)
+                if close is not None:
+                    close()
+            put((end, None))
+        except BaseException as e:  # noqa: BLE001 - handed to the consumer
+            put((None, e))
+
+    th = threading.Thread(target=produce, name="vimsim-prefetch", daemon=True)
+    th.start()
+    try:
+        while True:
+            x, err = q.get()
+            if err is not None:
+                raise err
+            if x is end:
+                return
+            yield x
+    finally:
+        stop.set()
+        th.join()
 
 
 def _read_image(p: Path, fmt: PixelFormat) -> NDArray[np.uint8]:

@@ -3,11 +3,14 @@ the gray fast path, the atomic H.264 writer, bad input."""
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 import pytest
 
 from simulator.errors import InputError
-from simulator.video import VideoWriter, iter_frames, probe, read_frame
+from simulator.video import VideoWriter, iter_frames, prefetch, probe, read_frame
 
 
 def _write(path, n: int, size=(128, 64), fps: float = 30.0, seed: int = 0):
@@ -93,3 +96,50 @@ def test_bad_inputs(tmp_path):
         probe(tmp_path / "missing.mp4")
     with pytest.raises(InputError, match="has no frame 9"):
         read_frame(_write(tmp_path / "v.mp4", 2), 9)
+
+
+# ---------------------------------------------------------------------------- prefetch
+def _source(n: int, log: list, fail_at: int | None = None):
+    """A generator that records what it produced and whether it was closed."""
+    try:
+        for i in range(n):
+            if i == fail_at:
+                raise InputError(f"bad item {i}")
+            log.append(i)
+            yield i
+    finally:
+        log.append("closed")
+
+
+def test_prefetch_in_order_and_closes_source():
+    log: list = []
+    assert list(prefetch(_source(50, log), depth=3)) == list(range(50))
+    assert log[-1] == "closed"
+
+
+def test_prefetch_reraises_producer_error_at_its_item():
+    log: list = []
+    got = []
+    with pytest.raises(InputError, match="bad item 4"):
+        for x in prefetch(_source(10, log, fail_at=4)):
+            got.append(x)
+    assert got == [0, 1, 2, 3]
+    assert log[-1] == "closed"
+
+
+def test_prefetch_early_exit_stops_thread_and_closes_source():
+    log: list = []
+    before = threading.active_count()
+    gen = prefetch(_source(10_000, log), depth=2)
+    assert next(gen) == 0
+    time.sleep(0.05)  # let the producer fill the queue
+    # Bounded read-ahead: the one consumed, `depth` queued, one blocked in put().
+    assert len([x for x in log if x != "closed"]) <= 4
+    gen.close()
+    assert log[-1] == "closed"
+    assert threading.active_count() == before
+
+
+def test_prefetch_bad_depth():
+    with pytest.raises(ValueError, match="depth"):
+        next(prefetch([1], depth=0))
