@@ -8,7 +8,8 @@ Steps, each printed with its wall-clock time:
 3. ``preprocess``: the POF matrix of the left eye (:func:`simulator.preprocess.preprocess_video`,
    DIS flow, the default 24 x 11 window grid at a small window size).
 4. ``epof``: EPOF and GRF opacity of the viewing (:func:`simulator.epof.compute_epof`).
-5. ``render``: per-eye MP4s with the GRF overlay (``vimsim render``).
+5. ``render``: per-eye MP4s with the GRF overlay (:func:`simulator.render.render_viewing`,
+   what ``vimsim render`` runs).
 6. plots (EPOF and opacity over time; POF heat maps over yaw x pitch for a few frames
    and averaged, estimated beside the analytic truth), ``README.txt`` and
    ``summary.json``.
@@ -167,13 +168,14 @@ def run_demo(
     Raises InputError for an unusable output folder. A renderer failure (e.g. no EGL)
     is recorded in the summary and README instead of aborting the other outputs.
     """
-    from simulator.cli import main as cli_main
     from simulator.epof import compute_epof, write_epof_csv
     from simulator.geometry import grid_preset, head_rotation, perspective_rays
+    from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
     from simulator.headpath import save_headpath_csv
     from simulator.headpath import synth as synth_headpath
     from simulator.preprocess import preprocess_video
+    from simulator.render import RenderConfig, render_viewing
     from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 
     out = check_output_dir(output)
@@ -242,31 +244,20 @@ def run_demo(
     )
     t0 = _step(log, "epof: EPOF, opacity and truth", t0)
 
-    # 5. Render the per-eye videos with GRFs.
-    render_dir = out / "render"
-    argv = [
-        "render",
-        str(video),
-        str(hpath),
-        "-o",
-        str(render_dir),
-        "--grid",
-        str(gpath),
-        "--layout",
-        "top-bottom",
-        "--eye-size",
-        f"{cfg.render_size[0]}x{cfg.render_size[1]}",
-        "--seed",
-        str(cfg.seed),
-    ]
-    if not progress:
-        argv.append("--no-progress")
+    # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs).
     render_error = None
     if cfg.render:
         try:
-            rc = cli_main(argv)
-            if rc != 0:
-                render_error = f"vimsim {' '.join(argv)} exited with status {rc}"
+            render_viewing(
+                video,
+                hpath,
+                out / "render",
+                grid=grid,
+                config=RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)),
+                opacity="auto",
+                layout="top-bottom",
+                progress=progress,
+            )
         except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands
             render_error = f"{type(e).__name__}: {e}"
         if render_error:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import ast
 import json
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -82,3 +84,35 @@ def test_demo_bad_output_dir(tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2
     assert len(err.strip().splitlines()) == 1 and "output directory" in err
+
+
+def test_demo_and_render_do_not_import_the_cli():
+    """Layering: the demo calls simulator.render.render_viewing, not ``vimsim render``;
+    neither module imports simulator.cli or simulator.commands (higher layers)."""
+    import simulator.demo
+    import simulator.render
+
+    for mod in (simulator.demo, simulator.render):
+        tree = ast.parse(Path(mod.__file__).read_text())
+        names = [a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names]
+        names += [n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)]
+        bad = [
+            m
+            for m in names
+            if m in ("simulator.cli", "simulator.commands") or m.startswith("simulator.commands.")
+        ]
+        assert bad == [], f"{mod.__name__} imports {bad}"
+
+
+def test_demo_render_matches_the_command(demo_dir):
+    """The demo's render/ is what ``vimsim render --grid grid.npz --layout top-bottom`` writes."""
+    s = json.loads((demo_dir / "summary.json").read_text())
+    if not s["render"]["ok"]:
+        pytest.skip(f"renderer unavailable: {s['render']['error']}")
+    r = json.loads((demo_dir / "render" / "summary.json").read_text())
+    assert r["layout"] == "top-bottom" and r["eye_size"] == [64, 64]
+    assert r["grid"] == str(demo_dir / "grid.npz") and r["headpath"] == str(
+        demo_dir / "headpath.csv"
+    )
+    assert r["opacity"] == "auto" and r["grf"]["seed"] == TINY.seed
+    assert r["hfov_deg"] == r["vfov_deg"] == 107.0

@@ -564,3 +564,168 @@ def test_interrupted_render_leaves_no_mp4(ctx, tmp_path, monkeypatch):
             progress=False,
         )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.mp4"]
+
+
+# ------------------------------------------- render_viewing, reader options, OUTDIR state
+def _render_argv(vid, path, out, *extra):
+    return [
+        "render", str(vid), str(path), "-o", str(out), "--eye-size", "32x32", "--no-progress",
+        *extra,
+    ]  # fmt: skip
+
+
+def _avtrack360(path: Path) -> None:
+    """Two traces (AVTrack360 ``Head_rotation/<subject>.json``): 1.mp4 turns left, 6.mp4 right."""
+
+    def trace(sign):
+        return [{"sec": t, "yaw": sign * 40 * t, "pitch": 0, "roll": 0} for t in (0.0, 0.5, 1.0)]
+
+    data = [
+        {"filename": "1.mp4", "pitch_yaw_roll_data_hmd": trace(-1)},
+        {"filename": "6.mp4", "pitch_yaw_roll_data_hmd": trace(1)},
+    ]
+    path.write_text(json.dumps({"data": data}))
+
+
+def _vidstr(path: Path) -> None:
+    """360VidStr aggregated file, radians: user 1 looks left (-0.5 rad), user 2 right (+0.5)."""
+    times = " ".join(f"{0.1 * i:.1f}" for i in range(11))
+    zero = " ".join(["0"] * 11)
+    path.write_text(
+        f"{times}\n{zero}\n{' '.join(['-0.5'] * 11)}\n{zero}\n{' '.join(['0.5'] * 11)}\n"
+    )
+
+
+@pytest.mark.parametrize(
+    "writer,name,option,missing",
+    [(_avtrack360, "2.json", ["--video", "6.mp4"], "--video"), (_vidstr, "0.txt", ["--user", "2"], "--user")],
+)  # fmt: skip
+def test_cli_render_multi_trace_head_path(ctx, tmp_path, capsys, writer, name, option, missing):
+    """render takes the head path reader options (--format/--video/--user), as vimsim epof."""
+    from simulator.cli import main
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=4, fps=10)
+    writer(tmp_path / name)
+    out = tmp_path / "o"
+    rc = main(_render_argv(vid, tmp_path / name, out))
+    err = capsys.readouterr().err
+    assert rc == 2 and missing in err and err.count("\n") == 1
+    assert not out.exists() or not list(out.iterdir())
+    assert main(_render_argv(vid, tmp_path / name, out, *option)) == 0
+    rows = (out / "epof.csv").read_text().splitlines()[1:]
+    assert len(rows) == 4
+    assert float(rows[-1].split(",")[2]) > 5  # yaw_deg: the right-turning trace was chosen
+    assert json.loads((out / "summary.json").read_text())["frames_written"] == 4
+
+
+def test_cli_render_head_path_warning_is_one_line(ctx, tmp_path, capsys):
+    from simulator.cli import main
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=2)
+    p = tmp_path / "rad.csv"
+    p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,0.5,0.2,0\n")  # radians?
+    assert main(_render_argv(vid, p, tmp_path / "o", "--opacity", "0.5")) == 0
+    err = capsys.readouterr().err
+    warn = [ln for ln in err.splitlines() if "RADIANS" in ln]
+    assert len(warn) == 1 and warn[0].startswith("vimsim render: warning: ")
+
+
+def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
+    """The library entry point (no CLI): outputs renamed into place, summary.json last."""
+    import simulator.render as R
+    from simulator.headpath import HeadPath
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=3)
+    hp = HeadPath.from_angles_deg(np.array([0.0, 1.0]), 0.0, [0.0, 10.0], 0.0, source="mem")
+    renamed = []
+    real_replace = os.replace
+
+    def rec(src, dst):
+        renamed.append(Path(dst).name)
+        return real_replace(src, dst)
+
+    monkeypatch.setattr(os, "replace", rec)
+    cfg = R.RenderConfig(eye_size=(32, 32), grf=GrfConfig(seed=1))
+    s = R.render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
+    assert sorted(renamed) == sorted(R.OUTDIR_FILES) and renamed[-1] == "summary.json"
+    assert json.loads((tmp_path / "o" / "summary.json").read_text()) == json.loads(
+        json.dumps(s, default=str)
+    )
+    assert s["headpath"] == "mem" and s["opacity"] == 0.4 and s["frames_written"] == 3
+
+
+@pytest.mark.parametrize("fail_at", ["render", "epof_csv"])
+def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_at):
+    """A re-run into an existing OUTDIR that fails must not leave the previous run's
+    epof.csv/summary.json beside new (or no) MP4s; other files in OUTDIR are kept."""
+    import simulator.epof
+    import simulator.render as R
+    from simulator.cli import main
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=3)
+    _path_csv(tmp_path / "p.csv", 1.0)
+    out = tmp_path / "o"
+    argv = _render_argv(vid, tmp_path / "p.csv", out, "--opacity", "0.5")
+    assert main(argv) == 0
+    (out / "notes.txt").write_text("mine")
+
+    def boom(*a, **k):
+        raise RuntimeError("simulated failure")
+
+    if fail_at == "render":
+        monkeypatch.setattr(R.EyeRenderer, "render", boom)
+    else:
+        monkeypatch.setattr(simulator.epof, "write_epof_csv", boom)
+    with pytest.raises(RuntimeError, match="simulated"):
+        main(argv)
+    left = sorted(p.name for p in out.iterdir())
+    assert "summary.json" not in left and "epof.csv" not in left and "notes.txt" in left
+    if fail_at == "render":
+        assert left == ["notes.txt"]
+    else:  # the new MP4s are complete, but without summary.json the run is not
+        assert left == ["left.mp4", "notes.txt", "right.mp4"]
+
+
+def test_mono_right_copy_is_atomic(ctx, tmp_path, monkeypatch):
+    """Mono: right.mp4 is a copy of left.mp4, made under a temporary name then renamed."""
+    import shutil
+
+    import simulator.render as R
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=2)
+
+    def half_copy(src, dst, *a, **k):
+        Path(dst).write_bytes(Path(src).read_bytes()[:100])
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(shutil, "copyfile", half_copy)
+    out = tmp_path / "o"
+    out.mkdir()
+    outs = (str(out / "left.mp4"), str(out / "right.mp4"))
+    with pytest.raises(OSError, match="No space"):
+        R.render_video(ctx, str(vid), outs, np.zeros((2, 3)),
+                       config=R.RenderConfig(eye_size=(32, 32), grf=None), progress=False)  # fmt: skip
+    assert sorted(p.name for p in out.iterdir()) == ["left.mp4"]
+
+
+@pytest.mark.parametrize("bad", ["wide", None, float("nan"), float("inf"), 0.0, 180.0, -10.0])
+def test_render_config_fov_is_geometry_check_fov(bad):
+    """RenderConfig applies the one FOV rule (geometry.check_fov): InputError, same words."""
+    from simulator.geometry import check_fov
+    from simulator.render import RenderConfig
+
+    with pytest.raises(InputError) as want:
+        check_fov(bad, 90.0)
+    with pytest.raises(InputError) as got:
+        RenderConfig(eye_size=(32, 32), hfov_deg=bad, vfov_deg=90.0, grf=None)
+    assert str(got.value) == str(want.value)
+    if bad is not None:  # vfov None = hfov (check_fov's rule)
+        with pytest.raises(InputError, match="vfov"):
+            RenderConfig(eye_size=(32, 32), hfov_deg=90.0, vfov_deg=bad, grf=None)
+    c = RenderConfig(eye_size=(32, 32), hfov_deg=np.float32(90), vfov_deg="60", grf=None)
+    assert (c.hfov_deg, c.vfov_deg) == (90.0, 60.0) and type(c.vfov_deg) is float

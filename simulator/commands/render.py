@@ -1,4 +1,7 @@
-"""``vimsim render``: per-eye videos of what the viewer saw, with the GRF overlay."""
+"""``vimsim render``: per-eye videos of what the viewer saw, with the GRF overlay.
+
+Parses the options; the work is :func:`simulator.render.render_viewing`.
+"""
 
 from __future__ import annotations
 
@@ -31,22 +34,27 @@ def _opacity(text: str) -> float | str:
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``render`` parser."""
+    from simulator.commands.headpath import add_reader_options
+
     p = subparsers.add_parser(
         "render",
         help="per-eye H.264 videos of what the viewer saw, with the GRF overlay (headless EGL)",
         description="Render what each eye saw along a head path (OpenGL over EGL, no display "
         "needed) and composite the granulated rest frame (GRF: world-fixed black grains of "
-        "1.5 deg covering 50%% of the view, transparent within 18 deg of the view centre, "
+        "1.5 deg covering 50% of the view, transparent within 18 deg of the view centre, "
         "opaque beyond 40 deg) at the EPOF-driven opacity. Writes OUTDIR/left.mp4, "
         "OUTDIR/right.mp4 (H.264, the video's frame rate, one frame per video frame), "
-        "OUTDIR/epof.csv and OUTDIR/summary.json. Angles in degrees: positive yaw turns "
+        "OUTDIR/epof.csv and, last, OUTDIR/summary.json (the run is complete when it exists). "
+        "Angles in degrees: positive yaw turns "
         "right, positive pitch looks up, positive roll tilts the head right ear down.",
     )
-    p.add_argument("video", metavar="VIDEO", help="equirectangular video (mono or stereo)")
+    # dest video_file: --video (add_reader_options) names the trace of an AVTrack360 file
+    p.add_argument("video_file", metavar="VIDEO", help="equirectangular video (mono or stereo)")
     p.add_argument(
         "headpath",
         metavar="PATH.csv",
-        help="head path (time_s,yaw_deg,pitch_deg,roll_deg or another format vimsim headpath reads)",
+        help="head path (time_s,yaw_deg,pitch_deg,roll_deg or another format vimsim headpath "
+        "reads; --format, --video, --user below choose the format and the trace)",
     )
     p.add_argument(
         "-o", "--output", metavar="OUTDIR", required=True, help="output folder (created)"
@@ -133,58 +141,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="x264 quality, lower = better (default 18)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_reader_options(p)
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
-    import json
-    import time
-    from pathlib import Path
-
-    import numpy as np
-
-    from simulator.errors import InputError
-    from simulator.fileio import atomic_output, check_output_dir
-    from simulator.grf import GrfConfig, grain_count
+    """Parse the options and run :func:`simulator.render.render_viewing`; InputError -> exit 2."""
+    from simulator.commands.headpath import warnings_to_stderr
+    from simulator.grf import GrfConfig
+    from simulator.gridfile import load_grid
     from simulator.headpath import load_headpath
-    from simulator.render import RenderConfig, create_context, render_video
-    from simulator.video import probe
+    from simulator.render import RenderConfig, render_viewing
 
-    t0 = time.perf_counter()
     hfov, vfov = fov_from_args(args, (107.0, 107.0))
-    w, h = args.eye_size
-    if w % 2 or h % 2:
-        raise InputError(
-            f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
-        )
+    with warnings_to_stderr("vimsim render"):
+        hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
+        grid = load_grid(args.grid) if args.grid else None
 
-    info = probe(args.video)
-    info.eye_size(args.layout)  # 2:1 per eye (or squeezed stereo), else InputError
-    if not info.is_video:
-        raise InputError(
-            f"{args.video}: a still image; render needs a video (vimsim viewport renders images)"
-        )
-    hp = load_headpath(args.headpath)
-    duration = (info.n_frames - 1) / info.fps  # time of the last frame
-    hp.check_covers(duration, hold=args.hold_last, video=args.video)
-    times = np.arange(info.n_frames) / info.fps
-
-    grid = None
-    if args.grid:
-        from simulator.gridfile import load_grid
-
-        grid = load_grid(args.grid)
-        grid.check_video(info, source=args.grid)
-
-    # GRF on/off and opacity source.
+    # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
     note = None
     if args.grf is None and not grf_on:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
-    if grf_on and args.opacity == "auto" and grid is None:
-        raise InputError(
-            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
-        )
     grf = None
     if grf_on:
         grf = GrfConfig(
@@ -195,106 +173,25 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             distance_m=args.grain_distance,
         )
-
-    # Per-frame head angles and opacity (EPOF rows when a grid is given).
-    epof_dps = np.full(info.n_frames, np.nan)
-    thresholds = (float("nan"), float("nan"))
-    if grid is not None:
-        from simulator.epof import compute_epof
-
-        res = compute_epof(grid, hp, hfov_deg=hfov, vfov_deg=vfov, hold=args.hold_last)
-        yaw, pitch, roll = hp.sample_angles_deg(times, hold=args.hold_last)
-        n = min(len(res.epof_dps), info.n_frames)
-        epof_dps[:n] = res.epof_dps[:n]
-        epof_dps[n:] = res.epof_dps[-1]
-        op_auto = np.empty(info.n_frames)
-        op_auto[:n] = res.opacity[:n]
-        op_auto[n:] = res.opacity[-1]
-        thresholds = tuple(float(v) for v in res.thresholds_dps)
-    else:
-        yaw, pitch, roll = hp.sample_angles_deg(times, hold=args.hold_last)
-        op_auto = None
-    if not grf_on:
-        opacity = np.zeros(info.n_frames)
-    elif args.opacity == "auto":
-        opacity = op_auto
-    else:
-        opacity = np.full(info.n_frames, float(args.opacity))
-
-    out = check_output_dir(args.output)
-    if note:
-        print(f"vimsim render: note: {note}", file=sys.stderr)
-    ctx = create_context()
-    config = RenderConfig(eye_size=(w, h), hfov_deg=hfov, vfov_deg=vfov, grf=grf)
-    t_setup = time.perf_counter() - t0
-    result = render_video(
-        ctx,
-        args.video,
-        (str(out / "left.mp4"), str(out / "right.mp4")),
-        np.stack([yaw, pitch, roll], axis=-1),
-        opacity=opacity,
+    config = RenderConfig(eye_size=args.eye_size, hfov_deg=hfov, vfov_deg=vfov, grf=grf)
+    s = render_viewing(
+        args.video_file,
+        hp,
+        args.output,
+        grid=grid,
         config=config,
+        opacity=args.opacity,
         layout=args.layout,
-        fps=info.fps,
-        n_frames=info.n_frames,
+        hold=args.hold_last,
         preset=args.preset,
         crf=args.crf,
         progress=not args.no_progress,
+        note=note,
     )
-
-    # epof.csv: one row per video frame.
-    from simulator.epof import EpofResult, write_epof_csv
-
-    nf = info.n_frames
-    write_epof_csv(
-        out / "epof.csv",
-        EpofResult(np.arange(nf), times, yaw, pitch, roll, epof_dps, opacity, thresholds),
-    )
-
-    def pct(a):
-        a = np.asarray(a, float)
-        a = a[np.isfinite(a)]
-        return {f"p{q}": float(np.percentile(a, q)) for q in (10, 50, 90)} if a.size else None
-
-    timings = dict(result.timings_s, setup=t_setup, total_with_setup=time.perf_counter() - t0)
-    summary = {
-        "video": str(args.video),
-        "headpath": str(args.headpath),
-        "grid": args.grid,
-        "layout": args.layout,
-        "fps": info.fps,
-        "frames_video": info.n_frames,
-        "frames_written": result.n_frames,
-        "eye_size": [w, h],
-        "hfov_deg": hfov,
-        "vfov_deg": vfov,
-        "grf": None
-        if grf is None
-        else {
-            "grain_deg": grf.grain_deg,
-            "density": grf.density,
-            "inner_deg": grf.inner_deg,
-            "outer_deg": grf.outer_deg,
-            "seed": grf.seed,
-            "distance_m": grf.distance_m,
-            "n_grains": grain_count(grf),
-        },
-        "opacity": args.opacity if grf_on else "off",
-        "opacity_thresholds_dps": list(thresholds),
-        "epof_dps_percentiles": pct(epof_dps),
-        "opacity_percentiles": pct(opacity),
-        "x264": {"preset": args.preset, "crf": args.crf},
-        "timings_s": timings,
-        "frames_per_s": result.frames_per_s,
-        "renderer": ctx.info.get("GL_RENDERER"),
-    }
-    if note:
-        summary["note"] = note
-    with atomic_output(out / "summary.json") as tmp:
-        Path(tmp).write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    w, h = s["eye_size"]
     print(
-        f"vimsim render: {result.n_frames} frames x 2 eyes {w}x{h} -> {out}/left.mp4, right.mp4 "
-        f"({result.frames_per_s:.2f} frames/s)",
+        f"vimsim render: {s['frames_written']} frames x 2 eyes {w}x{h} -> {s['outdir']}/left.mp4, "
+        f"right.mp4 ({s['frames_per_s']:.2f} frames/s)",
         file=sys.stderr,
     )
     return 0
