@@ -44,7 +44,13 @@ from numpy.typing import NDArray
 
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
-from simulator.geometry import WindowGrid, head_angles_deg, head_rotation, perspective_rays
+from simulator.geometry import (
+    WindowGrid,
+    check_fov,
+    head_angles_deg,
+    head_rotation,
+    perspective_rays,
+)
 from simulator.gridfile import GridFile
 from simulator.headpath import HeadPath
 
@@ -421,12 +427,20 @@ def viewport_overlaps(grid: WindowGrid, hfov_deg: float, vfov_deg: float) -> Vie
 
 
 def _fov(grid: GridFile, hfov_deg, vfov_deg) -> tuple[float, float]:
-    h = grid.hfov_deg if hfov_deg is None else float(hfov_deg)
-    v = (grid.vfov_deg if hfov_deg is None else h) if vfov_deg is None else float(vfov_deg)
-    for name, x in (("hfov", h), ("vfov", v)):
-        if not (0.0 < x < 180.0):
-            raise InputError(f"viewport {name} must be degrees in (0, 180); got {x}")
-    return h, v
+    """Viewport FOV (degrees): the grid's window FOV by default, ``vfov`` = ``hfov`` when
+    only that is given; checked by the one rule, :func:`simulator.geometry.check_fov`."""
+    h = grid.hfov_deg if hfov_deg is None else hfov_deg
+    v = (grid.vfov_deg if hfov_deg is None else h) if vfov_deg is None else vfov_deg
+    return check_fov(h, v, source="viewport")
+
+
+def _frames(grid: GridFile) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+    """``(frame, time_s)`` of each grid row: video frame numbers and their times (s from
+    the video start). A grid made with ``preprocess --start`` begins at ``meta["start_frame"]``
+    (``GridFile.frame_times_s`` counts from 0 regardless)."""
+    start = int(grid.meta.get("start_frame", 0) or 0)
+    frames = start + np.arange(grid.n_frames, dtype=np.int64)
+    return frames, frames / float(grid.fps)
 
 
 def epof_from_grid(
@@ -537,7 +551,8 @@ class OpacityRule:
 # ------------------------------------------------------------------------- viewing
 @dataclass(frozen=True)
 class EpofResult:
-    """EPOF of one viewing, one row per video frame (frame time = frame / fps).
+    """EPOF of one viewing, one row per video frame (frame time = frame / fps; ``frame``
+    counts from the video's first frame, also for a grid of part of it).
 
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
@@ -576,8 +591,11 @@ def compute_epof(
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
-    The head path must cover every frame time (0 .. (T-1)/fps) unless ``hold`` holds its
-    first/last pose (InputError otherwise, saying where it ends).
+    Frame i of the grid is video frame ``start_frame + i`` (``meta["start_frame"]``, 0
+    unless the grid was made with ``preprocess --start``) at ``(start_frame + i) / fps``
+    seconds; those are the ``frame`` and ``time_s`` columns. The head path must cover
+    every such time unless ``hold`` holds its first/last pose (InputError otherwise,
+    saying where it ends).
 
     ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
     ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual
@@ -595,12 +613,14 @@ def compute_epof(
             "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
             "field over the viewport: drop --top-k or use --method paper"
         )
-    t = grid.frame_times_s()
+    frames, t = _frames(grid)
     hp.check_covers(
-        float(t[-1]), hold=hold, video=grid.meta.get("video", {}).get("path", "") or grid.path
+        float(t[-1]),
+        hold=hold,
+        video=grid.meta.get("video", {}).get("path", "") or grid.path,
+        start_s=float(t[0]),
     )
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    frames = np.arange(grid.n_frames)
     if sphere:
         from simulator.sphere import require_field, viewport_epof
 
@@ -608,8 +628,9 @@ def compute_epof(
         h, v = _fov(grid, hfov_deg, vfov_deg)
         e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
     else:
+        rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
         e = epof_from_grid(
-            grid, yaw, pitch, roll, frames, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
+            grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)

@@ -40,7 +40,9 @@ from simulator.geometry import head_angles_deg, head_rotation
 
 __all__ = [
     "FORMATS",
+    "MAX_SAMPLES",
     "SYNTH_KINDS",
+    "CoarseSamplingWarning",
     "HeadPath",
     "RadiansWarning",
     "load_headpath",
@@ -67,10 +69,20 @@ QUAT_COLUMNS: tuple[str, ...] = ("time_s", "qw", "qx", "qy", "qz")
 
 #: Time tolerance (s) when checking that a path covers a video.
 _TIME_TOL = 1e-6
+#: Most samples :func:`synth` makes (seconds x rate + 1); beyond, InputError.
+MAX_SAMPLES = 10_000_000
+#: A loaded path whose consecutive poses differ by more than this (deg) gives a
+#: :class:`CoarseSamplingWarning`.
+COARSE_STEP_DEG = 90.0
 
 
 class RadiansWarning(UserWarning):
     """Angles in a file that should hold degrees all lie within +-2*pi: radians?"""
+
+
+class CoarseSamplingWarning(UserWarning):
+    """Consecutive poses differ by more than 90 deg: Slerp takes the shortest arc between
+    them, which may not be the way the head turned."""
 
 
 # ------------------------------------------------------------------------------ HeadPath
@@ -187,10 +199,13 @@ class HeadPath:
             warnings.simplefilter("ignore", UserWarning)
             return head_angles_deg(self.sample(times_s, hold=hold))
 
-    def check_covers(self, duration_s: float, *, hold: bool = False, video: str = "") -> None:
-        """Raise InputError unless the path covers ``[0, duration_s]`` seconds.
+    def check_covers(
+        self, duration_s: float, *, hold: bool = False, video: str = "", start_s: float = 0.0
+    ) -> None:
+        """Raise InputError unless the path covers ``[start_s, duration_s]`` seconds.
 
-        With ``hold=True`` nothing is checked (the first/last pose are held).
+        ``start_s`` > 0 for a part of a video (a grid made with ``--start``). With
+        ``hold=True`` nothing is checked (the first/last pose are held).
         """
         if hold:
             return
@@ -201,9 +216,14 @@ class HeadPath:
                 f"head path {src} ends at {self.end_s:.3f} s; {vid}lasts {duration_s:.3f} s "
                 "(use --hold-last to hold the last pose)"
             )
-        if self.start_s > _TIME_TOL:
+        if self.start_s > start_s + _TIME_TOL:
+            where = (
+                f"the start of {vid.strip()}"
+                if start_s <= 0
+                else f"{start_s:.3f} s of {vid.strip()}"
+            )
             raise InputError(
-                f"head path {src} starts at {self.start_s:.3f} s, after the start of {vid.strip()} "
+                f"head path {src} starts at {self.start_s:.3f} s, after {where} "
                 "(use --hold-last to hold the first and last poses)"
             )
 
@@ -307,10 +327,32 @@ def load_headpath(
             f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(FORMATS)}"
         )
     if fmt == "avtrack360":
-        return _read_avtrack360(p, video)
-    if fmt == "360vidstr":
-        return _read_360vidstr(p, user)
-    return _READERS[fmt](p)
+        hp = _read_avtrack360(p, video)
+    elif fmt == "360vidstr":
+        hp = _read_360vidstr(p, user)
+    else:
+        hp = _READERS[fmt](p)
+    _warn_if_coarse(hp)
+    return hp
+
+
+def _warn_if_coarse(hp: HeadPath) -> None:
+    """CoarseSamplingWarning when consecutive poses differ by more than 90 deg."""
+    if hp.n < 2:
+        return
+    r = hp.rotations
+    step = np.degrees((r[:-1].inv() * r[1:]).magnitude())
+    big = np.flatnonzero(step > COARSE_STEP_DEG)
+    if big.size:
+        k = int(big[0])
+        t = hp.times_s
+        more = f" ({big.size} such steps)" if big.size > 1 else ""
+        warnings.warn(
+            f"{hp.source or 'head path'}: poses at {t[k]:.6g} s and {t[k + 1]:.6g} s differ by "
+            f"{step[k]:.0f} deg{more}: sampling too coarse; interpolation takes the shortest arc",
+            CoarseSamplingWarning,
+            stacklevel=3,
+        )
 
 
 def _parse_table(
@@ -344,21 +386,25 @@ def _parse_table(
     return cols, data, [ln for ln, _ in rows[1:]]
 
 
-def _check_finite(p: Path, cols: list[str], data: NDArray, lines: list[int]) -> None:
+def _check_finite(
+    p: Path, cols: list[str], data: NDArray, lines: list[int], what: str = "line"
+) -> None:
+    """InputError naming ``{what} {lines[k]}`` (file line, or 1-based sample number)."""
     bad = ~np.isfinite(data)
     if np.any(bad):
         k, c = np.argwhere(bad)[0]
         raise InputError(
-            f"{p}: line {lines[k]}: {cols[c]} is {data[k, c]}; expected a finite number"
+            f"{p}: {what} {lines[k]}: {cols[c]} is {data[k, c]}; expected a finite number"
         )
 
 
-def _check_increasing(p: Path, t: NDArray, lines: list[int]) -> None:
+def _check_increasing(p: Path, t: NDArray, lines: list[int], what: str = "line") -> None:
+    """InputError naming ``{what} {lines[k]}``; ``lines`` labels the rows of ``t``."""
     d = np.diff(t)
     if np.any(d <= 0):
         k = int(np.flatnonzero(d <= 0)[0])
         raise InputError(
-            f"{p}: time is not strictly increasing at line {lines[k + 1]} "
+            f"{p}: time is not strictly increasing at {what} {lines[k + 1]} "
             f"({t[k + 1]:.6g} s after {t[k]:.6g} s)"
         )
 
@@ -462,9 +508,9 @@ def _read_keyframes_json(p: Path) -> HeadPath:
         except (TypeError, ValueError):
             raise InputError(f"{p}: keyframe {k} has a non-numeric value") from None
     data = np.array(rows)
-    lines = [k for k in range(len(rows))]
-    _check_finite(p, list(CANONICAL_COLUMNS), data, lines)
-    _check_increasing(p, data[:, 0], lines)
+    lines = list(range(len(rows)))  # keyframe numbers, 0-based as in the messages above
+    _check_finite(p, list(CANONICAL_COLUMNS), data, lines, "keyframe")
+    _check_increasing(p, data[:, 0], lines, "keyframe")
     _warn_if_radians(p, data[:, 1], data[:, 2], data[:, 3])
     return HeadPath.from_angles_deg(data[:, 0], data[:, 1], data[:, 2], data[:, 3], source=str(p))
 
@@ -639,7 +685,13 @@ def _read_avtrack360(p: Path, video: str | None) -> HeadPath:
     want = video if video.endswith(".mp4") else f"{video}.mp4"
     if want not in names:
         raise InputError(f"{p}: no video {video!r}; available: {', '.join(names)}")
-    samples = entries[names.index(want)]["pitch_yaw_roll_data_hmd"]
+    try:
+        samples = entries[names.index(want)]["pitch_yaw_roll_data_hmd"]
+    except (KeyError, TypeError):
+        raise InputError(
+            f"{p}: video {want}: entry has no pitch_yaw_roll_data_hmd samples; "
+            "not an AVTrack360 head rotation file?"
+        ) from None
     try:
         data = np.array(
             [
@@ -651,11 +703,13 @@ def _read_avtrack360(p: Path, video: str | None) -> HeadPath:
         raise InputError(f"{p}: video {want}: samples need numeric sec, yaw, pitch, roll") from None
     if data.size == 0:
         raise InputError(f"{p}: video {want} has no samples")
-    lines = list(range(len(data)))
-    _check_finite(p, ["sec", "yaw", "pitch", "roll"], data, lines)
+    # Errors name the 1-based sample of the video's entry (JSON has no useful line numbers).
+    src = f"{p}: video {want}"
+    labels = np.arange(1, len(data) + 1)
+    _check_finite(src, ["sec", "yaw", "pitch", "roll"], data, labels, "sample")
     keep = _dedupe_times(data[:, 0])
-    data = data[keep]
-    _check_increasing(p, data[:, 0], lines)
+    data, labels = data[keep], labels[keep]
+    _check_increasing(src, data[:, 0], labels, "sample")
     return HeadPath.from_angles_deg(
         data[:, 0], data[:, 1], -data[:, 2], data[:, 3], source=f"{p}:{want}"
     )
@@ -690,8 +744,9 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
         raise InputError(f"{p}: user {user} has no samples")
     t = rows[0][:n]
     data = np.stack([t, yaw[:n], pitch[:n]], axis=1)
-    _check_finite(p, ["time", "yaw", "pitch"], data, list(range(n)))
-    _check_increasing(p, t, list(range(n)))
+    labels = list(range(1, n + 1))  # 1-based sample (column) numbers
+    _check_finite(p, ["time", "yaw", "pitch"], data, labels, "sample")
+    _check_increasing(p, t, labels, "sample")
     return HeadPath.from_angles_deg(
         t, np.degrees(yaw[:n]), np.degrees(pitch[:n]), 0.0, source=f"{p}:user{user}"
     )
@@ -736,6 +791,10 @@ def synth(kind: str, seconds: float, rate_hz: float = 60.0, seed: int = 0, **par
         ``keyframes=PATH`` (JSON list or canonical CSV of time_s/yaw_deg/pitch_deg/roll_deg),
         Slerp between them; ``seconds`` may be 0 to end at the last keyframe; the last
         pose is held after it.
+
+    At most :data:`MAX_SAMPLES` samples. Sampling so coarse that the head could turn
+    180 deg or more between two samples (Slerp would then take the shortest arc, the
+    wrong way) raises :class:`InputError` asking for a higher rate.
     """
     if kind not in SYNTH_KINDS:
         raise InputError(
@@ -743,31 +802,63 @@ def synth(kind: str, seconds: float, rate_hz: float = 60.0, seed: int = 0, **par
         )
     if not (rate_hz > 0 and math.isfinite(rate_hz)):
         raise InputError(f"rate must be > 0 Hz; got {rate_hz}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise InputError(f"seed must be an integer >= 0; got {seed!r}")
     if kind == "keyframes":
         return _synth_keyframes(seconds, rate_hz, params)
     if not (seconds > 0 and math.isfinite(seconds)):
         raise InputError(f"seconds must be > 0; got {seconds}")
-    n = math.floor(seconds * rate_hz + 1e-9) + 1
-    t = np.arange(n) / rate_hz
+    t = _sample_times(seconds, rate_hz, f"synth {kind}")
     g = {k: float(v) for k, v in params.items() if v is not None}
     yaw0, pitch0, roll0 = g.get("yaw", 0.0), g.get("pitch", 0.0), g.get("roll", 0.0)
     src = f"synth:{kind}"
     if kind == "static":
         return HeadPath.from_angles_deg(t, yaw0, pitch0, roll0, source=src)
     if kind == "sweep":
-        yaw = yaw0 + g.get("yaw_rate", 30.0) * t
+        yaw_rate = g.get("yaw_rate", 30.0)
+        step = abs(yaw_rate) / rate_hz
+        _check_step(kind, step, rate_hz, f"--yaw-rate {yaw_rate:g} deg/s", abs(yaw_rate) / 180)
+        yaw = yaw0 + yaw_rate * t
         return HeadPath.from_angles_deg(t, yaw, pitch0, roll0, source=src)
     if kind == "sine":
-        yaw = yaw0 + g.get("yaw_amp", 60.0) * np.sin(2 * np.pi * g.get("yaw_freq", 0.1) * t)
-        pitch = pitch0 + g.get("pitch_amp", 20.0) * np.sin(
-            2 * np.pi * g.get("pitch_freq", 0.15) * t + np.pi / 2
-        )
+        ya, yf = g.get("yaw_amp", 60.0), g.get("yaw_freq", 0.1)
+        pa, pf = g.get("pitch_amp", 20.0), g.get("pitch_freq", 0.15)
+        # Largest change between two samples: speed x step, at most peak to peak (2 amp);
+        # yaw and pitch together turn at most the sum (triangle inequality on rotations).
+        speed = [2 * math.pi * abs(a * f) for a, f in ((ya, yf), (pa, pf))]  # peak deg/s
+        step = sum(min(2 * abs(a), v / rate_hz) for a, v in zip((ya, pa), speed))
+        _check_step(kind, step, rate_hz, "amplitude x frequency", sum(speed) / 180)
+        yaw = yaw0 + ya * np.sin(2 * np.pi * yf * t)
+        pitch = pitch0 + pa * np.sin(2 * np.pi * pf * t + np.pi / 2)
         if np.any(np.abs(pitch) > 90):
             raise InputError(
                 f"sine: pitch + pitch_amp reaches {np.abs(pitch).max():.1f} deg; keep |pitch| <= 90"
             )
         return HeadPath.from_angles_deg(t, yaw, pitch, roll0, source=src)
-    return _synth_look_around(t, np.random.default_rng(seed), yaw0, g)
+    return _synth_look_around(t, np.random.default_rng(seed), yaw0, g, rate_hz)
+
+
+def _sample_times(seconds: float, rate_hz: float, what: str) -> NDArray[np.float64]:
+    """``arange(n) / rate_hz`` covering 0..seconds; InputError beyond :data:`MAX_SAMPLES`."""
+    n_f = seconds * rate_hz  # inf for huge values: refused below, no OverflowError
+    if not n_f < MAX_SAMPLES:
+        raise InputError(
+            f"{what}: --seconds {seconds:g} x --rate {rate_hz:g} Hz = {n_f:.3g} samples; "
+            f"at most {MAX_SAMPLES:,} (lower --seconds or --rate)"
+        )
+    n = math.floor(n_f + 1e-9) + 1
+    return np.arange(n) / rate_hz
+
+
+def _check_step(kind: str, step_deg: float, rate_hz: float, cause: str, need_hz: float) -> None:
+    """InputError when the head can turn 180 deg or more between two samples (``need_hz``
+    = a rate above which it cannot, for the message)."""
+    if step_deg >= 180.0 - 1e-9:
+        raise InputError(
+            f"synth {kind}: the head can turn {step_deg:.0f} deg between two samples at --rate "
+            f"{rate_hz:g} Hz ({cause}) and interpolation takes the shortest arc, the wrong way: "
+            f"raise --rate above {need_hz:.3g} Hz"
+        )
 
 
 #: look-around model parameters (tuned against the real traces, see docs/headpath.md).
@@ -781,7 +872,9 @@ _LOOK = {
 }
 
 
-def _synth_look_around(t: NDArray, rng: np.random.Generator, yaw0: float, g: dict) -> HeadPath:
+def _synth_look_around(
+    t: NDArray, rng: np.random.Generator, yaw0: float, g: dict, rate_hz: float
+) -> HeadPath:
     c = dict(_LOOK)
     c.update({k: v for k, v in g.items() if k in c})
     T = t[-1]
@@ -829,6 +922,10 @@ def _synth_look_around(t: NDArray, rng: np.random.Generator, yaw0: float, g: dic
     pitch = np.clip(pitch + drift(c["drift_sd_dps"] * 0.6, 2.0), -85, 85)
     roll = c["roll_sd_deg"] * np.sin(2 * np.pi * 0.05 * t + rng.uniform(0, 2 * np.pi))
     roll = roll + drift(1.0, 2.0)
+    if t.size > 1:  # the scripted angles (not wrapped): the turn between two samples
+        step = np.abs(np.diff(yaw)) + np.abs(np.diff(pitch)) + np.abs(np.diff(roll))
+        big = float(step.max())
+        _check_step("look-around", big, rate_hz, "a scripted head turn", rate_hz * big / 180)
     return HeadPath.from_angles_deg(t, yaw, pitch, roll, source="synth:look-around")
 
 
@@ -848,8 +945,7 @@ def _synth_keyframes(seconds: float, rate_hz: float, g: dict) -> HeadPath:
     end = float(seconds) if seconds and seconds > 0 else kf.end_s
     if not math.isfinite(end) or end <= 0:
         raise InputError(f"{p}: keyframes end at {kf.end_s} s; give --seconds > 0")
-    n = math.floor(end * rate_hz + 1e-9) + 1
-    t = np.arange(n) / rate_hz
+    t = _sample_times(end, rate_hz, "synth keyframes")
     return HeadPath(t, kf.sample(t, hold=True), f"synth:keyframes:{p}")
 
 

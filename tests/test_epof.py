@@ -77,8 +77,9 @@ def brute_overlaps(grid: WindowGrid, yaw, pitch, roll, hfov, vfov, n=256):
     return out
 
 
-def _gridfile(tmp_path, grid: WindowGrid, pof, fps=30.0, name="g.npz"):
+def _gridfile(tmp_path, grid: WindowGrid, pof, fps=30.0, name="g.npz", **extra):
     meta = {
+        **extra,
         "fps": fps,
         "n_frames": len(pof),
         "flow": {"method": "test"},
@@ -320,3 +321,60 @@ def test_cli_bad_input_one_line_exit_2_no_output(tmp_path, capsys):
     out = tmp_path / "e.csv"
     assert main(["epof", str(ok), str(path), "-o", str(out), "--hold-last"]) == 0
     assert out.exists()
+
+
+def test_grid_of_part_of_the_video_uses_its_frame_numbers_and_times(tmp_path):
+    # A grid made with `preprocess --start 2 --end 3` (25 fps): row 0 is video frame 50.
+    g = GRIDS["default"]
+    pof = np.random.default_rng(4).uniform(1, 50, (25, *g.shape))
+    path = _gridfile(tmp_path, g, pof, fps=25.0, start_frame=50, end_frame=75)
+    gf = load_grid(path)
+    hp = synth("sweep", 5.0, rate_hz=60, yaw_rate=30)
+    res = compute_epof(gf, hp)
+    np.testing.assert_array_equal(res.frame, np.arange(50, 75))
+    np.testing.assert_allclose(res.time_s, np.arange(50, 75) / 25.0)
+    np.testing.assert_allclose(res.yaw_deg, 30.0 * res.time_s, atol=1e-6)  # head at 2..3 s
+    rows = np.arange(25)
+    ref = epof_from_grid(gf, res.yaw_deg, res.pitch_deg, res.roll_deg, rows)
+    np.testing.assert_allclose(res.epof_dps, ref)
+    # The path must cover 2..2.96 s only: one from 1.5 s to 3 s is enough.
+    part = HeadPath.from_angles_deg([1.5, 3.0], [0.0, 10.0], 0.0, source="part")
+    assert len(compute_epof(gf, part).frame) == 25
+    late = HeadPath.from_angles_deg([2.5, 3.0], [0.0, 10.0], 0.0, source="late")
+    with pytest.raises(InputError, match="starts at 2.500 s, after 2.000 s"):
+        compute_epof(gf, late)
+    out, csv = tmp_path / "e.csv", tmp_path / "p.csv"
+    save_headpath_csv(csv, hp)
+    assert main(["epof", str(path), str(csv), "-o", str(out)]) == 0
+    first = out.read_text().splitlines()[1].split(",")
+    assert first[0] == "50" and float(first[1]) == pytest.approx(2.0)
+
+
+def test_cli_missing_output_folder_leaves_no_plot(tmp_path, capsys, monkeypatch):
+    g = GRIDS["default"]
+    grid = _gridfile(tmp_path, g, np.ones((10, *g.shape)))
+    path = tmp_path / "p.csv"
+    save_headpath_csv(path, synth("static", 1.0, rate_hz=10))
+    monkeypatch.chdir(tmp_path)
+    bad = str(tmp_path / "nonexistent" / "e.csv")
+    assert main(["epof", str(grid), str(path), "-o", bad, "--plot", "pl.png"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "nonexistent" in err and "does not exist" in err
+    assert not (tmp_path / "pl.png").exists()
+    out = tmp_path / "e.csv"
+    assert main(["epof", str(grid), str(path), "-o", str(out), "--plot", bad[:-3] + "png"]) == 2
+    assert not out.exists()
+    capsys.readouterr()
+
+
+@pytest.mark.parametrize(
+    "fov", [(float("nan"), None), (90.0, float("inf")), (0.0, 90.0), ("wide", None)]
+)
+def test_compute_epof_refuses_bad_fov_by_the_one_rule(tmp_path, fov):
+    g = GRIDS["default"]
+    gf = load_grid(_gridfile(tmp_path, g, np.ones((5, *g.shape))))
+    hp = synth("static", 1.0, rate_hz=10)
+    with pytest.raises(InputError, match="viewport: [hv]fov must be degrees in \\(0, 180\\)"):
+        compute_epof(gf, hp, hfov_deg=fov[0], vfov_deg=fov[1])
+    with pytest.raises(InputError, match="viewport: [hv]fov"):
+        epof_from_grid(gf, 0.0, 0.0, 0.0, 0, hfov_deg=fov[0], vfov_deg=fov[1])

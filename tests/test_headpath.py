@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import warnings
 
 import numpy as np
@@ -13,6 +14,7 @@ from simulator.cli import main
 from simulator.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.headpath import (
+    CoarseSamplingWarning,
     HeadPath,
     RadiansWarning,
     detect_format,
@@ -290,3 +292,98 @@ def test_radians_warning(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_headpath(_write(tmp_path, "deg.csv", "time_s,yaw_deg,pitch_deg\n0,10,5\n1,40,-20\n"))
+
+
+# ------------------------------------------------------------------ review fixes
+def test_synth_refuses_sampling_that_turns_the_wrong_way(tmp_path, capsys):
+    # yaw 0, 200, 400, 600 would be written as 0, -160, 40, -120: Slerp turns left.
+    with pytest.raises(InputError, match=r"200 deg between two samples.*raise --rate above 1.11"):
+        synth("sweep", 3.0, rate_hz=1, yaw_rate=200)
+    with pytest.raises(InputError, match="raise --rate"):
+        synth("sweep", 3.0, rate_hz=1, yaw_rate=-180)
+    with pytest.raises(InputError, match="raise --rate"):  # samples all at sin(k pi) = 0
+        synth("sine", 3.0, rate_hz=1, yaw_amp=170, yaw_freq=0.5)
+    ok = synth("sweep", 3.0, rate_hz=2, yaw_rate=200)  # 100 deg steps: still the short way
+    y = np.unwrap(np.radians(ok.sample_angles_deg(np.linspace(0, 3, 61))[0]))
+    assert np.all(np.diff(y) > 0)
+    out = tmp_path / "s.csv"
+    args = ["headpath", "synth", "sweep", "-o", str(out), "--seconds", "3", "--rate", "1"]
+    assert main([*args, "--yaw-rate", "200"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--rate" in err and not out.exists()
+
+
+@pytest.mark.parametrize(
+    "extra, msg",
+    [
+        (["look-around", "--seconds", "1", "--seed", "-1"], "--seed: expected an integer >= 0"),
+        (["sweep", "--seconds", "1e308"], "samples; at most 10,000,000"),
+        (["sweep", "--seconds", "1e7", "--rate", "1000"], "1e\\+10 samples; at most"),
+    ],
+)
+def test_synth_cli_bad_numbers_one_line_exit_2(tmp_path, capsys, extra, msg):
+    out = tmp_path / "s.csv"
+    try:
+        rc = main(["headpath", "synth", extra[0], "-o", str(out), *extra[1:]])
+    except SystemExit as e:  # usage errors exit from argparse
+        rc = e.code
+    assert rc == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert re.search(msg, err), err
+    assert not out.exists()
+
+
+def test_synth_api_refuses_negative_seed_and_too_many_samples(tmp_path):
+    with pytest.raises(InputError, match="seed"):
+        synth("look-around", 1.0, seed=-1)
+    with pytest.raises(InputError, match="at most"):
+        synth("static", 1e308)
+    kf = _write(tmp_path, "k.csv", "time_s,yaw_deg,pitch_deg\n0,0,0\n1,10,0\n")
+    with pytest.raises(InputError, match="at most"):
+        synth("keyframes", 1e9, rate_hz=100, keyframes=str(kf))
+
+
+def test_loaders_warn_when_poses_are_more_than_90_deg_apart(tmp_path, capsys):
+    p = _write(tmp_path, "c.csv", "time_s,yaw_deg,pitch_deg\n0,0,0\n1,-160,0\n2,40,0\n")
+    with pytest.warns(CoarseSamplingWarning, match="sampling too coarse; interpolation takes"):
+        load_headpath(p)
+    assert main(["headpath", "convert", str(p), "-o", str(tmp_path / "o.csv")]) == 0
+    err = capsys.readouterr().err
+    assert "vimsim headpath: warning:" in err and "differ by 160 deg (2 such steps)" in err
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        load_headpath(_write(tmp_path, "f.csv", "time_s,yaw_deg,pitch_deg\n0,0,0\n1,89,0\n"))
+
+
+def _avtrack(tmp_path, samples, key="pitch_yaw_roll_data_hmd"):
+    entry = {"filename": "1.mp4", key: samples}
+    return _write(tmp_path, "av.json", json.dumps({"data": [entry]}))
+
+
+def test_avtrack360_entry_without_samples_is_one_line(tmp_path, capsys):
+    one = {
+        "filename": "1.mp4",
+        "pitch_yaw_roll_data_hmd": [{"sec": 0, "yaw": 0, "pitch": 0, "roll": 0}],
+    }
+    p = _write(tmp_path, "av.json", json.dumps({"data": [one, {"filename": "2.mp4", "x": []}]}))
+    out = tmp_path / "o.csv"
+    args = ["headpath", "convert", str(p), "-o", str(out), "--format", "avtrack360"]
+    assert main([*args, "--video", "2.mp4"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and str(p) in err and "2.mp4" in err
+    assert "pitch_yaw_roll_data_hmd" in err and not out.exists()
+
+
+def test_avtrack360_errors_name_1_based_samples_after_dedupe(tmp_path):
+    s = [{"sec": t, "yaw": 0, "pitch": 0, "roll": 0} for t in (0.1, 0.1, 0.2, 0.3, 0.25)]
+    p = _avtrack(tmp_path, s)
+    # samples 1 and 2 share a time (2 is dropped); sample 5 goes back in time
+    with pytest.raises(
+        InputError, match=r"video 1.mp4: time is not strictly increasing at sample 5 "
+    ):
+        load_headpath(p, "avtrack360")
+    s[3]["yaw"] = float("nan")
+    p.write_text(json.dumps({"data": [{"filename": "1.mp4", "pitch_yaw_roll_data_hmd": s}]}))
+    with pytest.raises(InputError, match="sample 4: yaw is nan"):
+        load_headpath(p, "avtrack360")

@@ -111,18 +111,38 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _check_output_file(path: str) -> None:
+    """InputError unless ``path`` can be written: its folder exists and is writable and
+    it is not a folder (checked before any work, so that nothing is left half done)."""
+    import os
+    from pathlib import Path
+
+    from simulator.errors import InputError
+
+    target = Path(path)
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"{target}: output directory {parent} is not writable")
+    if target.is_dir():
+        raise InputError(f"{target}: is a directory; expected an output file name")
+
+
 def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
-    from simulator.commands.headpath import warnings_to_stderr
+    from simulator.commands.headpath import load_headpath_args, warnings_to_stderr
     from simulator.epof import OpacityRule, compute_epof, plot_epof, write_epof_csv
     from simulator.gridfile import load_grid
-    from simulator.headpath import load_headpath
 
+    for out in (args.output, args.plot):
+        if out:
+            _check_output_file(out)
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
     with warnings_to_stderr("vimsim epof"):
         grid = load_grid(args.grid)
-        hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
+    hp = load_headpath_args(args, args.headpath, "vimsim epof")
     res = compute_epof(
         grid,
         hp,
@@ -133,9 +153,9 @@ def run(args: argparse.Namespace) -> int:
         hold=args.hold_last,
         method=args.method,
     )
+    write_epof_csv(args.output, res)  # the CSV first: a plot is never left without it
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
-    write_epof_csv(args.output, res)
     lo, hi = res.thresholds_dps
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "

@@ -11,9 +11,9 @@ import argparse
 import math
 import sys
 
-from simulator.commands._types import positive_float
+from simulator.commands._types import nonneg_int, positive_float
 
-__all__ = ["register", "run", "warnings_to_stderr"]
+__all__ = ["add_reader_options", "load_headpath_args", "register", "run", "warnings_to_stderr"]
 
 _KINDS = ("static", "sweep", "sine", "look-around", "keyframes")  # = headpath.SYNTH_KINDS
 _FORMATS = (
@@ -114,7 +114,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="HZ",
         help="samples per second (default 60)",
     )
-    s.add_argument("--seed", type=int, default=0, metavar="N", help="random seed (look-around)")
+    s.add_argument(
+        "--seed", type=nonneg_int, default=0, metavar="N", help="random seed >= 0 (look-around)"
+    )
     s.add_argument(
         "--yaw",
         type=_float,
@@ -213,6 +215,24 @@ def warnings_to_stderr(prog: str):
             return cm.__exit__(*exc)
 
     return _Ctx()
+
+
+def load_headpath_args(args: argparse.Namespace, path, prog: str):
+    """Load the head path ``path`` with the options of :func:`add_reader_options` in ``args``
+    (missing ones = defaults), reader warnings printed as ``<prog>: warning: ...`` on stderr.
+
+    For commands reading a head path (``vimsim epof``, ``vimsim render``): add
+    :func:`add_reader_options` to the parser and call this. InputError on bad input.
+    """
+    from simulator.headpath import load_headpath
+
+    with warnings_to_stderr(prog):
+        return load_headpath(
+            path,
+            getattr(args, "format", "auto"),
+            video=getattr(args, "video", None),
+            user=getattr(args, "user", None),
+        )
 
 
 def run(args: argparse.Namespace) -> int:
