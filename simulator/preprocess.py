@@ -16,7 +16,8 @@ scalars:
     ``u = (x / w * 2 - 1) tan(hfov / 2)``, ``v = (1 - y / h * 2) tan(vfov / 2)`` on the
     plane ``z = 1``; flow targets outside the window still have a ray. The angle between
     a window's own rays does not depend on the window's orientation, so one set of
-    per-pixel constants serves every window.
+    per-pixel constants serves every window (:class:`simulator.flow.RayAngles`, shared
+    with sphere mode).
 
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
 :func:`simulator.gridfile.save_grid` (atomic: the grid file appears only when complete).
@@ -36,24 +37,21 @@ import itertools
 import json
 import math
 import os
-import queue
 import sys
-import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
-import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
-from simulator.flow import FlowBackend, make_backend
+from simulator.flow import FlowBackend, RayAngles, make_backend
 from simulator.geometry import WindowExtractor, WindowGrid, perspective_rays
 from simulator.gridfile import content_hash, save_grid
-from simulator.video import iter_frames, probe
+from simulator.video import iter_frames, prefetch, probe
 
 __all__ = [
     "PreprocessInterrupted",
@@ -85,79 +83,31 @@ class WindowFlowReducer:
     Call with ``flow`` ``(N, h, w, 2)`` float32 (window px / frame) and ``fps``; returns
     ``(dps, px)``, each ``(N,)`` float64: deg/s and px/frame.
 
-    The angle is ``atan2(|r0 x r1|, r0 . r1)`` with the unnormalised rays
-    ``r = (u, v, 1)`` (exact at any angle), the ``atan2`` evaluated with OpenCV's
-    vectorised ``phase`` (relative error < 3e-4, 30x faster than numpy's). Sums are
-    float64 and independent of memory alignment and threads: results are bit-reproducible.
+    The per-pixel angles are :class:`simulator.flow.RayAngles` (the formula sphere mode
+    uses too). Sums are float64 pairwise sums, independent of memory alignment and
+    threads: results are bit-reproducible.
     """
 
     def __init__(self, size: tuple[int, int], hfov_deg: float, vfov_deg: float):
         w, h = int(size[0]), int(size[1])
         _, sa = perspective_rays((w, h), hfov_deg, vfov_deg)
-        tx = math.tan(math.radians(hfov_deg) / 2.0)
-        ty = math.tan(math.radians(vfov_deg) / 2.0)
-        u = ((np.arange(w) + 0.5) / w * 2.0 - 1.0) * tx
-        v = (1.0 - (np.arange(h) + 0.5) / h * 2.0) * ty
-        uu, vv = np.meshgrid(u, v)
         self.size = (w, h)
-        self._u0 = uu.astype(np.float32)
-        self._v0 = vv.astype(np.float32)
-        self._a = (1.0 + uu * uu + vv * vv).astype(np.float32)
-        # Pixel steps of u and v: +x right = +u, +y down = -v.
-        self._cx = np.float32(2.0 * tx / w)
-        self._cy = np.float32(-2.0 * ty / h)
+        self._rays = RayAngles((w, h), hfov_deg, vfov_deg)
         self._wt32 = (sa.astype(np.float64) / sa.astype(np.float64).sum()).astype(np.float32)
-        self._local = threading.local()
 
-    def _buffers(self) -> list[NDArray[np.float32]]:
-        """Six (h, w) float32 scratch arrays of the calling thread (reused: fresh 256 KB
-        temporaries cost a page-faulting mmap each, more than the arithmetic)."""
-        bufs = getattr(self._local, "bufs", None)
-        if bufs is None:
-            w, h = self.size
-            bufs = [np.empty((h, w), np.float32) for _ in range(6)]
-            self._local.bufs = bufs
-        return bufs
-
-    def _one(self, f: NDArray[np.float32], out_angles: bool = False):
+    def _one(self, f: NDArray[np.float32]) -> tuple[float, float]:
         """``(sum of weighted angles (rad), sum of |f| (px))`` of one window's flow."""
-        fx, fy, du, dv, t, u = self._buffers()
-        np.copyto(fx, f[..., 0])
-        np.copyto(fy, f[..., 1])
-        np.multiply(fx, fx, out=t)
-        np.multiply(fy, fy, out=u)
-        np.add(t, u, out=du)
-        np.sqrt(du, out=du)
+        ang, mag = self._rays.into_scratch(f, magnitude=True)
         # float64 pairwise sums: the order does not depend on memory alignment or threads
         # (BLAS dot and cv2.mean/magnitude do), so results are bit-reproducible (--resume).
-        px_sum = float(np.sum(du, dtype=np.float64))
-        np.multiply(fx, self._cx, out=du)
-        np.multiply(fy, self._cy, out=dv)
-        # |r0 x r1|^2 = du^2 + dv^2 + (u0 dv - v0 du)^2 with r = (u, v, 1)
-        np.multiply(t, self._cx * self._cx, out=t)
-        np.multiply(u, self._cy * self._cy, out=u)
-        np.add(t, u, out=t)
-        np.multiply(self._u0, dv, out=u)
-        np.multiply(self._v0, du, out=fx)
-        np.subtract(u, fx, out=u)
-        np.multiply(u, u, out=u)
-        np.add(t, u, out=t)
-        np.sqrt(t, out=t)
-        # r0 . r1 = 1 + u0^2 + v0^2 + u0 du + v0 dv
-        np.multiply(self._u0, du, out=u)
-        np.multiply(self._v0, dv, out=fy)
-        np.add(u, fy, out=u)
-        np.add(u, self._a, out=u)
-        ang = cv2.phase(u, t, fx)  # atan2(|cross|, dot) in [0, pi]
-        if out_angles:
-            return ang.copy()
-        np.multiply(ang, self._wt32, out=fy)
-        return float(np.sum(fy, dtype=np.float64)), px_sum
+        px_sum = float(np.sum(mag, dtype=np.float64))
+        np.multiply(ang, self._wt32, out=mag)
+        return float(np.sum(mag, dtype=np.float64)), px_sum
 
     def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
         """Per-pixel angle in **radians** between each ray and its flow target's ray,
         ``(h, w)`` float32, for one window's flow ``(h, w, 2)``."""
-        return self._one(np.asarray(flow, np.float32), out_angles=True)
+        return self._rays(flow)
 
     def __call__(
         self, flow: NDArray[np.float32], fps: float
@@ -249,52 +199,22 @@ def _load_checkpoint(path: Path, identity: dict) -> tuple[list, list]:
     return list(dps), list(px)
 
 
-def _prefetch(items: Iterator, fn: Callable, depth: int = 2) -> Iterator:
-    """Yield ``fn(item)`` for each item, computed ahead in a background thread (decoding
-    and window extraction of frame t+1 overlap the flow of frame t). Exceptions raised
-    there are re-raised here; closing the generator stops the thread."""
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-    done = object()
-
-    def put(x) -> bool:
-        while not stop.is_set():
-            try:
-                q.put(x, timeout=0.1)
-                return True
-            except queue.Full:
-                continue
-        return False
-
-    def produce() -> None:
-        try:
-            for it in items:
-                if not put((fn(it), None)):
-                    break
-        except BaseException as e:  # noqa: BLE001 - handed to the consumer
-            put((None, e))
-        finally:
-            close = getattr(items, "close", None)
-            if close is not None:
-                close()
-            put((done, None))
-
-    th = threading.Thread(target=produce, name="vimsim-decode", daemon=True)
-    th.start()
-    try:
-        while True:
-            val, err = q.get()
-            if err is not None:
-                raise err
-            if val is done:
-                return
-            yield val
-    finally:
-        stop.set()
-        th.join()
+def check_output_dir(output: str | os.PathLike) -> Path:
+    """``output`` as a Path after checking that its directory exists and is writable
+    (InputError otherwise): called before any work, so a typo fails at once."""
+    out = Path(output)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise InputError(f"{out}: output directory {parent} does not exist or is not writable")
+    return out
 
 
-def _frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
+def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
+    """Video frames ``start <= i < end`` of ``--start``/``--end`` (seconds) for preprocess
+    (both modes): ``start = round(start_s * fps)``, ``end = round(end_s * fps)`` capped at
+    the video's frame count. InputError (naming ``src``) for a negative or non-finite
+    start, an end not after the start, a start past the end of the video, or fewer than
+    2 frames (flow needs a pair)."""
     fps = info.fps
     if not (start_s >= 0 and math.isfinite(start_s)):
         raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
@@ -360,12 +280,9 @@ def preprocess_video(
     if info.n_frames < 1:
         raise InputError(f"{src}: video stream has no frames")
     eye_w, eye_h = info.eye_size(layout)
-    start_f, end_f = _frame_range(info, float(start_s), end_s, src)
+    start_f, end_f = frame_range(info, float(start_s), end_s, src)
+    out = check_output_dir(output)
     backend = flow if isinstance(flow, FlowBackend) else make_backend(flow)
-    out = Path(output)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise InputError(f"{out}: output directory {parent} does not exist or is not writable")
     ckpt = checkpoint_path(out)
     identity = {
         "video": {
@@ -435,14 +352,15 @@ def preprocess_video(
     )
     last_ckpt = time.monotonic()
     prev_win: NDArray | None = None
-    windows = None
+    frames = windows = None
     row = first_row - 1
     pool = ThreadPoolExecutor(n_threads) if len(chunks) > 1 or not backend.thread_safe else None
     try:
         frames = iter_frames(
             video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
         )
-        windows = _prefetch(frames, lambda f: extractor(f).reshape(n_win, h, w))
+        # Decoding and window extraction of frame t+1 overlap the flow of frame t.
+        windows = prefetch((extractor(f).reshape(n_win, h, w) for f in frames), depth=2)
         for win in windows:
             if prev_win is None:
                 prev_win = win
@@ -492,6 +410,8 @@ def preprocess_video(
         bar.close()
         if windows is not None:
             windows.close()  # stops the decoding thread now, not when garbage-collected
+        if frames is not None:
+            frames.close()  # closes the video file
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
 

@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from simulator.errors import InputError
-from simulator.flow import DISFlow, FarnebackFlow, TorchFlow, make_backend
+from simulator.flow import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
+from simulator.geometry import perspective_rays
 
 
 def _texture(h: int = 128, w: int = 128, seed: int = 0) -> np.ndarray:
@@ -148,3 +149,38 @@ def test_torch_not_torchscript(tmp_path):
         TorchFlow(p, device="cpu")
     with pytest.raises(InputError, match="not found"):
         make_backend(f"torch:{tmp_path / 'missing.pt'}")
+
+
+# ------------------------------------------------------------------------ ray angles
+@pytest.mark.parametrize(("size", "fov"), [((40, 30), (107.0, 90.0)), ((33, 33), (60.0, 60.0))])
+def test_ray_angles_match_perspective_rays(size, fov):
+    """A flow of whole pixels lands on another pixel centre: the angle must equal the
+    angle between the two rays of geometry.perspective_rays (the one ray convention)."""
+    w, h = size
+    dirs, _ = perspective_rays(size, *fov)
+    rng = np.random.default_rng(3)
+    dx = rng.integers(-5, 6, (h, w))
+    dy = rng.integers(-5, 6, (h, w))
+    jj, ii = np.mgrid[0:h, 0:w]
+    tx, ty = np.clip(ii + dx, 0, w - 1), np.clip(jj + dy, 0, h - 1)
+    flow = np.stack([tx - ii, ty - jj], -1).astype(np.float32)
+    a, b = dirs.astype(float), dirs[ty, tx].astype(float)
+    want = np.arctan2(np.linalg.norm(np.cross(a, b), axis=-1), (a * b).sum(-1))
+    got = RayAngles(size, *fov)(flow)
+    assert got.shape == (h, w) and got.dtype == np.float32
+    # cv2.phase: relative error < 3e-4; float32 rays: ~1e-6 rad absolute.
+    assert np.allclose(got, want, rtol=3e-4, atol=2e-6)
+    assert not RayAngles(size, *fov)(np.zeros((2, h, w, 2), np.float32)).any()
+
+
+def test_ray_angles_stride_and_bad_input():
+    r1 = RayAngles((64, 64), 100.0)
+    r2 = RayAngles((64, 64), 100.0, stride=2)
+    flow = np.random.default_rng(0).normal(0, 3, (3, 64, 64, 2)).astype(np.float32)
+    a1, a2 = r1(flow), r2(flow)
+    assert a2.shape == (3, 32, 32)
+    assert np.array_equal(a2, a1[:, 1::2, 1::2])
+    with pytest.raises(ValueError, match="flow must be"):
+        r1(np.zeros((64, 32, 2), np.float32))
+    with pytest.raises(InputError, match="hfov must be degrees"):
+        RayAngles((8, 8), 180.0)
