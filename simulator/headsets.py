@@ -33,6 +33,7 @@ import math
 from dataclasses import dataclass
 
 from simulator.errors import InputError
+from simulator.geometry import check_fov
 
 __all__ = ["HEADSETS", "Headset", "get_headset", "resolve_fov"]
 
@@ -153,7 +154,8 @@ def resolve_fov(
     """Per-eye ``(hfov_deg, vfov_deg)`` from a headset name or explicit FOVs (CLI helper).
 
     At most one of ``headset``, ``fov_deg`` (square) and ``hfov_deg``/``vfov_deg`` may be
-    given; ``vfov_deg`` defaults to ``hfov_deg``; nothing given -> ``default``.
+    given; ``vfov_deg`` defaults to ``hfov_deg``; nothing given -> ``default``. Explicit
+    FOVs follow :func:`simulator.geometry.check_fov` (the one FOV rule).
     """
     given = [
         k
@@ -175,8 +177,4 @@ def resolve_fov(
         return default
     if hfov_deg is None:
         raise InputError("--vfov needs --hfov")
-    vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
-    for n, v in (("hfov", hfov_deg), ("vfov", vfov_deg)):
-        if not (0.0 < float(v) < 180.0) or not math.isfinite(float(v)):
-            raise InputError(f"{n} must be degrees in (0, 180); got {v}")
-    return float(hfov_deg), float(vfov_deg)
+    return check_fov(hfov_deg, vfov_deg)

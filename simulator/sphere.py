@@ -40,9 +40,7 @@ from __future__ import annotations
 
 import functools
 import math
-import queue
-import threading
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, replace
 
 import cv2
@@ -52,12 +50,14 @@ from scipy import sparse
 from scipy.special import ellipe
 
 from simulator.errors import InputError
+from simulator.flow import RayAngles
 from simulator.geometry import (
     WindowGrid,
-    _equirect_remap_coords,
-    _pad_equirect,
+    check_fov,
     dir_to_lonlat,
+    equirect_remap_coords,
     head_rotation,
+    pad_equirect,
     perspective_rays,
 )
 
@@ -238,12 +238,14 @@ class Frustum:
 
     @classmethod
     def symmetric(cls, hfov_deg: float, vfov_deg: float | None = None) -> Frustum:
-        """A centred ``hfov_deg x vfov_deg`` view (exact FOVs, degrees in (0, 179])."""
-        vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
-        for name, v in (("hfov", hfov_deg), ("vfov", vfov_deg)):
-            if not (0.0 < float(v) <= 179.0) or not math.isfinite(float(v)):
-                raise InputError(f"{name} must be degrees in (0, 179]; got {v}")
-        return cls(hfov_deg / 2.0, hfov_deg / 2.0, vfov_deg / 2.0, vfov_deg / 2.0)
+        """A centred ``hfov_deg x vfov_deg`` view: exact FOVs in degrees, checked by
+        :func:`simulator.geometry.check_fov` (the one FOV rule), and at most 179 deg (the
+        half-angle limit of a frustum)."""
+        h, v = check_fov(hfov_deg, vfov_deg, source="viewport")
+        for name, f in (("hfov", h), ("vfov", v)):
+            if f > 179.0:
+                raise InputError(f"viewport: {name} must be at most 179 degrees; got {f:g}")
+        return cls(h / 2.0, h / 2.0, v / 2.0, v / 2.0)
 
     @classmethod
     def from_headset(cls, name: str, eye: str = "left") -> Frustum:
@@ -303,24 +305,18 @@ class _TileGeometry:
             [a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0
         ).as_matrix()  # (6, 3, 3)
         world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (6, s, s, 3)
-        mx, my = _equirect_remap_coords(world.reshape(len(_CUBE) * s, s, 3), *self.small_size)
+        mx, my = equirect_remap_coords(world.reshape(len(_CUBE) * s, s, 3), *self.small_size)
         self.m1, self.m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
         # Flow is evaluated on every ``stride``-th pixel (DIS presets with finest scale 2
         # compute flow at 1/4 resolution and upsample it: stride 2 loses nothing).
         st = self.stride = stride
         sel = np.arange(st // 2, s, st)
-        self.sel = slice(st // 2, None, st)
-        # Tile-plane coordinates (tan units) of the evaluated pixel centres, x right, y up.
-        u = ((np.arange(s) + 0.5) / s * 2.0 - 1.0) * t
-        uu, vv = np.meshgrid(u[sel], -u[sel])
-        self.u0 = uu.astype(np.float32)
-        self.v0 = vv.astype(np.float32)
-        self.r2 = (1.0 + uu * uu + vv * vv).astype(np.float32)
-        self.u0f, self.v0f, self.r2f = (a.reshape(1, -1) for a in (self.u0, self.v0, self.r2))
-        self.px_to_tan = np.float32(2.0 * t / s)
+        # Per-pixel ray angles of the tile's flow (the formula paper mode uses), on the
+        # evaluated pixels; their tile-plane coordinates u0, v0 (tan units, x right, y up).
+        self.rays = RayAngles((s, s), fov, fov, stride=st)
         # Blend weight: 1 inside the cube face each tile owns (max(|u|,|v|) <= 1), falling
         # smoothly to 0 at the tile border where flow is least reliable.
-        m = np.maximum(np.abs(uu), np.abs(vv))
+        m = np.maximum(np.abs(self.rays.u0), np.abs(self.rays.v0)).astype(np.float64)
         x = np.clip((t - m) / (t - 1.0), 0.0, 1.0)
         blend = x * x * (3.0 - 2.0 * x)
         sub_world = world[:, sel][:, :, sel].reshape(-1, 3)
@@ -339,25 +335,14 @@ class _TileGeometry:
         for _ in range(self.level):
             f = cv2.pyrDown(f)
         out = cv2.remap(
-            _pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
+            pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
         )
         return out.reshape(self.n_tiles, self.size, self.size)
 
     def angles(self, flow: NDArray[np.float32]) -> NDArray[np.float32]:
         """Angle (radians) between each evaluated pixel's ray and its flow target's ray;
         flow is ``(N, s, s, 2)`` pixels (x right, y down) -> ``(N, s', s')``."""
-        if self.stride > 1:
-            flow = flow[:, self.sel, self.sel]
-        du = np.ascontiguousarray(flow[..., 0]) * self.px_to_tan
-        dv = np.ascontiguousarray(flow[..., 1]) * -self.px_to_tan
-        # a = (u0, v0, 1), b = a + (du, dv, 0): |a x b| and a . b in closed form; OpenCV's
-        # vectorised magnitude/phase (relative error < 3e-4), as the paper-mode reducer.
-        n = du.shape[0]
-        du2, dv2 = du.reshape(n, -1), dv.reshape(n, -1)
-        cz = self.u0f * dv2 - self.v0f * du2
-        cross = cv2.magnitude(cv2.magnitude(du2, dv2), cz)
-        dot = self.r2f + self.u0f * du2 + self.v0f * dv2
-        return cv2.phase(dot, cross).reshape(du.shape)
+        return self.rays(flow)
 
 
 def _splat_matrix(idx: NDArray, w: NDArray, cells: CellGrid, dirs: NDArray) -> sparse.csr_matrix:
@@ -454,7 +439,7 @@ class FieldEstimator:
     def field(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> NDArray[np.float32]:
         """Angular-speed field ``(n_lat, n_lon)`` float32 in deg/s of the flow prev -> cur."""
         fl = self._flow(prev_tiles, tiles)
-        ang = self._geo.angles(fl)
+        ang, _ = self._geo.rays.into_scratch(np.asarray(fl, np.float32))
         f = self._geo.splat @ ang.reshape(-1)
         return (
             (f * np.float32(math.degrees(1.0) * self.fps))
@@ -499,42 +484,6 @@ def field_from_frames(
     return np.stack([out[0], *out])
 
 
-def _prefetch(it: Iterator, fn: Callable, depth: int = 4) -> Iterator:
-    """Run ``fn(item)`` for the items of ``it`` in a background thread (decode and tile
-    extraction release the GIL), yielding results in order; errors are re-raised here."""
-    q: queue.Queue = queue.Queue(maxsize=depth)
-    stop = threading.Event()
-    END = object()
-
-    def work() -> None:
-        try:
-            for x in it:
-                if stop.is_set():
-                    return
-                q.put(fn(x))
-            q.put(END)
-        except BaseException as e:  # noqa: BLE001 - handed to the consumer
-            q.put(e)
-
-    th = threading.Thread(target=work, daemon=True)
-    th.start()
-    try:
-        while True:
-            x = q.get()
-            if x is END:
-                return
-            if isinstance(x, BaseException):
-                raise x
-            yield x
-    finally:
-        stop.set()
-        while th.is_alive():
-            try:
-                q.get_nowait()
-            except queue.Empty:
-                th.join(0.01)
-
-
 def field_from_video(
     path,
     config: SphereConfig = SphereConfig(),
@@ -551,7 +500,7 @@ def field_from_video(
     Decodes the Y plane only; decoding and tile extraction run in a background thread
     while flow and splatting run in the caller's. Frames ``start <= k < end``.
     """
-    from simulator.video import iter_frames, probe
+    from simulator.video import iter_frames, prefetch, probe
 
     info = probe(path)
     if not info.is_video:
@@ -559,16 +508,21 @@ def field_from_video(
     w, h = info.eye_size(layout)
     est = FieldEstimator((w, h), info.fps, config, flow=flow)
     frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
+    tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     out: list[NDArray[np.float32]] = []
     prev = None
     n = 0
-    for t in _prefetch(frames, est.tiles):
-        if prev is not None:
-            out.append(est.field(prev, t))
-        prev = t
-        n += 1
-        if progress is not None:
-            progress(n)
+    try:
+        for t in tiles:
+            if prev is not None:
+                out.append(est.field(prev, t))
+            prev = t
+            n += 1
+            if progress is not None:
+                progress(n)
+    finally:
+        tiles.close()  # stops the decoding thread now, not when garbage-collected
+        frames.close()  # closes the video file
     if not out:
         raise InputError(f"{path}: sphere mode needs at least 2 frames; got {n}")
     return np.stack([out[0], *out]), info
@@ -943,12 +897,16 @@ def preprocess_sphere(
     ``field_dps`` (T, n_lat, n_lon) and ``meta["field"]`` (:func:`field_meta`).
     No checkpoints: sphere mode runs at tens of frames per second.
 
+    Every check (video, range, output directory, flow backend) runs before any work; the
+    backend is built once (a ``torch:MODEL.pt`` is loaded and validated once).
+
     Returns the output Path. InputError on bad input (nothing written).
     """
     import sys
     from pathlib import Path
 
     from simulator.gridfile import content_hash, save_grid
+    from simulator.preprocess import check_output_dir, frame_range
     from simulator.video import probe
 
     src = str(video)
@@ -961,18 +919,9 @@ def preprocess_sphere(
     if field_dtype not in ("float16", "float32"):
         raise InputError(f"field dtype must be float16 or float32; got {field_dtype!r}")
     fps = info.fps
-    if not (start_s >= 0 and math.isfinite(start_s)):
-        raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
-    start_f = round(start_s * fps)
-    end_f = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
-    if end_s is not None and not (end_s > start_s):
-        raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
-    if end_f - start_f < 2:
-        raise InputError(
-            f"{src}: {max(0, end_f - start_f)} frame(s) in the chosen range; flow needs at least 2 "
-            f"(video: {info.n_frames} frames at {fps:g} fps)"
-        )
-    est_desc = _backend(flow)[2] if isinstance(flow, str) else None
+    start_f, end_f = frame_range(info, float(start_s), end_s, src)
+    out = check_output_dir(output)
+    backend, default_stride, desc = _backend(flow)
     from tqdm import tqdm
 
     bar = tqdm(
@@ -998,7 +947,7 @@ def preprocess_sphere(
             eye=eye,
             start=start_f,
             end=end_f,
-            flow=flow,
+            flow=backend,
             progress=tick,
         )
     finally:
@@ -1013,7 +962,6 @@ def preprocess_sphere(
             f"vimsim preprocess: warning: {src}: expected {end_f - start_f} frames, decoded {T}",
             file=sys.stderr,
         )
-    desc = est_desc or _backend(flow)[2]
     meta = {
         "method": "sphere",
         "fps": fps,
@@ -1032,7 +980,7 @@ def preprocess_sphere(
         },
         "frame0": "repeats frame 1",
         "field": field_meta(
-            replace(config, stride=config.stride or _backend(flow)[1]), field_dtype
+            replace(config, stride=config.stride or default_stride), field_dtype
         ),
         "video": {
             "path": str(Path(video).resolve()),
@@ -1044,6 +992,5 @@ def preprocess_sphere(
             "content_hash": content_hash(video),
         },
     }
-    out = Path(output)
     save_grid(out, dps, px, grid, meta, field_dps=field.astype(field_dtype))
     return out

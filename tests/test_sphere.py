@@ -258,6 +258,81 @@ def test_preprocess_sphere_writes_a_grid_file(tmp_path):
     assert not (tmp_path / "h.npz").exists()
 
 
+def _rot_video(path, n: int = 3):
+    from simulator.video import VideoWriter
+
+    frames, _ = _rotating_frames(n, 30.0, (0, 1, 0))
+    with VideoWriter(path, 30.0, (512, 256)) as vw:
+        for fr in frames:
+            vw.write(np.repeat(fr[..., None], 3, axis=2))
+    return path
+
+
+def test_preprocess_sphere_checks_output_dir_before_any_work(tmp_path, monkeypatch):
+    vid = _rot_video(tmp_path / "rot.mp4")
+
+    def no_work(*a, **k):
+        raise AssertionError("field computed before the output directory was checked")
+
+    monkeypatch.setattr(S, "field_from_video", no_work)
+    out = tmp_path / "missing" / "g.npz"
+    with pytest.raises(InputError, match="output directory .* does not exist"):
+        S.preprocess_sphere(vid, out, grid=grid_preset("default"), progress=False)
+
+
+def test_preprocess_sphere_frame_range_is_paper_modes(tmp_path):
+    """One --start/--end rule for both methods: a start past the end says so."""
+    vid = _rot_video(tmp_path / "rot.mp4")
+    grid = grid_preset("default")
+    with pytest.raises(InputError, match="past the end of the video"):
+        S.preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=5.0, progress=False)
+    with pytest.raises(InputError, match="--start must be seconds >= 0"):
+        S.preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=-1.0, progress=False)
+    assert not (tmp_path / "g.npz").exists()
+
+
+def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
+    """A torch:MODEL.pt is loaded and validated once, not once per use."""
+    import simulator.flow as F
+
+    vid = _rot_video(tmp_path / "rot.mp4")
+    calls = []
+    real = F.make_backend
+
+    def counting(spec):
+        calls.append(spec)
+        return real(spec)
+
+    monkeypatch.setattr(F, "make_backend", counting)
+    out = S.preprocess_sphere(
+        vid,
+        tmp_path / "g.npz",
+        grid=grid_preset("paper-198"),
+        config=S.SphereConfig(tile_size=96),
+        flow="dis",
+        progress=False,
+    )
+    assert calls == ["dis"]
+    meta = load_grid(out).meta
+    assert meta["flow"]["method"] == "dis" and meta["field"]["tiles"]["stride"] == 2
+
+
+@pytest.mark.parametrize(
+    ("fov", "match"),
+    [
+        ((float("nan"), None), r"viewport: hfov must be degrees in \(0, 180\)"),
+        ((90.0, float("inf")), r"viewport: vfov must be degrees in \(0, 180\)"),
+        (("wide", None), r"viewport: hfov must be degrees in \(0, 180\)"),
+        ((180.0, None), r"viewport: hfov must be degrees in \(0, 180\)"),
+        ((179.5, 90.0), "viewport: hfov must be at most 179 degrees"),
+    ],
+)
+def test_frustum_symmetric_uses_the_one_fov_rule(fov, match):
+    with pytest.raises(InputError, match=match):
+        S.Frustum.symmetric(*fov)
+    assert S.Frustum.symmetric(179.0).hfov_deg == 179.0
+
+
 # ---------------------------------------------------------------------------- headsets
 def test_headset_profiles():
     assert set(HEADSETS) >= {"vive-pro-eye", "vive-focus-3", "pimax-crystal", "quest-2"}
@@ -284,6 +359,11 @@ def test_headset_bad_input_and_resolve_fov():
         resolve_fov(headset="quest-2", fov_deg=90)
     with pytest.raises(InputError, match="hfov"):
         resolve_fov(hfov_deg=-5)
+    # The one FOV rule (geometry.check_fov): NaN and non-numbers are InputErrors too.
+    with pytest.raises(InputError, match=r"hfov must be degrees in \(0, 180\); got nan"):
+        resolve_fov(fov_deg=float("nan"))
+    with pytest.raises(InputError, match=r"hfov must be degrees in \(0, 180\); got wide"):
+        resolve_fov(hfov_deg="wide")
 
 
 # ------------------------------------------- integration (once the issue 7 patches land)
