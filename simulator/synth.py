@@ -67,11 +67,12 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output
 from simulator.geometry import (
     WindowGrid,
-    dir_to_lonlat,
+    check_equirect_aspect,
     equirect_pixel_lonlat,
+    equirect_remap_coords,
     head_rotation,
     lonlat_to_dir,
-    lonlat_to_equirect_xy,
+    pad_equirect,
     perspective_rays,
 )
 
@@ -98,6 +99,9 @@ SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
 TRUTH_FORMAT = "vimsim-synth-truth"
 TRUTH_VERSION = 1
 _BUNDLED = "panorama.jpg"
+#: Upper bounds of a clip (a typo such as ``--fps 1e9`` fails at once, not after hours).
+MAX_FPS = 240.0
+MAX_FRAMES = 100_000
 _G = 9.81  # m/s^2, for the coaster's banking
 
 
@@ -247,11 +251,13 @@ class SynthConfig:
     Parameters
     ----------
     scene : ``"rotate"``, ``"forward"`` or ``"coaster"``
-    seconds : float, clip length in seconds (> 0; at least 2 frames)
-    fps : float, frames per second (> 0)
+    seconds : float, clip length in seconds (> 0; at least 2, at most ``MAX_FRAMES``
+        = 100,000 frames)
+    fps : float, frames per second, in (0, ``MAX_FPS`` = 240]
     size : (W, H), pixels of one eye's equirect frame; ``W = 2 H``, both even
     layout : ``"mono"`` or ``"top-bottom"`` (left eye on top; the frame is W x 2H)
-    texture : path of an image, or None for the bundled panorama
+    texture : path of an image (rotate: a 2:1 equirect panorama), or None for the
+        bundled panorama
     seed : int, varies the texture placement on the walls
     axis : (x, y, z), rotate: rotation axis in the camera frame (+y up = a yaw pan)
     omega_dps : float, rotate: rotation rate in deg/s (> 0); the panorama turns
@@ -288,6 +294,14 @@ class SynthConfig:
             math.isfinite(self.speed_mps) and self.speed_mps > 0
         ):
             raise InputError(f"speed must be a finite number > 0 m/s; got {self.speed_mps!r}")
+        if self.fps > MAX_FPS:
+            raise InputError(f"fps must be at most {MAX_FPS:g} frames/s; got {self.fps:g}")
+        if self.seconds * self.fps > MAX_FRAMES + 0.5:
+            raise InputError(
+                f"a clip of {self.seconds:g} s at {self.fps:g} fps has "
+                f"{self.seconds * self.fps:.4g} frames; at most {MAX_FRAMES:,} "
+                "(lower --seconds or --fps)"
+            )
         if self.n_frames < 2:
             raise InputError(
                 f"a clip of {self.seconds} s at {self.fps} fps has {self.n_frames} frame(s); flow needs at least 2"
@@ -417,10 +431,12 @@ class SynthScene:
         if cfg.scene == "rotate":
             self.box = None
             th, tw = texture.shape[:2]
+            # The panorama must be an equirect image (resizing a 16:9 photo would distort it).
+            check_equirect_aspect(tw, th, source=f"{texture_name}: rotate texture")
             if (tw, th) != (W, H):
                 interp = cv2.INTER_AREA if tw > W else cv2.INTER_CUBIC
                 texture = cv2.resize(texture, (W, H), interpolation=interp)
-            self._pano_padded = self._pad_equirect(texture)
+            self._pano_padded = pad_equirect(texture)
             a = np.asarray(cfg.axis) / np.linalg.norm(cfg.axis)
             self._axis = a
         else:
@@ -542,19 +558,6 @@ class SynthScene:
         )
 
     # -- rendering -------------------------------------------------------------------
-    _PAD = 4
-
-    @classmethod
-    def _pad_equirect(cls, img: NDArray) -> NDArray:
-        """Pad by ``_PAD`` pixels for bicubic sampling: columns wrap at the seam, rows
-        beyond a pole continue on the meridian 180 deg away."""
-        H, W = img.shape[:2]
-        p = cls._PAD
-        top = np.roll(img[p - 1 :: -1], W // 2, axis=1)
-        bottom = np.roll(img[: H - p - 1 : -1], W // 2, axis=1)
-        tall = np.concatenate([top, img, bottom], axis=0)
-        return np.ascontiguousarray(np.concatenate([tall[:, -p:], tall, tall[:, :p]], axis=1))
-
     @functools.cached_property
     def _cam_dirs(self) -> NDArray[np.float64]:
         W, H = self.cfg.size
@@ -568,11 +571,8 @@ class SynthScene:
         if self.box is None:
             # Output pixel d (camera) shows the panorama at world direction R d.
             W, H = self.cfg.size
-            lon, lat = dir_to_lonlat(R.apply(self._cam_dirs.reshape(-1, 3)))
-            x, y = lonlat_to_equirect_xy(lon, lat, W, H)
-            p = self._PAD
-            mx = (x - 0.5 + p).reshape(H, W).astype(np.float32)
-            my = (y - 0.5 + p).reshape(H, W).astype(np.float32)
+            world = R.apply(self._cam_dirs.reshape(-1, 3)).reshape(H, W, 3)
+            mx, my = equirect_remap_coords(world, W, H)
             return cv2.remap(
                 self._pano_padded, mx, my, cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE
             )
@@ -724,6 +724,7 @@ def synthesize(
 ) -> tuple[Path, Path]:
     """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
 
+    ``crf`` is the x264 constant rate factor, an integer 0..51 (lower is better).
     Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
     written after the video, so a truth file implies a complete video.
     """
@@ -732,6 +733,8 @@ def synthesize(
     out = Path(out)
     if out.suffix.lower() != ".mp4":
         raise InputError(f"{out}: output must be an .mp4 file")
+    if isinstance(crf, bool) or not isinstance(crf, (int, np.integer)) or not 0 <= crf <= 51:
+        raise InputError(f"x264 crf must be an integer 0..51 (lower is better); got {crf!r}")
     scene = make_scene(cfg)
     W, H = cfg.size
     n = cfg.n_frames

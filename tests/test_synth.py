@@ -186,6 +186,11 @@ def test_custom_texture_is_used(tmp_path):
         (["--scene", "forward", "--speed", "-3"], "--speed"),
         (["--scene", "rotate", "--axis", "0,0,0"], "axis"),
         (["--scene", "rotate", "--truth-cell", "7"], "divide 180"),
+        (["--scene", "rotate", "--fps", "1e9", "--seconds", "0.3"], "at most 240"),
+        (["--scene", "rotate", "--fps", "240", "--seconds", "1e6"], "at most 100,000"),
+        (["--scene", "rotate", "--seconds", "1e308", "--fps", "240"], "at most 100,000"),
+        (["--scene", "rotate", "--crf", "99"], "integer 0..51"),
+        (["--scene", "rotate", "--crf", "-1"], "integer 0..51"),
     ],
 )
 def test_bad_input_one_line_exit_2(tmp_path, capsys, args, needle):
@@ -210,6 +215,30 @@ def test_texture_not_an_image(tmp_path, capsys):
     assert not out.exists()
     rc = main(["synth", str(out), "--scene", "rotate", "--texture", str(tmp_path / "missing.jpg")])
     assert rc == 2 and "not found" in capsys.readouterr().err
+
+
+def test_rotate_texture_must_be_2_to_1(tmp_path, capsys):
+    from PIL import Image
+
+    tex = tmp_path / "photo.png"
+    Image.fromarray(np.zeros((216, 384, 3), np.uint8)).save(tex)  # 16:9, like 3840x2160
+    out = tmp_path / "x.mp4"
+    rc = main(["synth", str(out), "--scene", "rotate", "--texture", str(tex), "--seconds", "0.1"])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert f"{tex}: rotate texture" in err and "2:1" in err and "384x216" in err
+    assert len(err.strip().splitlines()) == 1
+    assert not out.exists() and not truth_path_for(out).exists()
+    # The box scenes tile any texture.
+    make_scene(SynthConfig("forward", seconds=0.1, size=(64, 32), texture=str(tex)))
+
+
+def test_synthesize_refuses_bad_crf(tmp_path):
+    cfg = SynthConfig("rotate", seconds=0.1, size=(64, 32))
+    for crf in (52, -1, 2.5, True):
+        with pytest.raises(InputError, match="crf must be an integer 0..51"):
+            synthesize(cfg, tmp_path / "x.mp4", crf=crf)
+    assert not (tmp_path / "x.mp4").exists()
 
 
 def test_argparse_errors_exit_2(tmp_path):

@@ -25,6 +25,19 @@ def _axis(text: str) -> tuple[float, float, float]:
     return parts[0], parts[1], parts[2]
 
 
+def _crf(text: str) -> int:
+    """Parse an x264 CRF: an integer 0..51 (e.g. ``16``)."""
+    try:
+        v = int(text)
+    except ValueError:
+        v = -1
+    if not 0 <= v <= 51:
+        raise argparse.ArgumentTypeError(
+            f"expected an x264 CRF, an integer 0..51, e.g. 16; got {text!r}"
+        )
+    return v
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``synth`` parser."""
     p = subparsers.add_parser(
@@ -46,7 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--seconds", type=positive_float, default=3.0, help="clip length, seconds (default 3)"
     )
     p.add_argument(
-        "--fps", type=positive_float, default=30.0, help="frames per second (default 30)"
+        "--fps",
+        type=positive_float,
+        default=30.0,
+        help="frames per second, at most 240 (default 30); seconds x fps <= 100,000 frames",
     )
     p.add_argument(
         "--size",
@@ -65,7 +81,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--texture",
         metavar="IMG",
         default=None,
-        help="texture image: the panorama for rotate (2:1 equirect), tiled on the walls "
+        help="texture image: the panorama for rotate (2:1 equirect, checked), tiled on the walls "
         "for forward/coaster (default: the bundled procedural panorama)",
     )
     p.add_argument(
@@ -101,7 +117,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="cell size of the truth grid, degrees dividing 180 (default 4)",
     )
     p.add_argument(
-        "--crf", type=nonneg_int, default=16, help="x264 quality, lower is better (default 16)"
+        "--crf",
+        type=_crf,
+        default=16,
+        help="x264 quality (CRF) 0..51, lower is better (default 16)",
     )
     p.set_defaults(func=run)
 
@@ -123,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         speed_mps=args.speed,
         truth_cell_deg=args.truth_cell,
     )
-    video, truth = synthesize(cfg, args.output, crf=min(args.crf, 51), progress=True)
+    video, truth = synthesize(cfg, args.output, crf=args.crf, progress=True)
     w, h = cfg.size
     print(
         f"wrote {video} ({cfg.scene}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
