@@ -979,9 +979,7 @@ def preprocess_sphere(
             "field_dps": "deg/s of visual angle",
         },
         "frame0": "repeats frame 1",
-        "field": field_meta(
-            replace(config, stride=config.stride or default_stride), field_dtype
-        ),
+        "field": field_meta(replace(config, stride=config.stride or default_stride), field_dtype),
         "video": {
             "path": str(Path(video).resolve()),
             "width": info.width,
