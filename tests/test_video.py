@@ -119,11 +119,10 @@ def test_prefetch_in_order_and_closes_source():
 
 def test_prefetch_reraises_producer_error_at_its_item():
     log: list = []
-    got = []
+    got = prefetch(_source(10, log, fail_at=4))
+    assert [next(got) for _ in range(4)] == [0, 1, 2, 3]
     with pytest.raises(InputError, match="bad item 4"):
-        for x in prefetch(_source(10, log, fail_at=4)):
-            got.append(x)
-    assert got == [0, 1, 2, 3]
+        next(got)
     assert log[-1] == "closed"
 
 
