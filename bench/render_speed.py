@@ -1,6 +1,6 @@
 """Throughput of ``vimsim render`` beside ffmpeg v360 driven per frame by ``sendcmd``.
 
-Usage: .venv/bin/python bench/render_speed.py [--frames 48] [--eye 1440] [--quick]
+Usage: .venv/bin/python bench/render_speed.py [--frames 48] [--eye 1440] [--repeat 3] [--quick]
 
 Same run, same 2048x1024 H.264 video (petra.jpg panning, 30 fps) and the same moving head
 path (yaw sweep + pitch sine), wall clock, decode and encode included on both sides:
@@ -95,9 +95,12 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=48, help="video frames (default 48)")
     ap.add_argument("--eye", type=int, default=1440, help="eye width = height, px (default 1440)")
-    ap.add_argument("--quick", action="store_true", help="16 frames")
+    ap.add_argument("--quick", action="store_true", help="16 frames, 1 round")
+    ap.add_argument("--repeat", type=int, default=3, help="rounds (default 3; median reported)")
     a = ap.parse_args(argv)
     n = 16 if a.quick else a.frames
+    if a.quick:
+        a.repeat = 1
     fps = 30
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)
@@ -110,33 +113,57 @@ def main(argv=None) -> int:
         (d / "ours").mkdir()
         (d / "ours_tb").mkdir()
         # Warm-up (shader compilation, grain mask) is part of a real run: keep it in.
-        t_ours, c_ours, tim = run_ours(ctx, src, angles, a.eye, d / "ours")
-        t_tb, c_tb, tim_tb = run_ours(ctx, src_tb, angles, a.eye, d / "ours_tb", "top-bottom")
-        t_v, c_v = run_v360(src, angles, fps, a.eye, d / "v360.mp4")
-        for p in (
-            d / "ours" / "left.mp4",
-            d / "ours" / "right.mp4",
-            d / "ours_tb" / "right.mp4",
-            d / "v360.mp4",
-        ):
-            info = video.probe(p)
-            assert info.n_frames == n, f"{p}: {info.n_frames} frames, expected {n}"
-    f_v = n / t_v
+        # The machine is shared and one run swings by +-10%: a.repeat rounds, each one of
+        # every side back to back, and the median per side and of the per-round ratios.
+        runs = []
+        for _ in range(a.repeat):
+            t_ours, c_ours, tim = run_ours(ctx, src, angles, a.eye, d / "ours")
+            t_tb, c_tb, tim_tb = run_ours(ctx, src_tb, angles, a.eye, d / "ours_tb", "top-bottom")
+            t_v, c_v = run_v360(src, angles, fps, a.eye, d / "v360.mp4")
+            for p in (
+                d / "ours" / "left.mp4",
+                d / "ours" / "right.mp4",
+                d / "ours_tb" / "right.mp4",
+                d / "v360.mp4",
+            ):
+                info = video.probe(p)
+                assert info.n_frames == n, f"{p}: {info.n_frames} frames, expected {n}"
+            runs.append(
+                {
+                    "v360": (t_v, c_v, None),
+                    "mono": (t_ours, c_ours, tim),
+                    "tb": (t_tb, c_tb, tim_tb),
+                }
+            )
     print(
-        f"{n} frames of a 2048x1024 video, eye {a.eye}x{a.eye} at 107 deg, moving head; load {os.getloadavg()[0]:.1f}"
+        f"{n} frames of a 2048x1024 video, eye {a.eye}x{a.eye} at 107 deg, moving head; "
+        f"{a.repeat} rounds; load {os.getloadavg()[0]:.1f}"
     )
+
+    def med(key, k):
+        return float(np.median([r[key][k] for r in runs]))
+
+    t_v, c_v = med("v360", 0), med("v360", 1)
+    f_v = n / t_v
     print(f"  v360 (1 eye, sendcmd, x264 veryfast):         {f_v:6.2f} frames/s  ({t_v:6.1f} s wall, {c_v:6.1f} s CPU)"
           f"  (anchor {ANCHOR_V360_FPS} fps, ratio {f_v / ANCHOR_V360_FPS:.2f})")  # fmt: skip
-    for label, t, c, tm in (
-        ("ours, mono video (2 eyes = 1 render + copy)", t_ours, c_ours, tim),
-        ("ours, top-bottom stereo video (2 renders)  ", t_tb, c_tb, tim_tb),
+    for label, key in (
+        ("ours, mono video (2 eyes = 1 render + copy)", "mono"),
+        ("ours, top-bottom stereo video (2 renders)  ", "tb"),
     ):
-        f = n / t
-        ratio = f / f_v
-        print(f"  {label}: {f:6.2f} frames/s  ({t:6.1f} s wall, {c:6.1f} s CPU); ratio to v360 {ratio:.2f} "
+        t, c = med(key, 0), med(key, 1)
+        ratios = [r["v360"][0] / r[key][0] for r in runs]
+        cratios = [r["v360"][1] / r[key][1] for r in runs]
+        ratio = float(np.median(ratios))
+        print(f"  {label}: {n / t:6.2f} frames/s  ({t:6.1f} s wall, {c:6.1f} s CPU); ratio to v360 {ratio:.2f} "
               f"(goal >= {GOAL_RATIO:g}: {'met' if ratio >= GOAL_RATIO else 'NOT met'}); "
-              f"CPU-time ratio {c_v / c:.2f}")  # fmt: skip
-        print("      stage seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in tm.items()))
+              f"CPU-time ratio {float(np.median(cratios)):.2f}; per round "
+              + " ".join(f"{x:.2f}" for x in ratios))  # fmt: skip
+        tm = runs[int(np.argsort([r[key][0] for r in runs])[len(runs) // 2])][key][2]
+        print(
+            "      stage seconds (median round): "
+            + ", ".join(f"{k} {v:.1f}" for k, v in tm.items())
+        )
     return 0
 
 
