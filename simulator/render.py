@@ -583,46 +583,6 @@ class _Worker:
             raise self.error
 
 
-def _prefetch(it, maxsize: int = 3):
-    """Iterate ``it`` in a background thread (decoding overlaps rendering)."""
-    import queue
-    import threading
-
-    q: queue.Queue = queue.Queue(maxsize=maxsize)
-    done = object()
-    err: list[BaseException] = []
-    stop = threading.Event()
-
-    def run() -> None:
-        try:
-            for x in it:
-                if stop.is_set():
-                    return
-                q.put(np.array(x))  # decoder buffers are reused: copy
-        except BaseException as e:  # noqa: BLE001 - re-raised in the consumer
-            err.append(e)
-        finally:
-            q.put(done)
-
-    t = threading.Thread(target=run, name="decode", daemon=True)
-    t.start()
-    try:
-        while True:
-            x = q.get()
-            if x is done:
-                if err:
-                    raise err[0]
-                return
-            yield x
-    finally:
-        stop.set()
-        while t.is_alive():  # unblock a producer waiting on a full queue
-            try:
-                q.get_nowait()
-            except queue.Empty:
-                t.join(0.05)
-
-
 def render_video(
     ctx,
     video_path: str,
@@ -670,7 +630,7 @@ def render_video(
     import time
 
     from simulator.geometry import split_eye
-    from simulator.video import VideoWriter, iter_frames, probe
+    from simulator.video import VideoWriter, iter_frames, prefetch, probe
 
     info = probe(video_path)
     fps = float(fps or info.fps)
@@ -703,7 +663,15 @@ def render_video(
             try:
                 from tqdm import tqdm
 
-                frames = _prefetch(iter_frames(video_path, layout="mono"))
+                # Decoding overlaps rendering; decoder buffers are reused, so copy there.
+                frames = stack.enter_context(
+                    contextlib.closing(
+                        prefetch(
+                            (np.array(f) for f in iter_frames(video_path, layout="mono")),
+                            depth=3,
+                        )
+                    )
+                )
                 bar = tqdm(
                     total=total, unit="frame", disable=not progress, desc="render", leave=False
                 )
