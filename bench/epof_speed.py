@@ -36,7 +36,9 @@ def main() -> int:
     pof = rng.uniform(1, 100, (T, *g.shape)).astype(np.float32)
     t0 = time.perf_counter()
     vo = viewport_overlaps(g, 107.0, 107.0)
-    print(f"table build (default grid, 107 deg): {time.perf_counter() - t0:.2f} s, {vo.table.nbytes / 1e6:.1f} MB")
+    print(
+        f"table build (default grid, 107 deg): {time.perf_counter() - t0:.2f} s, {vo.table.nbytes / 1e6:.1f} MB"
+    )
     ts = []
     for i in range(5000):
         y, p, r = (i * 7.3) % 360 - 180, (i * 3.1) % 180 - 90, (i * 1.9) % 60 - 30
@@ -65,8 +67,12 @@ def main() -> int:
     qps = Q / (time.perf_counter() - t1)
     print(f"single query (ViewportOverlaps.epof): median {single:.1f} us = {single / FRAME_BUDGET_US:.2%} of the "
           f"{FRAME_BUDGET_US / 1000:.1f} ms 90 Hz frame budget; target {SINGLE_TARGET_US:.0f} us, ratio {single / SINGLE_TARGET_US:.2f}")  # fmt: skip
-    print(f"single query (epof_from_grid):       median {single2:.1f} us, ratio to target {single2 / SINGLE_TARGET_US:.2f}")
-    print(f"batch: {qps:,.0f} queries/s ({1e6 / qps:.2f} us each); target {BATCH_TARGET:,.0f}/s, ratio {qps / BATCH_TARGET:.2f}")
+    print(
+        f"single query (epof_from_grid):       median {single2:.1f} us, ratio to target {single2 / SINGLE_TARGET_US:.2f}"
+    )
+    print(
+        f"batch: {qps:,.0f} queries/s ({1e6 / qps:.2f} us each); target {BATCH_TARGET:,.0f}/s, ratio {qps / BATCH_TARGET:.2f}"
+    )
     from test_epof import brute_overlaps
 
     errs = []

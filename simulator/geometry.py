@@ -120,7 +120,9 @@ def head_rotation(yaw_deg, pitch_deg, roll_deg=0.0) -> Rotation:
     return Rotation.from_euler("YXZ", angles, degrees=True)
 
 
-def head_angles_deg(rot: Rotation) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+def head_angles_deg(
+    rot: Rotation,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """Inverse of :func:`head_rotation`: ``(yaw_deg, pitch_deg, roll_deg)``.
 
     yaw in (-180, 180], pitch in [-90, 90], roll in (-180, 180]. At pitch = +-90 deg
@@ -179,7 +181,9 @@ def lonlat_to_equirect_xy(lon, lat, width: int, height: int) -> tuple[NDArray, N
 
 
 # -------------------------------------------------------------------- perspective views
-def check_fov(hfov_deg: float, vfov_deg: float | None = None, *, source: str = "") -> tuple[float, float]:
+def check_fov(
+    hfov_deg: float, vfov_deg: float | None = None, *, source: str = ""
+) -> tuple[float, float]:
     """The one FOV rule: ``(hfov_deg, vfov_deg)`` as floats, each in degrees strictly
     inside (0, 180) (NaN and inf refused); ``vfov_deg`` defaults to ``hfov_deg``.
     InputError (prefixed by ``source`` when given) otherwise."""
@@ -204,7 +208,9 @@ def _check_size(size: tuple[int, int]) -> tuple[int, int]:
     try:
         w, h = int(size[0]), int(size[1])
     except (TypeError, ValueError, IndexError):
-        raise InputError(f"size must be (width, height) in pixels, e.g. (256, 256); got {size!r}") from None
+        raise InputError(
+            f"size must be (width, height) in pixels, e.g. (256, 256); got {size!r}"
+        ) from None
     if w <= 0 or h <= 0:
         raise InputError(f"size must be positive (width, height) in pixels; got {size!r}")
     return w, h
@@ -361,7 +367,9 @@ def sample_equirect(
     padded = _pad_equirect(np.ascontiguousarray(img))
     if interp == "lagrange":
         return _remap_lagrange(padded, map_x, map_y)
-    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[interp]
+    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[
+        interp
+    ]
     return cv2.remap(padded, map_x, map_y, flags, borderMode=cv2.BORDER_REPLICATE)
 
 
@@ -430,9 +438,7 @@ def extract_view(
     return sample_equirect(img, mx, my, interp=interp)
 
 
-def rotate_equirect(
-    img: NDArray, rot: Rotation, *, interp: Interp = "cubic"
-) -> NDArray:
+def rotate_equirect(img: NDArray, rot: Rotation, *, interp: Interp = "cubic") -> NDArray:
     """Equirect frame of the scene rotated by ``rot`` (a world-frame rotation).
 
     A scene point at direction ``d`` moves to ``rot.apply(d)``; output pixel with
@@ -449,14 +455,18 @@ def rotate_equirect(
 
 
 # ---------------------------------------------------------------------- stereo, aspect
-def split_eye(frame: NDArray, layout: str = "mono", eye: str = "left", *, source: str = "frame") -> NDArray:
+def split_eye(
+    frame: NDArray, layout: str = "mono", eye: str = "left", *, source: str = "frame"
+) -> NDArray:
     """The part of a (possibly stereo) equirect frame that one eye sees (a view, no copy).
 
     ``top-bottom``: left eye on top; ``side-by-side``: left eye on the left; ``mono``:
     the whole frame for both eyes. ``source`` names the file in error messages.
     """
     if layout not in LAYOUTS:
-        raise InputError(f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+        raise InputError(
+            f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}"
+        )
     if eye not in EYES:
         raise InputError(f"{source}: unknown eye {eye!r}; expected left or right")
     H, W = frame.shape[:2]
@@ -491,15 +501,21 @@ def check_equirect_aspect(
     pixels (longitude is linear in the column whatever the pixel shape).
     """
     if layout not in LAYOUTS:
-        raise InputError(f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}")
+        raise InputError(
+            f"{source}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}"
+        )
     w, h = width, height
     if layout == "top-bottom":
         if height % 2:
-            raise InputError(f"{source}: top-bottom stereo needs an even height; got {width}x{height}")
+            raise InputError(
+                f"{source}: top-bottom stereo needs an even height; got {width}x{height}"
+            )
         h = height // 2
     elif layout == "side-by-side":
         if width % 2:
-            raise InputError(f"{source}: side-by-side stereo needs an even width; got {width}x{height}")
+            raise InputError(
+                f"{source}: side-by-side stereo needs an even width; got {width}x{height}"
+            )
         w = width // 2
     if w % 2 or h < _PAD:
         raise InputError(
@@ -610,8 +626,18 @@ class WindowGrid:
 
 
 GRID_PRESETS: dict[str, dict] = {
-    "default": {"yaw_step_deg": 15.0, "pitch_step_deg": 7.5, "pitch_min_deg": -37.5, "pitch_max_deg": 37.5},
-    "paper-198": {"yaw_step_deg": 20.0, "pitch_step_deg": 7.5, "pitch_min_deg": -37.5, "pitch_max_deg": 37.5},
+    "default": {
+        "yaw_step_deg": 15.0,
+        "pitch_step_deg": 7.5,
+        "pitch_min_deg": -37.5,
+        "pitch_max_deg": 37.5,
+    },
+    "paper-198": {
+        "yaw_step_deg": 20.0,
+        "pitch_step_deg": 7.5,
+        "pitch_min_deg": -37.5,
+        "pitch_max_deg": 37.5,
+    },
 }
 
 
@@ -656,7 +682,9 @@ class WindowExtractor:
     def __call__(self, frame: NDArray, *, interp: Literal["cubic", "linear"] = "cubic") -> NDArray:
         H, W = frame.shape[:2]
         if (W, H) != self.equirect_size:
-            raise InputError(f"frame is {W}x{H}; this extractor was built for {self.equirect_size[0]}x{self.equirect_size[1]}")
+            raise InputError(
+                f"frame is {W}x{H}; this extractor was built for {self.equirect_size[0]}x{self.equirect_size[1]}"
+            )
         flags = cv2.INTER_CUBIC if interp == "cubic" else cv2.INTER_LINEAR
         padded = _pad_equirect(np.ascontiguousarray(frame))
         out = cv2.remap(padded, self._m1, self._m2, flags, borderMode=cv2.BORDER_REPLICATE)
@@ -679,7 +707,9 @@ def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
     mx = mx.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
     my = my.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
     if max(mx.shape) >= 32767:
-        raise InputError(f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows")
+        raise InputError(
+            f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows"
+        )
     m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
     m1.setflags(write=False)
     m2.setflags(write=False)

@@ -93,7 +93,9 @@ class GridFile:
                 f"{info.width}x{info.height} one ({info.path}); run vimsim preprocess on it"
             )
         if abs(float(self.meta["fps"]) - info.fps) > 1e-3 * info.fps:
-            raise InputError(f"{src}: grid is for a {self.meta['fps']} fps video; {info.path} is {info.fps:g} fps")
+            raise InputError(
+                f"{src}: grid is for a {self.meta['fps']} fps video; {info.path} is {info.fps:g} fps"
+            )
         n_video = int(v.get("n_frames", self.meta["n_frames"]))
         if abs(n_video - info.n_frames) > 1:
             raise InputError(
@@ -131,7 +133,9 @@ def save_grid(
     pof_px = np.asarray(pof_px, np.float32)
     P, Y = grid.shape
     if pof_dps.ndim != 3 or pof_dps.shape[1:] != (P, Y) or pof_px.shape != pof_dps.shape:
-        raise ValueError(f"pof arrays must be (T, {P}, {Y}); got {pof_dps.shape} and {pof_px.shape}")
+        raise ValueError(
+            f"pof arrays must be (T, {P}, {Y}); got {pof_dps.shape} and {pof_px.shape}"
+        )
     m = dict(meta)
     m.update(format=FORMAT, version=VERSION, grid=grid.to_dict())
     missing = [k for k in _REQUIRED_META if k not in m]
@@ -161,7 +165,9 @@ def load_grid(path: str | os.PathLike) -> GridFile:
             names = set(z.files)
             need = {"pof_dps", "pof_px", "yaw_deg", "pitch_deg", "meta"}
             if not need <= names:
-                raise InputError(f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing")
+                raise InputError(
+                    f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing"
+                )
             arrs = {k: z[k] for k in names}
     except InputError:
         raise
@@ -172,16 +178,22 @@ def load_grid(path: str | os.PathLike) -> GridFile:
     except (json.JSONDecodeError, TypeError):
         raise InputError(f"{p}: grid meta is not JSON; not a vimsim grid file") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise InputError(f"{p}: not a vimsim grid file (format {meta.get('format') if isinstance(meta, dict) else None!r})")
+        raise InputError(
+            f"{p}: not a vimsim grid file (format {meta.get('format') if isinstance(meta, dict) else None!r})"
+        )
     if meta.get("version") != VERSION:
-        raise InputError(f"{p}: grid file version {meta.get('version')}; this vimsim reads version {VERSION}: re-run vimsim preprocess")
+        raise InputError(
+            f"{p}: grid file version {meta.get('version')}; this vimsim reads version {VERSION}: re-run vimsim preprocess"
+        )
     missing = [k for k in _REQUIRED_META if k not in meta]
     if missing:
         raise InputError(f"{p}: grid meta lacks {missing}")
     dps, px = arrs["pof_dps"], arrs["pof_px"]
     Y, P = arrs["yaw_deg"].shape[0], arrs["pitch_deg"].shape[0]
     if dps.ndim != 3 or dps.shape[1:] != (P, Y) or px.shape != dps.shape:
-        raise InputError(f"{p}: pof arrays have shape {dps.shape}/{px.shape}; expected (T, {P}, {Y})")
+        raise InputError(
+            f"{p}: pof arrays have shape {dps.shape}/{px.shape}; expected (T, {P}, {Y})"
+        )
     if dps.shape[0] < 1 or not np.all(np.isfinite(dps)):
         raise InputError(f"{p}: pof_dps is empty or has non-finite values")
     try:
@@ -199,7 +211,9 @@ def load_grid(path: str | os.PathLike) -> GridFile:
     )
 
 
-def content_hash(path: str | os.PathLike, *, chunk: int = 1 << 20, max_bytes: int = 64 << 20) -> str:
+def content_hash(
+    path: str | os.PathLike, *, chunk: int = 1 << 20, max_bytes: int = 64 << 20
+) -> str:
     """SHA-256 of a file's first ``max_bytes`` and its size (fast for long videos).
 
     Returns ``"sha256:<hex>"``; identifies the source video of a grid.

@@ -14,11 +14,25 @@ from simulator.video import MediaInfo
 
 
 def _meta(video_path, n=5, **video):
-    v = {"path": str(video_path), "width": 64, "height": 32, "sar": 1.0, "n_frames": n,
-             "content_hash": content_hash(video_path)}
+    v = {
+        "path": str(video_path),
+        "width": 64,
+        "height": 32,
+        "sar": 1.0,
+        "n_frames": n,
+        "content_hash": content_hash(video_path),
+    }
     v.update(video)
-    return {"fps": 30.0, "n_frames": n, "flow": {"method": "dis"}, "layout": "mono", "eye": "left",
-                "video": v, "start_frame": 0, "end_frame": n}
+    return {
+        "fps": 30.0,
+        "n_frames": n,
+        "flow": {"method": "dis"},
+        "layout": "mono",
+        "eye": "left",
+        "video": v,
+        "start_frame": 0,
+        "end_frame": n,
+    }
 
 
 @pytest.fixture()
@@ -76,11 +90,13 @@ def test_check_video(tmp_path, video):
     with pytest.raises(InputError, match="content hash"):
         G.check_video(MediaInfo(str(other), 64, 32, 1.0, 30.0, 5, True, "h264"))
     # a grid of frames 0..3 of a 10-frame video cannot drive a whole-video render
-    save_grid(tmp_path / "part.npz", a[:3], a[:3], g,
-              dict(_meta(video, n=3, n_frames=10), end_frame=3))
+    save_grid(
+        tmp_path / "part.npz", a[:3], a[:3], g, dict(_meta(video, n=3, n_frames=10), end_frame=3)
+    )
     with pytest.raises(InputError, match="--start/--end"):
         load_grid(tmp_path / "part.npz").check_video(
-            MediaInfo(str(video), 64, 32, 1.0, 30.0, 10, True, "h264"))
+            MediaInfo(str(video), 64, 32, 1.0, 30.0, 10, True, "h264")
+        )
 
 
 def test_text_file_is_not_a_grid(tmp_path):
