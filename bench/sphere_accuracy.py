@@ -71,14 +71,18 @@ def viewport_truth(scene, yaw, pitch, roll, times, fov=107.0, rays=32):
     return out
 
 
-def grids_for(vid: Path, tag: str, grid, *, end_s=None):
-    """(paper GridFile, sphere GridFile, s/frame paper, s/frame sphere) for one clip."""
-    pg, sg = OUT / f"{tag}_paper_{grid.hfov_deg:g}.npz", OUT / f"{tag}_sphere.npz"
+def grids_for(vid: Path, tag: str, grid, *, end_s=None, flow: str = "dis"):
+    """(paper GridFile, sphere GridFile, s/frame paper, s/frame sphere) for one clip, both
+    modes with the same flow backend."""
+    sfx = "" if flow == "dis" else "_" + flow.replace(":", "-")
+    pg, sg = OUT / f"{tag}_paper_{grid.hfov_deg:g}{sfx}.npz", OUT / f"{tag}_sphere{sfx}.npz"
     t = time.perf_counter()
-    preprocess_video(vid, pg, grid=grid, end_s=end_s, progress=False)
+    preprocess_video(vid, pg, grid=grid, flow=flow, end_s=end_s, progress=False)
     tp = time.perf_counter() - t
     t = time.perf_counter()
-    S.preprocess_sphere(vid, sg, grid=grid_preset("default"), end_s=end_s, progress=False)
+    S.preprocess_sphere(
+        vid, sg, grid=grid_preset("default"), flow=flow, end_s=end_s, progress=False
+    )
     ts = time.perf_counter() - t
     p, s = load_grid(pg), load_grid(sg)
     return p, s, tp / p.n_frames, ts / s.n_frames
@@ -244,6 +248,12 @@ def main(argv=None) -> int:
     ap.add_argument("--pano-seconds", type=float, default=2.0)
     ap.add_argument("--size", default="1024x512")
     ap.add_argument("--diagnose", action="store_true", help="only section 4 (the pano gap)")
+    ap.add_argument(
+        "--pano-flow",
+        default="dis,dis:medium,farneback",
+        help="comma-separated flow backends for section 2 (both modes use the same one; "
+        "default %(default)s; section 3 uses the first)",
+    )
     args = ap.parse_args(argv)
     w, h = (int(x) for x in args.size.lower().split("x"))
     OUT.mkdir(parents=True, exist_ok=True)
@@ -313,18 +323,21 @@ def main(argv=None) -> int:
     rows2 = []
     pano = None
     if PANO.is_file():
-        p, s, tp, ts = grids_for(PANO, "pano", grid, end_s=args.pano_seconds)
-        dm, dp = rel(s.pof_dps[1:], p.pof_dps[1:])
-        mm, mp = rel(s.pof_dps[1:].mean(0), p.pof_dps[1:].mean(0))
-        ratio = float(s.pof_dps[1:].mean() / p.pof_dps[1:].mean())
-        rows2.append(
-            f"pano.mp4 ({p.n_frames} frames, {PANO.stat().st_size // 1024} KB, 1920x1080 SAR 9:8): "
-            f"per (frame, window) median {dm:.3f} / p90 {dp:.3f}; whole-clip window means median "
-            f"{mm:.3f} / p90 {mp:.3f}; mean sphere/paper {ratio:.3f}; median paper POF "
-            f"{np.median(p.pof_dps[1:]):.2f} deg/s; s/frame paper {tp:.2f}, sphere {ts:.3f}"
-        )
-        print(rows2[-1], flush=True)
-        pano = ("pano.mp4", PANO, "pano", s)
+        for k, fl in enumerate(args.pano_flow.split(",")):
+            p, s, tp, ts = grids_for(PANO, "pano", grid, end_s=args.pano_seconds, flow=fl)
+            dm, dp = rel(s.pof_dps[1:], p.pof_dps[1:])
+            mm, mp = rel(s.pof_dps[1:].mean(0), p.pof_dps[1:].mean(0))
+            ratio = float(s.pof_dps[1:].mean() / p.pof_dps[1:].mean())
+            rows2.append(
+                f"pano.mp4 ({p.n_frames} frames, {PANO.stat().st_size // 1024} KB, 1920x1080 SAR 9:8), "
+                f"flow {fl} in both modes: "
+                f"per (frame, window) median {dm:.3f} / p90 {dp:.3f}; whole-clip window means median "
+                f"{mm:.3f} / p90 {mp:.3f}; mean sphere/paper {ratio:.3f}; median paper POF "
+                f"{np.median(p.pof_dps[1:]):.2f} deg/s; s/frame paper {tp:.2f}, sphere {ts:.3f}"
+            )
+            print(rows2[-1], flush=True)
+            if k == 0:
+                pano = ("pano.mp4", PANO, "pano", s)
     else:
         print(f"skip: {PANO} not found")
 
