@@ -200,15 +200,27 @@ class TorchFlow(FlowBackend):
     device : ``"cuda"`` / ``"cpu"``; default CUDA when available
     batch : windows per forward pass (memory bound; all of a frame's windows are
         processed, ``batch`` at a time)
+    probe_size : (width, height) of the pair the model is checked with on load: the size
+        it will be given (the window size; ``preprocess`` and sphere mode pass theirs).
+        Models have minimum sizes (RAFT: 128 px) or fixed ones (a traced FlowNet2).
 
-    The model is checked on load with a ``(1, 3, 64, 64)`` pair: anything but a
-    ``(1, 2, 64, 64)`` floating tensor raises InputError "not a flow model".
+    The model is checked on load with a ``(1, 3, h, w)`` pair of ``probe_size``:
+    anything but a ``(1, 2, h, w)`` floating tensor raises InputError "not a flow model",
+    with the model's own last error line when it raises (e.g. RAFT's "should be at least
+    8 * 16 = 128").
     """
 
     name = "torch"
     thread_safe = False
 
-    def __init__(self, path: str | Path, *, device: str | None = None, batch: int = 32):
+    def __init__(
+        self,
+        path: str | Path,
+        *,
+        device: str | None = None,
+        batch: int = 32,
+        probe_size: tuple[int, int] = (64, 64),
+    ):
         try:
             import torch
         except ImportError:
@@ -231,24 +243,30 @@ class TorchFlow(FlowBackend):
         self.batch = int(batch)
         self.params = {"model": str(p), "model_bytes": p.stat().st_size, "device": self.device}
         self._path = p
-        self._validate()
+        self._validate(int(probe_size[0]), int(probe_size[1]))
 
-    def _validate(self) -> None:
+    def _validate(self, w: int, h: int) -> None:
         torch = self._torch
-        x = torch.zeros(1, 3, 64, 64, device=self.device)
+        # A smooth random texture shifted by one pixel: some models misbehave on constants.
+        g = torch.Generator().manual_seed(0)
+        a = torch.rand(1, 3, h + 1, w + 1, generator=g)
+        x, y0 = a[..., :h, :w].to(self.device), a[..., 1:, 1:].to(self.device)
         try:
             with torch.inference_mode():
-                y = self.model(x, x)
-        except Exception as e:  # noqa: BLE001
-            first = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+                y = self.model(x, y0)
+        except Exception as e:  # noqa: BLE001 - any failure of the user's model
+            # TorchScript puts the interpreter's frame first and the model's reason last.
+            lines = [ln.strip() for ln in str(e).strip().splitlines() if ln.strip()]
+            why = lines[-1] if lines else type(e).__name__
             raise InputError(
-                f"{self._path}: not a flow model: calling it with two (1, 3, 64, 64) tensors failed ({first[:200]})"
+                f"{self._path}: not a flow model for {w}x{h} px windows: calling it with two "
+                f"(1, 3, {h}, {w}) tensors failed ({why[:300]})"
             ) from None
         shape = tuple(y.shape) if isinstance(y, torch.Tensor) else type(y).__name__
-        if not isinstance(y, torch.Tensor) or shape != (1, 2, 64, 64) or not y.is_floating_point():
+        if not isinstance(y, torch.Tensor) or shape != (1, 2, h, w) or not y.is_floating_point():
             raise InputError(
-                f"{self._path}: not a flow model: two (1, 3, 64, 64) inputs gave {shape}; expected a "
-                "(1, 2, 64, 64) float tensor (see docs/preprocess.md for the interface)"
+                f"{self._path}: not a flow model: two (1, 3, {h}, {w}) inputs gave {shape}; "
+                f"expected a (1, 2, {h}, {w}) float tensor (see docs/preprocess.md for the interface)"
             )
 
     def __call__(self, prev, nxt):
@@ -271,9 +289,10 @@ class TorchFlow(FlowBackend):
         return out
 
 
-def make_backend(spec: str) -> FlowBackend:
+def make_backend(spec: str, size: tuple[int, int] | None = None) -> FlowBackend:
     """A backend from its ``--flow`` text: ``dis``, ``dis:PRESET``, ``farneback`` or
-    ``torch:MODEL.pt``. Raises InputError for anything else."""
+    ``torch:MODEL.pt``. Raises InputError for anything else. ``size``: (width, height) of
+    the images it will be given (a torch model is checked at that size)."""
     text = str(spec).strip()
     kind, _, arg = text.partition(":")
     kind = kind.lower()
@@ -284,7 +303,7 @@ def make_backend(spec: str) -> FlowBackend:
     if kind == "torch":
         if not arg:
             raise InputError("--flow torch needs a model file: torch:MODEL.pt")
-        return TorchFlow(arg)
+        return TorchFlow(arg) if size is None else TorchFlow(arg, probe_size=size)
     raise InputError(f"unknown flow backend {text!r}; expected one of {FLOW_CHOICES}")
 
 

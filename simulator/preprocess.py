@@ -282,7 +282,7 @@ def preprocess_video(
     eye_w, eye_h = info.eye_size(layout)
     start_f, end_f = frame_range(info, float(start_s), end_s, src)
     out = check_output_dir(output)
-    backend = flow if isinstance(flow, FlowBackend) else make_backend(flow)
+    backend = flow if isinstance(flow, FlowBackend) else make_backend(flow, size=grid.size)
     ckpt = checkpoint_path(out)
     identity = {
         "video": {

@@ -368,11 +368,12 @@ def _splat_matrix(idx: NDArray, w: NDArray, cells: CellGrid, dirs: NDArray) -> s
     return sparse.csr_matrix((vals.astype(np.float32), (rows, cols)), shape=(C, len(keep)))
 
 
-def _backend(flow) -> tuple[FlowFn, int, dict]:
-    """``(flow function, default stride, description for meta)`` of a flow spec."""
+def _backend(flow, tile_size: int) -> tuple[FlowFn, int, dict]:
+    """``(flow function, default stride, description for meta)`` of a flow spec, for
+    square tiles of ``tile_size`` pixels."""
     from simulator.flow import DISFlow, FlowBackend, make_backend
 
-    be = make_backend(flow) if isinstance(flow, str) else flow
+    be = make_backend(flow, size=(tile_size, tile_size)) if isinstance(flow, str) else flow
     if isinstance(be, DISFlow):
         stride = 2 if be.preset in ("ultrafast", "fast") else 1
     else:
@@ -424,7 +425,7 @@ class FieldEstimator:
         self.cells = CellGrid(config.cell_deg)
         self.fps = float(fps)
         self.equirect_size = (W, H)
-        self._flow, stride, self.flow_desc = _backend(flow)
+        self._flow, stride, self.flow_desc = _backend(flow, config.tile_size)
         self.stride = int(config.stride or stride)
         self._geo = _tile_geometry(config, (W, H), self.stride)
 
@@ -921,7 +922,7 @@ def preprocess_sphere(
     fps = info.fps
     start_f, end_f = frame_range(info, float(start_s), end_s, src)
     out = check_output_dir(output)
-    backend, default_stride, desc = _backend(flow)
+    backend, default_stride, desc = _backend(flow, config.tile_size)
     from tqdm import tqdm
 
     bar = tqdm(

@@ -480,3 +480,33 @@ def test_fov_options(tmp_path, videos, capsys):
         60.0,
         [24, 24],
     )
+
+
+def _min_size_model(path):
+    """Like RAFT: raises for images smaller than 128 px, else zero flow."""
+    torch = pytest.importorskip("torch")
+
+    class MinSize(torch.nn.Module):
+        def forward(self, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+            if a.shape[-1] < 128 or a.shape[-2] < 128:
+                raise ValueError("input images should be at least 128 px")
+            return 0.0 * (a[:, :2] - b[:, :2])
+
+    torch.jit.script(MinSize()).save(str(path))
+    return f"torch:{path}"
+
+
+def test_torch_model_checked_at_the_window_size(tmp_path, capsys, videos):
+    """A model with a minimum input size (RAFT needs 128 px) is checked at the windows it
+    will get: it works at 128 px windows, and at 32 px fails with its own reason, before
+    any output."""
+    flow = _min_size_model(tmp_path / "min.pt")
+    out = tmp_path / "g.npz"
+    assert _cli(videos["long"], "-o", out, "--window-size", 128, "--flow", flow, "--end", 0.2) == 0
+    assert load_grid(out).meta["flow"]["method"] == "torch"
+    bad = tmp_path / "small.npz"
+    assert _cli(videos["long"], "-o", bad, "--window-size", 32, "--flow", flow) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1, err
+    assert "32x32 px windows" in err and "at least 128 px" in err
+    assert not bad.exists()

@@ -299,9 +299,9 @@ def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
     calls = []
     real = F.make_backend
 
-    def counting(spec):
-        calls.append(spec)
-        return real(spec)
+    def counting(spec, size=None):
+        calls.append((spec, size))
+        return real(spec, size=size)
 
     monkeypatch.setattr(F, "make_backend", counting)
     out = S.preprocess_sphere(
@@ -312,7 +312,7 @@ def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
         flow="dis",
         progress=False,
     )
-    assert calls == ["dis"]
+    assert calls == [("dis", (96, 96))]
     meta = load_grid(out).meta
     assert meta["flow"]["method"] == "dis" and meta["field"]["tiles"]["stride"] == 2
 
