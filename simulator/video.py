@@ -114,7 +114,7 @@ def probe(path: str | os.PathLike) -> MediaInfo:
     Raises InputError for a missing file, a file FFmpeg cannot read, or a container
     without a video stream.
     """
-    p = check_input_file(path, "video")
+    p = check_input_file(path, "image" if _is_image_path(Path(path)) else "video")
     if _is_image_path(p):
         return _probe_image(p)
     with _open_container(p) as c:
@@ -187,7 +187,7 @@ def iter_frames(
     one at a time (streaming: memory does not grow with the video's length). Frames are
     yielded as views into decoder buffers where possible: copy one to keep it.
     """
-    p = check_input_file(path, "video")
+    p = check_input_file(path, "image" if _is_image_path(Path(path)) else "video")
     if _is_image_path(p):
         if start == 0 and (end is None or end > 0):
             yield split_eye(_read_image(p, fmt), layout, eye, source=str(p))
