@@ -19,7 +19,6 @@ Deterministic given ``seed`` (texture placement, head path, grain layout).
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import sys
@@ -30,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir
+from simulator.fileio import atomic_output, check_output_dir, json_text
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -352,5 +351,5 @@ def run_demo(
     with atomic_output(out / "README.txt") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
     with atomic_output(out / "summary.json") as tmp:
-        Path(tmp).write_text(json.dumps(summary, indent=2) + "\n")
+        Path(tmp).write_text(json_text(summary) + "\n")
     return summary

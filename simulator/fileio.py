@@ -7,13 +7,15 @@ when complete, so an interrupted run never leaves a file that looks finished.
 from __future__ import annotations
 
 import contextlib
+import json
+import math
 import os
 from collections.abc import Iterator
 from pathlib import Path
 
 from simulator.errors import InputError
 
-__all__ = ["atomic_output", "check_input_file", "check_output_dir"]
+__all__ = ["atomic_output", "check_input_file", "check_output_dir", "json_text"]
 
 
 @contextlib.contextmanager
@@ -64,3 +66,24 @@ def check_output_dir(path: str | os.PathLike) -> Path:
     if not os.access(p, os.W_OK):
         raise InputError(f"{p}: output directory is not writable")
     return p
+
+
+def _json_safe(x):
+    """``x`` with NaN/inf floats as None and numpy scalars/arrays as Python values."""
+    if isinstance(x, dict):
+        return {str(k): _json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_json_safe(v) for v in x]
+    if hasattr(x, "tolist") and not isinstance(x, (str, bytes)):  # numpy scalar or array
+        return _json_safe(x.tolist())
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def json_text(obj, *, indent: int | None = 2) -> str:
+    """Standard JSON for files users read with any tool: a non-finite number (``NaN``,
+    ``Infinity``, which Python's ``json`` writes but JSON does not allow) becomes
+    ``null``; numpy values become numbers or lists; anything else unknown becomes its
+    ``str``."""
+    return json.dumps(_json_safe(obj), indent=indent, allow_nan=False, default=str)

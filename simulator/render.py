@@ -801,13 +801,12 @@ def render_viewing(
     dict, the summary (also ``OUTDIR/summary.json``): settings, grain count, opacity
     thresholds, EPOF and opacity percentiles, timings (seconds), frames/s, GL renderer.
     """
-    import json
     import sys
     import time
     from pathlib import Path
 
     from simulator.epof import EpofResult, compute_epof, write_epof_csv
-    from simulator.fileio import atomic_output, check_output_dir
+    from simulator.fileio import atomic_output, check_output_dir, json_text
     from simulator.grf import grain_count
     from simulator.gridfile import GridFile, load_grid
     from simulator.headpath import HeadPath, load_headpath
@@ -941,5 +940,5 @@ def render_viewing(
         summary["note"] = note
     # Last: the completion marker.
     with atomic_output(out / "summary.json") as tmp:
-        Path(tmp).write_text(json.dumps(summary, indent=2, default=str) + "\n")
+        Path(tmp).write_text(json_text(summary) + "\n")
     return summary

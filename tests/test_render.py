@@ -651,9 +651,9 @@ def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
     cfg = R.RenderConfig(eye_size=(32, 32), grf=GrfConfig(seed=1))
     s = R.render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
     assert sorted(renamed) == sorted(R.OUTDIR_FILES) and renamed[-1] == "summary.json"
-    assert json.loads((tmp_path / "o" / "summary.json").read_text()) == json.loads(
-        json.dumps(s, default=str)
-    )
+    from simulator.fileio import json_text
+
+    assert json.loads((tmp_path / "o" / "summary.json").read_text()) == json.loads(json_text(s))
     assert s["headpath"] == "mem" and s["opacity"] == 0.4 and s["frames_written"] == 3
 
 
@@ -729,3 +729,23 @@ def test_render_config_fov_is_geometry_check_fov(bad):
             RenderConfig(eye_size=(32, 32), hfov_deg=90.0, vfov_deg=bad, grf=None)
     c = RenderConfig(eye_size=(32, 32), hfov_deg=np.float32(90), vfov_deg="60", grf=None)
     assert (c.hfov_deg, c.vfov_deg) == (90.0, 60.0) and type(c.vfov_deg) is float
+
+
+def test_cli_render_grf_off_summary_is_strict_json(ctx, tmp_path, capsys):
+    """GRF off (no --grid, no --opacity): no thresholds exist; summary.json says null, not
+    Python's NaN, which JSON does not allow (jq, browsers and R refuse the file)."""
+    from simulator.cli import main
+
+    vid = tmp_path / "m.mp4"
+    _tiny_video(vid, n=4, fps=10)
+    path = tmp_path / "p.csv"
+    path.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,10,0,0\n")
+    out = tmp_path / "o"
+    assert main(_render_argv(vid, path, out)) == 0
+    assert "GRF off" in capsys.readouterr().err
+
+    def refuse(name):
+        raise ValueError(f"non-standard JSON constant {name}")
+
+    s = json.loads((out / "summary.json").read_text(), parse_constant=refuse)
+    assert s["grf"] is None and s["opacity_thresholds_dps"] == [None, None]
