@@ -234,6 +234,46 @@ def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[in
     return s, e
 
 
+def common_meta(
+    video,
+    info,
+    *,
+    n_rows: int,
+    start_frame: int,
+    flow: dict,
+    layout: str,
+    eye: str,
+    content_hash: str,
+    units: dict,
+) -> dict:
+    """The grid-file ``meta`` both methods write (paper and sphere mode): frames, flow,
+    layout, eye, the frame range, units and the video's identity (``GridFile.check_video``
+    compares it with a video)."""
+    fps = info.fps
+    return {
+        "fps": fps,
+        "n_frames": n_rows,
+        "flow": flow,
+        "layout": layout,
+        "eye": eye,
+        "start_frame": start_frame,
+        "end_frame": start_frame + n_rows,
+        "start_s": start_frame / fps,
+        "eye_size": list(info.eye_size(layout)),
+        "units": units,
+        "frame0": "repeats frame 1",
+        "video": {
+            "path": str(Path(video).resolve()),
+            "width": info.width,
+            "height": info.height,
+            "sar": info.sar,
+            "codec": info.codec,
+            "n_frames": info.n_frames,
+            "content_hash": content_hash,
+        },
+    }
+
+
 def preprocess_video(
     video: str | os.PathLike,
     output: str | os.PathLike,
@@ -418,31 +458,20 @@ def preprocess_video(
     n_rows = len(dps_rows)
     if n_rows < 2:
         raise InputError(f"{src}: only {n_rows} frame(s) could be decoded; flow needs at least 2")
-    meta = {
-        "fps": fps,
-        "n_frames": n_rows,
-        "flow": backend.describe(),
-        "layout": layout,
-        "eye": eye,
-        "start_frame": start_f,
-        "end_frame": start_f + n_rows,
-        "start_s": start_f / fps,
-        "eye_size": [eye_w, eye_h],
-        "units": {
+    meta = common_meta(
+        video,
+        info,
+        n_rows=n_rows,
+        start_frame=start_f,
+        flow=backend.describe(),
+        layout=layout,
+        eye=eye,
+        content_hash=identity["video"]["content_hash"],
+        units={
             "pof_dps": "deg/s of visual angle (solid-angle-weighted mean)",
             "pof_px": "window px/frame (mean magnitude)",
         },
-        "frame0": "repeats frame 1",
-        "video": {
-            "path": str(Path(video).resolve()),
-            "width": info.width,
-            "height": info.height,
-            "sar": info.sar,
-            "codec": info.codec,
-            "n_frames": info.n_frames,
-            "content_hash": identity["video"]["content_hash"],
-        },
-    }
+    )
     if n_rows != total:
         print(
             f"vimsim preprocess: warning: {src}: expected {total} frames, decoded {n_rows}",

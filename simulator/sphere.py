@@ -904,10 +904,9 @@ def preprocess_sphere(
     Returns the output Path. InputError on bad input (nothing written).
     """
     import sys
-    from pathlib import Path
 
     from simulator.gridfile import content_hash, save_grid
-    from simulator.preprocess import check_output_dir, frame_range
+    from simulator.preprocess import check_output_dir, common_meta, frame_range
     from simulator.video import probe
 
     src = str(video)
@@ -916,7 +915,7 @@ def preprocess_sphere(
         raise InputError(
             f"{src}: is a still image; preprocess needs a video with at least 2 frames"
         )
-    eye_w, eye_h = info.eye_size(layout)
+    info.eye_size(layout)  # the layout must fit the frame (InputError otherwise)
     if field_dtype not in ("float16", "float32"):
         raise InputError(f"field dtype must be float16 or float32; got {field_dtype!r}")
     fps = info.fps
@@ -965,31 +964,22 @@ def preprocess_sphere(
         )
     meta = {
         "method": "sphere",
-        "fps": fps,
-        "n_frames": T,
-        "flow": desc,
-        "layout": layout,
-        "eye": eye,
-        "start_frame": start_f,
-        "end_frame": start_f + T,
-        "start_s": start_f / fps,
-        "eye_size": [eye_w, eye_h],
-        "units": {
-            "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
-            "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
-            "field_dps": "deg/s of visual angle",
-        },
-        "frame0": "repeats frame 1",
+        **common_meta(
+            video,
+            info,
+            n_rows=T,
+            start_frame=start_f,
+            flow=desc,
+            layout=layout,
+            eye=eye,
+            content_hash=content_hash(video),
+            units={
+                "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
+                "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
+                "field_dps": "deg/s of visual angle",
+            },
+        ),
         "field": field_meta(replace(config, stride=config.stride or default_stride), field_dtype),
-        "video": {
-            "path": str(Path(video).resolve()),
-            "width": info.width,
-            "height": info.height,
-            "sar": info.sar,
-            "codec": info.codec,
-            "n_frames": info.n_frames,
-            "content_hash": content_hash(video),
-        },
     }
     save_grid(out, dps, px, grid, meta, field_dps=field.astype(field_dtype))
     return out
