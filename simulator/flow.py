@@ -247,7 +247,7 @@ class TorchFlow(FlowBackend):
 
     def _validate(self, w: int, h: int) -> None:
         torch = self._torch
-        # A smooth random texture shifted by one pixel: some models misbehave on constants.
+        # Random noise and the same moved by one pixel: some models misbehave on constants.
         g = torch.Generator().manual_seed(0)
         a = torch.rand(1, 3, h + 1, w + 1, generator=g)
         x, y0 = a[..., :h, :w].to(self.device), a[..., 1:, 1:].to(self.device)
