@@ -454,6 +454,30 @@ def _tile_geometry(cfg: SphereConfig, equirect_size: tuple[int, int], stride: in
     return _TileGeometry(cfg, equirect_size, stride)
 
 
+class _FieldRows:
+    """Per-frame fields appended into one preallocated ``(T, n_lat, n_lon)`` float32 array
+    (grown by doubling if ``expected`` was short), row 0 reserved for the copy of row 1:
+    peak memory is the result itself, with no list of rows and no final stack."""
+
+    def __init__(self, shape: tuple[int, int], expected: int):
+        self._a = np.empty((max(2, int(expected)), *shape), np.float32)
+        self.n = 1  # rows filled, counting the reserved row 0
+
+    def append(self, f: NDArray[np.float32]) -> None:
+        if self.n == len(self._a):
+            grown = np.empty((2 * len(self._a), *self._a.shape[1:]), np.float32)
+            grown[: self.n] = self._a
+            self._a = grown
+        self._a[self.n] = f
+        self.n += 1
+
+    def result(self) -> NDArray[np.float32]:
+        """``(n, n_lat, n_lon)``; row 0 = row 1 (frame 0 has no predecessor)."""
+        a = self._a[: self.n]
+        a[0] = a[1]
+        return a if self.n > 0.9 * len(self._a) else a.copy()
+
+
 def field_from_frames(
     frames: Iterable[NDArray[np.uint8]],
     equirect_size: tuple[int, int],
@@ -469,7 +493,7 @@ def field_from_frames(
     ``progress(n)`` is called after each frame with the number of frames done.
     """
     est = FieldEstimator(equirect_size, fps, config, flow=flow)
-    out: list[NDArray[np.float32]] = []
+    out = _FieldRows(est.cells.shape, 256)
     prev = None
     for k, fr in enumerate(frames):
         t = est.tiles(fr)
@@ -478,11 +502,11 @@ def field_from_frames(
         prev = t
         if progress is not None:
             progress(k + 1)
-    if not out:
+    if out.n < 2:
         raise InputError(
             "sphere mode needs at least 2 frames; got " + ("0" if prev is None else "1")
         )
-    return np.stack([out[0], *out])
+    return out.result()
 
 
 def field_from_video(
@@ -510,7 +534,8 @@ def field_from_video(
     est = FieldEstimator((w, h), info.fps, config, flow=flow)
     frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
-    out: list[NDArray[np.float32]] = []
+    last = info.n_frames if end is None else min(int(end), info.n_frames)
+    out = _FieldRows(est.cells.shape, last - int(start))
     prev = None
     n = 0
     try:
@@ -524,9 +549,9 @@ def field_from_video(
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file
-    if not out:
+    if out.n < 2:
         raise InputError(f"{path}: sphere mode needs at least 2 frames; got {n}")
-    return np.stack([out[0], *out]), info
+    return out.result(), info
 
 
 # --------------------------------------------------------------------- integration

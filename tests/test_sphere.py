@@ -395,3 +395,16 @@ def test_compute_epof_uses_the_field(tmp_path):
     save_grid(tmp_path / "p.npz", z, z, grid, {**_meta(), "n_frames": 4})
     with pytest.raises(InputError, match="--method sphere"):
         compute_epof(load_grid(tmp_path / "p.npz"), hp, method="sphere")
+
+
+@pytest.mark.parametrize("expected", [2, 3, 6, 50])
+def test_field_rows_grow_and_repeat_row_one(expected):
+    """The field accumulator: rows in order whatever the expected count (grown when it
+    was short, trimmed when long), row 0 a copy of row 1."""
+    rows = S._FieldRows((2, 3), expected)
+    data = [np.full((2, 3), k + 1.0, np.float32) for k in range(5)]
+    for d in data:
+        rows.append(d)
+    out = rows.result()
+    assert out.shape == (6, 2, 3) and out.dtype == np.float32
+    assert np.array_equal(out[1:], np.stack(data)) and np.array_equal(out[0], out[1])
