@@ -201,7 +201,8 @@ class TorchFlow(FlowBackend):
     batch : windows per forward pass (memory bound; all of a frame's windows are
         processed, ``batch`` at a time)
     probe_size : (width, height) of the pair the model is checked with on load: the size
-        it will be given (the window size; ``preprocess`` and sphere mode pass theirs).
+        it will be given (the window size; ``preprocess`` and sphere mode pass theirs);
+        ``None``: 64 x 64.
         Models have minimum sizes (RAFT: 128 px) or fixed ones (a traced FlowNet2).
 
     The model is checked on load with a ``(1, 3, h, w)`` pair of ``probe_size``:
@@ -219,7 +220,7 @@ class TorchFlow(FlowBackend):
         *,
         device: str | None = None,
         batch: int = 32,
-        probe_size: tuple[int, int] = (64, 64),
+        probe_size: tuple[int, int] | None = None,
     ):
         try:
             import torch
@@ -243,7 +244,8 @@ class TorchFlow(FlowBackend):
         self.batch = int(batch)
         self.params = {"model": str(p), "model_bytes": p.stat().st_size, "device": self.device}
         self._path = p
-        self._validate(int(probe_size[0]), int(probe_size[1]))
+        w, h = probe_size or (64, 64)
+        self._validate(int(w), int(h))
 
     def _validate(self, w: int, h: int) -> None:
         torch = self._torch
@@ -303,7 +305,7 @@ def make_backend(spec: str, size: tuple[int, int] | None = None) -> FlowBackend:
     if kind == "torch":
         if not arg:
             raise InputError("--flow torch needs a model file: torch:MODEL.pt")
-        return TorchFlow(arg) if size is None else TorchFlow(arg, probe_size=size)
+        return TorchFlow(arg, probe_size=size)
     raise InputError(f"unknown flow backend {text!r}; expected one of {FLOW_CHOICES}")
 
 

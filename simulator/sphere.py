@@ -493,19 +493,25 @@ def field_from_frames(
     ``progress(n)`` is called after each frame with the number of frames done.
     """
     est = FieldEstimator(equirect_size, fps, config, flow=flow)
-    out = _FieldRows(est.cells.shape, 256)
+    return _fields(est, (est.tiles(f) for f in frames), 256, progress, "")
+
+
+def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str):
+    """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
+    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
+    ``source`` prefixes the error for fewer than 2 frames."""
+    out = _FieldRows(est.cells.shape, expected)
     prev = None
-    for k, fr in enumerate(frames):
-        t = est.tiles(fr)
+    n = 0
+    for t in tiles:
         if prev is not None:
             out.append(est.field(prev, t))
         prev = t
+        n += 1
         if progress is not None:
-            progress(k + 1)
+            progress(n)
     if out.n < 2:
-        raise InputError(
-            "sphere mode needs at least 2 frames; got " + ("0" if prev is None else "1")
-        )
+        raise InputError(f"{source}sphere mode needs at least 2 frames; got {n}")
     return out.result()
 
 
@@ -535,23 +541,11 @@ def field_from_video(
     frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
-    out = _FieldRows(est.cells.shape, last - int(start))
-    prev = None
-    n = 0
     try:
-        for t in tiles:
-            if prev is not None:
-                out.append(est.field(prev, t))
-            prev = t
-            n += 1
-            if progress is not None:
-                progress(n)
+        return _fields(est, tiles, last - int(start), progress, f"{path}: "), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file
-    if out.n < 2:
-        raise InputError(f"{path}: sphere mode needs at least 2 frames; got {n}")
-    return out.result(), info
 
 
 # --------------------------------------------------------------------- integration

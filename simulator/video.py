@@ -90,6 +90,11 @@ def _is_image_path(path: Path) -> bool:
     return path.suffix.lower() in IMAGE_SUFFIXES
 
 
+def _check_media_file(path: str | os.PathLike) -> Path:
+    """:func:`check_input_file` naming the file an image or a video by its suffix."""
+    return check_input_file(path, "image" if _is_image_path(Path(path)) else "video")
+
+
 def _probe_image(path: Path) -> MediaInfo:
     from PIL import Image, UnidentifiedImageError
 
@@ -114,7 +119,7 @@ def probe(path: str | os.PathLike) -> MediaInfo:
     Raises InputError for a missing file, a file FFmpeg cannot read, or a container
     without a video stream.
     """
-    p = check_input_file(path, "image" if _is_image_path(Path(path)) else "video")
+    p = _check_media_file(path)
     if _is_image_path(p):
         return _probe_image(p)
     with _open_container(p) as c:
@@ -187,7 +192,7 @@ def iter_frames(
     one at a time (streaming: memory does not grow with the video's length). Frames are
     yielded as views into decoder buffers where possible: copy one to keep it.
     """
-    p = check_input_file(path, "image" if _is_image_path(Path(path)) else "video")
+    p = _check_media_file(path)
     if _is_image_path(p):
         if start == 0 and (end is None or end > 0):
             yield split_eye(_read_image(p, fmt), layout, eye, source=str(p))
