@@ -35,11 +35,12 @@ from pathlib import Path
 import numpy as np
 
 from simulator.epof import compute_epof
-from simulator.geometry import grid_preset, head_rotation, perspective_rays
+from simulator.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.headpath import synth as synth_headpath
 from simulator.preprocess import preprocess_video
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
+from simulator.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"
@@ -142,7 +143,7 @@ def main(argv=None) -> int:
             n = cfg.n_frames if fast else min(cfg.n_frames, args.slow_frames)
             t0 = time.perf_counter()
             if be == "sphere":  # issue 7: field on the sphere (DIS), windows derived from it
-                from simulator.sphere import preprocess_sphere
+                from simulator.preprocess import preprocess_sphere
 
                 preprocess_sphere(vid, out, grid=grid, progress=False, end_s=n / cfg.fps)
             else:

@@ -21,8 +21,8 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from simulator.epof import epof_from_grid, viewport_overlaps
-from simulator.geometry import grid_preset
 from simulator.gridfile import load_grid, save_grid
+from simulator.windows import grid_preset
 
 FRAME_BUDGET_US = 1e6 / 90.0
 SINGLE_TARGET_US = 50.0

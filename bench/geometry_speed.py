@@ -23,6 +23,7 @@ sys.path.insert(0, str(REPO))
 
 from bench._v360 import v360_time_ms
 from simulator import geometry, video
+from simulator.windows import WindowExtractor, grid_preset
 
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"
 ANCHOR_V360_MS = {(256, 256): 1.9, (1440, 1600): 29.8}
@@ -67,9 +68,9 @@ def main() -> int:
             print(
                 f"  {label:25s}{t:7.1f} ms  (ratio to v360 anchor {t / anchor:.2f}, to v360 here {t / t_v360:.2f})"
             )
-    grid = geometry.grid_preset("default", size=(256, 256))
+    grid = grid_preset("default", size=(256, 256))
     t = time.perf_counter()
-    ex = geometry.WindowExtractor(grid, (W, H))
+    ex = WindowExtractor(grid, (W, H))
     t_build = (time.perf_counter() - t) * 1e3
     t_grid = best_ms(lambda: ex(gray), 10)
     print(f"grid {grid.n_windows} windows 256x256 gray, cubic: {t_grid:.1f} ms per frame "

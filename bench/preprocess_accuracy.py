@@ -26,10 +26,11 @@ from scipy.spatial.transform import Rotation
 
 from simulator import geometry
 from simulator.flow import DISFlow
-from simulator.geometry import grid_preset, head_rotation, perspective_rays
+from simulator.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.preprocess import preprocess_video
 from simulator.video import VideoWriter
+from simulator.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

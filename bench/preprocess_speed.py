@@ -24,9 +24,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
 from simulator.flow import make_backend
-from simulator.geometry import WindowExtractor, grid_preset
 from simulator.preprocess import WindowFlowReducer, preprocess_video
 from simulator.video import iter_frames
+from simulator.windows import WindowExtractor, grid_preset
 
 GOAL_FPS = 3.0
 PAPER_S_PER_FRAME = 6.0 * 264  # 6 s per viewport-frame, 264 windows

@@ -38,15 +38,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from simulator import sphere as S
-from simulator.epof import compute_epof
-from simulator.geometry import grid_preset, head_rotation, perspective_rays
-from simulator.gridfile import load_grid
+from simulator.cells import CellGrid, window_pof
+from simulator.epof import compute_epof, viewport_epof
+from simulator.geometry import head_rotation, perspective_rays
+from simulator.gridfile import load_grid, require_field
 from simulator.headpath import synth as synth_headpath
 from simulator.headsets import get_headset
-from simulator.preprocess import WindowFlowReducer, preprocess_video
+from simulator.preprocess import (
+    SphereConfig,
+    WindowFlowReducer,
+    preprocess_sphere,
+    preprocess_video,
+)
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 from simulator.video import iter_frames
+from simulator.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 PANO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "pano.mp4"
@@ -80,9 +86,7 @@ def grids_for(vid: Path, tag: str, grid, *, end_s=None, flow: str = "dis"):
     preprocess_video(vid, pg, grid=grid, flow=flow, end_s=end_s, progress=False)
     tp = time.perf_counter() - t
     t = time.perf_counter()
-    S.preprocess_sphere(
-        vid, sg, grid=grid_preset("default"), flow=flow, end_s=end_s, progress=False
-    )
+    preprocess_sphere(vid, sg, grid=grid_preset("default"), flow=flow, end_s=end_s, progress=False)
     ts = time.perf_counter() - t
     p, s = load_grid(pg), load_grid(sg)
     return p, s, tp / p.n_frames, ts / s.n_frames
@@ -92,13 +96,13 @@ def transfer_rows(name, vid, tag, sphere_grid, hp, fovs, *, end_s=None):
     """Rows comparing windows/EPOF derived from the 107-deg field with paper grids made at
     each FOV directly."""
     rows = []
-    field, cells = S.require_field(sphere_grid)
+    field, cells = require_field(sphere_grid)
     for label, (h, v) in fovs:
         g = grid_preset("default", hfov_deg=h, vfov_deg=v)
         pg = OUT / f"{tag}_paper_{h:g}x{v:g}.npz"
         preprocess_video(vid, pg, grid=g, end_s=end_s, progress=False)
         paper = load_grid(pg)
-        dps, px = S.window_pof(field, cells.cell_deg, g, sphere_grid.fps)
+        dps, px = window_pof(field, cells.cell_deg, g, sphere_grid.fps)
         w_med, w_p90 = rel(dps[1:], paper.pof_dps[1:])
         m_med, _ = rel(dps[1:].mean(0), paper.pof_dps[1:].mean(0))
         px_med, _ = rel(px[1:], paper.pof_px[1:])
@@ -139,7 +143,7 @@ def window_flows(vid: Path, grid, *, end=None):
     """Per frame pair: ``(angles (N, h, w) rad, world rays (N, h, w, 3))`` of DIS ultrafast
     on the paper's windows (what paper mode averages), as a generator."""
     from simulator.flow import DISFlow
-    from simulator.geometry import WindowExtractor
+    from simulator.windows import WindowExtractor
 
     ext = None
     flow = DISFlow()
@@ -209,7 +213,7 @@ def diagnose(grid, pano_seconds: float) -> list[str]:
         if not pg.exists():
             preprocess_video(PANO, pg, grid=grid, end_s=pano_seconds, progress=False)
         paper = load_grid(pg)
-        cells = S.CellGrid(4.0)
+        cells = CellGrid(4.0)
         world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
         idx = cells.index(*dir_to_lonlat(world)).ravel()
         _, sa = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
@@ -221,7 +225,7 @@ def diagnose(grid, pano_seconds: float) -> list[str]:
                 np.bincount(idx, wsa * ang.ravel(), cells.n_cells) / np.maximum(den, 1e-12)
             )
         F = np.stack(fields).reshape(-1, *cells.shape) * np.degrees(1.0) * paper.fps
-        dps, _ = S.window_pof(F, cells.cell_deg, grid, paper.fps)
+        dps, _ = window_pof(F, cells.cell_deg, grid, paper.fps)
         m, q = rel(dps, paper.pof_dps[1:])
         say(
             f"(c) pano.mp4: field made of the paper's own window flows vs the paper's windows: median {m:.3f} / p90 {q:.3f}"
@@ -266,7 +270,7 @@ def main(argv=None) -> int:
         ("80 x 80", (80.0, 80.0)),
         (f"quest-2 {q2.hfov_deg:g} x {q2.vfov_deg:g}", (q2.hfov_deg, q2.vfov_deg)),
     ]
-    print(f"load average {os.getloadavg()[0]:.1f}; sphere config {S.SphereConfig()}")
+    print(f"load average {os.getloadavg()[0]:.1f}; sphere config {SphereConfig()}")
     if args.diagnose:
         print("\n4. Why sphere and paper differ on pano.mp4")
         diagnose(grid, args.pano_seconds)
@@ -306,8 +310,8 @@ def main(argv=None) -> int:
         dm, dp = rel(s.pof_dps[1:], p.pof_dps[1:])
         tf = np.arange(p.n_frames) / cfg.fps
         yaw, pitch, roll = hp.sample_angles_deg(tf, hold=True)
-        field, cells = S.require_field(s)
-        ex = S.viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=107.0)[1:]
+        field, cells = require_field(s)
+        ex = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=107.0)[1:]
         vt = viewport_truth(scene, yaw, pitch, roll, tr.time_s)[1:]
         em, ep = rel(ex, vt)
         rows1.append(

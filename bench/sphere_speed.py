@@ -20,11 +20,18 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator import sphere as S
-from simulator.geometry import grid_preset
-from simulator.preprocess import preprocess_video
+from simulator.cells import Frustum, _window_matrices, window_pof
+from simulator.epof import ViewportQuery
+from simulator.preprocess import (
+    FieldEstimator,
+    SphereConfig,
+    field_from_video,
+    preprocess_sphere,
+    preprocess_video,
+)
 from simulator.synth import SynthConfig, synthesize
 from simulator.video import iter_frames
+from simulator.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"
@@ -77,7 +84,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     vid = make_video(args.frames)
     grid = grid_preset("default")
-    cfg = S.SphereConfig()
+    cfg = SphereConfig()
     print(
         f"input {vid.name}: 2048x1024 H.264, {args.frames} frames, 30 fps; "
         f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
@@ -89,22 +96,22 @@ def main(argv=None) -> int:
     )
 
     # Sphere mode: field (decode + tiles + flow + splat), then the window matrix.
-    S.field_from_video(vid, cfg, end=3)  # warm caches (tile maps, splat matrix)
+    field_from_video(vid, cfg, end=3)  # warm caches (tile maps, splat matrix)
     res: dict = {}
 
     def sphere_run(hook):
-        res["field"], _ = S.field_from_video(vid, cfg, progress=hook)
+        res["field"], _ = field_from_video(vid, cfg, progress=hook)
 
     s_fps, s_cpu, _ = timed(sphere_run)
-    S._window_matrices.cache_clear()
+    _window_matrices.cache_clear()
     t = time.perf_counter()
-    S.window_pof(res["field"][:2], cfg.cell_deg, grid, 30.0)
+    window_pof(res["field"][:2], cfg.cell_deg, grid, 30.0)
     t_build = time.perf_counter() - t
     t = time.perf_counter()
-    S.window_pof(res["field"], cfg.cell_deg, grid, 30.0)
+    window_pof(res["field"], cfg.cell_deg, grid, 30.0)
     t_win = (time.perf_counter() - t) / args.frames
     t = time.perf_counter()
-    S.preprocess_sphere(vid, OUT / "speed_sphere.npz", grid=grid, config=cfg, progress=False)
+    preprocess_sphere(vid, OUT / "speed_sphere.npz", grid=grid, config=cfg, progress=False)
     e2e = args.frames / (time.perf_counter() - t)
     print(
         f"sphere mode: steady {s_fps:.1f} frames/s wall ({1000 / s_fps:.1f} ms/frame); "
@@ -135,7 +142,7 @@ def main(argv=None) -> int:
     )
 
     # Stage profile of sphere mode (CPU ms/frame, caller thread only, OpenCV may thread).
-    est = S.FieldEstimator((2048, 1024), 30.0, cfg)
+    est = FieldEstimator((2048, 1024), 30.0, cfg)
     geo = est._geo
     n = 20
     clock = time.process_time
@@ -170,7 +177,7 @@ def main(argv=None) -> int:
     from simulator.headpath import synth as synth_headpath
 
     field = res["field"]
-    q = S.ViewportQuery(cfg.cell_deg, S.Frustum.symmetric(107.0))
+    q = ViewportQuery(cfg.cell_deg, Frustum.symmetric(107.0))
     d = q.doubled(field[10])
     q.query(d, 10.0, 5.0, 0.0)
     reps = 20000
@@ -182,7 +189,7 @@ def main(argv=None) -> int:
     tt = np.arange(3600) / 30.0
     yaw, pitch, roll = hp.sample_angles_deg(tt, hold=True)
     fld = np.broadcast_to(field[10], (len(tt), *field.shape[1:]))
-    q2 = S.ViewportQuery(cfg.cell_deg, S.Frustum.symmetric(107.0))
+    q2 = ViewportQuery(cfg.cell_deg, Frustum.symmetric(107.0))
     t = time.perf_counter()
     q2.many(fld, yaw, pitch, roll)
     cold = time.perf_counter() - t

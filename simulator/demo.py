@@ -21,15 +21,29 @@ from __future__ import annotations
 
 import math
 import os
-import sys
 import time
+import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
+from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.geometry import head_rotation, perspective_rays
+from simulator.grf import GrfConfig
+from simulator.gridfile import load_grid
+from simulator.headpath import save_headpath_csv
+from simulator.headpath import synth as synth_headpath
+from simulator.preprocess.paper import preprocess_video
+from simulator.progress import Progress
+from simulator.render.eye import RenderConfig
+from simulator.synth.clip import load_truth, synthesize
+from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps
+from simulator.viewing import render_viewing
+from simulator.windows import grid_preset
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -82,10 +96,11 @@ _FILES = {
 }
 
 
-def _step(log: list, name: str, t0: float) -> float:
+def _step(log: list, name: str, t0: float, note: Callable[[str], None] | None) -> float:
     dt = time.perf_counter() - t0
     log.append((name, dt))
-    print(f"vimsim demo: {name} done in {dt:.1f} s", file=sys.stderr, flush=True)
+    if note is not None:
+        note(f"{name} done in {dt:.1f} s")
     return time.perf_counter()
 
 
@@ -160,28 +175,24 @@ def run_demo(
     output: str | os.PathLike = "outputs/demo",
     cfg: DemoConfig = DemoConfig(),
     *,
-    progress: bool = True,
+    progress: Progress | None = None,
+    note: Callable[[str], None] | None = None,
 ) -> dict:
     """Run the whole pipeline into ``output``; returns the summary (also ``summary.json``).
+
+    ``progress(done, total)`` follows each long step's frames; ``note(text)`` receives one
+    line per finished step (the CLI prints them).
 
     Raises InputError for an unusable output folder. A renderer failure (e.g. no EGL)
     is recorded in the summary and README instead of aborting the other outputs.
     """
-    from simulator.epof import compute_epof, write_epof_csv
-    from simulator.geometry import grid_preset, head_rotation, perspective_rays
-    from simulator.grf import GrfConfig
-    from simulator.gridfile import load_grid
-    from simulator.headpath import save_headpath_csv
-    from simulator.headpath import synth as synth_headpath
-    from simulator.preprocess import preprocess_video
-    from simulator.render import RenderConfig, render_viewing
-    from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 
     out = check_output_dir(output)
     log: list[tuple[str, float]] = []
     t_all = time.perf_counter()
     t0 = t_all
-    print(f"vimsim demo: writing to {out}", file=sys.stderr, flush=True)
+    if note is not None:
+        note(f"writing to {out}")
 
     # 1. The clip and its truth.
     scfg = SynthConfig(
@@ -195,14 +206,17 @@ def run_demo(
     )
     video, tpath = synthesize(scfg, out / "coaster.mp4", crf=18, progress=progress)
     t0 = _step(
-        log, f"synth: {scfg.n_frames} frames of {cfg.eye_size[0]}x{cfg.eye_size[1]} x 2 eyes", t0
+        log,
+        f"synth: {scfg.n_frames} frames of {cfg.eye_size[0]}x{cfg.eye_size[1]} x 2 eyes",
+        t0,
+        note,
     )
 
     # 2. Head path (covers the last frame; 60 Hz).
     hp = synth_headpath("look-around", cfg.seconds + 0.5, rate_hz=60.0, seed=cfg.seed)
     hpath = out / "headpath.csv"
     save_headpath_csv(hpath, hp)
-    t0 = _step(log, "headpath: look-around", t0)
+    t0 = _step(log, "headpath: look-around", t0, note)
 
     # 3. Preprocess the left eye.
     grid_def = grid_preset("default", size=(cfg.window, cfg.window))
@@ -215,6 +229,7 @@ def run_demo(
         log,
         f"preprocess: {grid_def.n_windows} windows of {cfg.window}x{cfg.window} px per frame",
         t0,
+        note,
     )
 
     # 4. EPOF and opacity; the truth beside them.
@@ -241,7 +256,7 @@ def run_demo(
             for k in range(len(res.frame))
         ]
     )
-    t0 = _step(log, "epof: EPOF, opacity and truth", t0)
+    t0 = _step(log, "epof: EPOF, opacity and truth", t0, note)
 
     # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs).
     render_error = None
@@ -260,15 +275,15 @@ def run_demo(
         except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands
             render_error = f"{type(e).__name__}: {e}"
         if render_error:
-            print(f"vimsim demo: warning: render failed: {render_error}", file=sys.stderr)
-        t0 = _step(log, f"render: two eyes at {cfg.render_size[0]}x{cfg.render_size[1]}", t0)
+            warnings.warn(f"render failed: {render_error}", stacklevel=2)
+        t0 = _step(log, f"render: two eyes at {cfg.render_size[0]}x{cfg.render_size[1]}", t0, note)
 
     # 6. Plots, README, summary.
     _plot_epof(out / "epof_opacity.png", res, exact)
     _plot_heatmaps(
         out / "pof_heatmaps.png", grid.pof_dps, truth_win, grid.yaw_deg, grid.pitch_deg, grid.fps
     )
-    t0 = _step(log, "plots", t0)
+    t0 = _step(log, "plots", t0, note)
 
     est = grid.pof_dps[1:].astype(np.float64)
     rel = np.abs(est - truth_win[1:]) / truth_win[1:]

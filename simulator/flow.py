@@ -36,12 +36,13 @@ from __future__ import annotations
 import math
 import threading
 from pathlib import Path
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.choices import FLOW_CHOICES, DISPreset
 from simulator.errors import InputError
 from simulator.geometry import check_fov
 
@@ -56,14 +57,11 @@ __all__ = [
     "make_backend",
 ]
 
-DISPreset = Literal["ultrafast", "fast", "medium"]
 DIS_PRESETS: dict[str, int] = {
     "ultrafast": cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
     "fast": cv2.DISOPTICAL_FLOW_PRESET_FAST,
     "medium": cv2.DISOPTICAL_FLOW_PRESET_MEDIUM,
 }
-#: What ``--flow`` accepts (for help texts).
-FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
 
 
 def _check_pair(prev: NDArray, nxt: NDArray) -> tuple[NDArray, NDArray]:

@@ -41,33 +41,25 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass, field
-from typing import Literal
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from simulator.choices import EYES, INTERPS, LAYOUTS, Interp
 from simulator.errors import InputError
 
 __all__ = [
     "EYES",
-    "GRID_PRESETS",
     "INTERPS",
     "LAYOUTS",
-    "Eye",
-    "Interp",
-    "Layout",
-    "WindowExtractor",
-    "WindowGrid",
     "check_equirect_aspect",
     "check_fov",
     "dir_to_lonlat",
     "equirect_pixel_lonlat",
     "equirect_remap_coords",
     "extract_view",
-    "grid_preset",
     "head_angles_deg",
     "head_rotation",
     "lonlat_to_dir",
@@ -80,23 +72,12 @@ __all__ = [
     "split_eye",
 ]
 
-Layout = Literal["mono", "top-bottom", "side-by-side"]
-Eye = Literal["left", "right"]
-LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
-#: Interpolation kernels of :func:`sample_equirect`. ``cubic``: OpenCV's bicubic (Keys,
-#: a = -0.75; sub-pixel positions quantised to 1/32 px; fast, used for the window grid).
-#: ``lagrange``: the 4-point Lagrange cubic that ffmpeg's v360 calls ``cubic``, exact
-#: sub-pixel positions, numpy (slower; closest to v360). ``linear``, ``nearest``: OpenCV.
-Interp = Literal["cubic", "lagrange", "linear", "nearest"]
-INTERPS: tuple[str, ...] = ("cubic", "lagrange", "linear", "nearest")
-EYES: tuple[str, ...] = ("left", "right")
 
 #: Extra rows/columns added around an equirect frame before bicubic sampling, so that
 #: the 4x4 kernel sees the wrapped seam and the other side of each pole.
 _PAD = 4
 
 
-# ----------------------------------------------------------------------------- rotations
 def head_rotation(yaw_deg, pitch_deg, roll_deg=0.0) -> Rotation:
     """Rotation taking head-frame vectors to world-frame vectors.
 
@@ -132,7 +113,6 @@ def head_angles_deg(
     return a[..., 0], -a[..., 1], -a[..., 2]
 
 
-# ------------------------------------------------------------------- sphere <-> equirect
 def lonlat_to_dir(lon, lat) -> NDArray[np.float64]:
     """Unit directions, shape ``(..., 3)``, from longitude/latitude in **radians**
     (broadcast against each other).
@@ -180,7 +160,6 @@ def lonlat_to_equirect_xy(lon, lat, width: int, height: int) -> tuple[NDArray, N
     return x, y
 
 
-# -------------------------------------------------------------------- perspective views
 def check_fov(
     hfov_deg: float, vfov_deg: float | None = None, *, source: str = ""
 ) -> tuple[float, float]:
@@ -199,9 +178,6 @@ def check_fov(
             raise InputError(f"{pre}{name} must be degrees in (0, 180); got {v}")
         out.append(f)
     return out[0], out[1]
-
-
-_check_fov = check_fov
 
 
 def _check_size(size: tuple[int, int]) -> tuple[int, int]:
@@ -256,7 +232,7 @@ def perspective_rays(size: tuple[int, int], hfov_deg: float, vfov_deg: float | N
     """
     w, h = _check_size(size)
     vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
-    _check_fov(hfov_deg, vfov_deg)
+    check_fov(hfov_deg, vfov_deg)
     return _perspective_rays_cached(w, h, float(hfov_deg), float(vfov_deg))
 
 
@@ -281,9 +257,6 @@ def equirect_remap_coords(
     lon, lat = dir_to_lonlat(dirs)
     x, y = lonlat_to_equirect_xy(lon, lat, width, height)
     return (x - 0.5 + _PAD).astype(np.float32), (y - 0.5 + _PAD).astype(np.float32)
-
-
-_equirect_remap_coords = equirect_remap_coords
 
 
 def perspective_map(
@@ -316,7 +289,7 @@ def perspective_map(
     dirs, _ = perspective_rays(size, hfov_deg, vfov_deg)
     R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
     world = dirs.astype(np.float64) @ R.T
-    return _equirect_remap_coords(world, W, H)
+    return equirect_remap_coords(world, W, H)
 
 
 def pad_equirect(img: NDArray) -> NDArray:
@@ -345,9 +318,6 @@ def pad_equirect(img: NDArray) -> NDArray:
     return np.concatenate([tall[:, -p:], tall, tall[:, :p]], axis=1)
 
 
-_pad_equirect = pad_equirect
-
-
 def sample_equirect(
     img: NDArray,
     map_x: NDArray[np.float32],
@@ -364,7 +334,7 @@ def sample_equirect(
     """
     if interp not in INTERPS:
         raise InputError(f"unknown interpolation {interp!r}; expected one of {', '.join(INTERPS)}")
-    padded = _pad_equirect(np.ascontiguousarray(img))
+    padded = pad_equirect(np.ascontiguousarray(img))
     if interp == "lagrange":
         return _remap_lagrange(padded, map_x, map_y)
     flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}[
@@ -450,11 +420,10 @@ def rotate_equirect(img: NDArray, rot: Rotation, *, interp: Interp = "cubic") ->
     lon, lat = equirect_pixel_lonlat(W, H)
     d = lonlat_to_dir(lon[None, :], lat[:, None])
     src = rot.inv().apply(d.reshape(-1, 3)).reshape(H, W, 3)
-    mx, my = _equirect_remap_coords(src, W, H)
+    mx, my = equirect_remap_coords(src, W, H)
     return sample_equirect(img, mx, my, interp=interp)
 
 
-# ---------------------------------------------------------------------- stereo, aspect
 def split_eye(
     frame: NDArray, layout: str = "mono", eye: str = "left", *, source: str = "frame"
 ) -> NDArray:
@@ -541,176 +510,3 @@ def check_equirect_aspect(
             f"{extra}, {aspect:.3f}:1 per eye with layout {layout}{hint}"
         )
     return w, h
-
-
-# ------------------------------------------------------------------ sliding-window grid
-@dataclass(frozen=True)
-class WindowGrid:
-    """The sliding-window grid of the paper (section 3.2), in degrees.
-
-    Window centres: yaw ``yaw_start_deg + k * yaw_step_deg`` for k < 360 / yaw_step_deg
-    (wrapping), pitch from ``pitch_min_deg`` to ``pitch_max_deg`` in ``pitch_step_deg``
-    steps. Each window is a perspective view with no roll, ``hfov_deg x vfov_deg``
-    (exact FOVs), sampled at ``size`` pixels.
-
-    Presets (:data:`GRID_PRESETS`): ``default`` = 15 deg yaw x 7.5 deg pitch steps, pitch
-    -37.5..37.5 (24 x 11 = 264 windows); ``paper-198`` = 20 deg yaw steps (18 x 11).
-    """
-
-    yaw_step_deg: float = 15.0
-    pitch_step_deg: float = 7.5
-    pitch_min_deg: float = -37.5
-    pitch_max_deg: float = 37.5
-    yaw_start_deg: float = -180.0
-    hfov_deg: float = 107.0
-    vfov_deg: float = 107.0
-    size: tuple[int, int] = (256, 256)
-    yaw_deg: NDArray = field(init=False, repr=False, compare=False)
-    pitch_deg: NDArray = field(init=False, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        _check_fov(self.hfov_deg, self.vfov_deg)
-        _check_size(self.size)
-        object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
-        if not (0 < self.yaw_step_deg <= 360):
-            raise InputError(f"grid yaw step must be in (0, 360] degrees; got {self.yaw_step_deg}")
-        n_yaw = 360.0 / self.yaw_step_deg
-        if abs(n_yaw - round(n_yaw)) > 1e-6:
-            raise InputError(f"grid yaw step must divide 360 degrees; got {self.yaw_step_deg}")
-        if not (self.pitch_step_deg > 0):
-            raise InputError(f"grid pitch step must be > 0 degrees; got {self.pitch_step_deg}")
-        if not (-90 <= self.pitch_min_deg <= self.pitch_max_deg <= 90):
-            raise InputError(
-                f"grid pitch range must satisfy -90 <= min <= max <= 90; got {self.pitch_min_deg}..{self.pitch_max_deg}"
-            )
-        yaw = self.yaw_start_deg + self.yaw_step_deg * np.arange(round(n_yaw))
-        yaw = (yaw + 180.0) % 360.0 - 180.0
-        n_p = math.floor((self.pitch_max_deg - self.pitch_min_deg) / self.pitch_step_deg + 1e-9) + 1
-        pitch = self.pitch_min_deg + self.pitch_step_deg * np.arange(n_p)
-        yaw.setflags(write=False)
-        pitch.setflags(write=False)
-        object.__setattr__(self, "yaw_deg", yaw)
-        object.__setattr__(self, "pitch_deg", pitch)
-
-    @property
-    def shape(self) -> tuple[int, int]:
-        """``(P, Y)``: number of pitch rows and yaw columns (the grid file's axis order)."""
-        return len(self.pitch_deg), len(self.yaw_deg)
-
-    @property
-    def n_windows(self) -> int:
-        return len(self.pitch_deg) * len(self.yaw_deg)
-
-    def centres_deg(self) -> tuple[NDArray, NDArray]:
-        """``(pitch, yaw)`` of every window, each shape ``(P, Y)``, degrees."""
-        return np.meshgrid(self.pitch_deg, self.yaw_deg, indexing="ij")
-
-    def to_dict(self) -> dict:
-        return {
-            "yaw_step_deg": self.yaw_step_deg,
-            "pitch_step_deg": self.pitch_step_deg,
-            "pitch_min_deg": self.pitch_min_deg,
-            "pitch_max_deg": self.pitch_max_deg,
-            "yaw_start_deg": self.yaw_start_deg,
-            "hfov_deg": self.hfov_deg,
-            "vfov_deg": self.vfov_deg,
-            "size": list(self.size),
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict) -> WindowGrid:
-        d = dict(d)
-        if "size" in d:
-            d["size"] = tuple(d["size"])
-        return cls(**d)
-
-
-GRID_PRESETS: dict[str, dict] = {
-    "default": {
-        "yaw_step_deg": 15.0,
-        "pitch_step_deg": 7.5,
-        "pitch_min_deg": -37.5,
-        "pitch_max_deg": 37.5,
-    },
-    "paper-198": {
-        "yaw_step_deg": 20.0,
-        "pitch_step_deg": 7.5,
-        "pitch_min_deg": -37.5,
-        "pitch_max_deg": 37.5,
-    },
-}
-
-
-def grid_preset(
-    name: str = "default",
-    *,
-    hfov_deg: float = 107.0,
-    vfov_deg: float | None = None,
-    size: tuple[int, int] = (256, 256),
-) -> WindowGrid:
-    """A :class:`WindowGrid` from a preset name (``default`` or ``paper-198``)."""
-    if name not in GRID_PRESETS:
-        raise InputError(f"unknown grid preset {name!r}; expected one of {', '.join(GRID_PRESETS)}")
-    return WindowGrid(
-        **GRID_PRESETS[name],
-        hfov_deg=hfov_deg,
-        vfov_deg=hfov_deg if vfov_deg is None else vfov_deg,
-        size=size,
-    )
-
-
-class WindowExtractor:
-    """Extract every window of a :class:`WindowGrid` from equirect frames of one size, fast.
-
-    The sampling maps of all windows are built once (per grid and frame size), stacked
-    into one tall map and converted to OpenCV's fixed-point form, then every frame is a
-    single ``cv2.remap`` call (bicubic, seam wrap, pole crossing).
-
-    Parameters
-    ----------
-    grid : WindowGrid
-    equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
-
-    Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``.
-    """
-
-    def __init__(self, grid: WindowGrid, equirect_size: tuple[int, int]):
-        self.grid = grid
-        self.equirect_size = _check_size(equirect_size)
-        self._m1, self._m2 = _window_maps(grid, self.equirect_size)
-
-    def __call__(self, frame: NDArray, *, interp: Literal["cubic", "linear"] = "cubic") -> NDArray:
-        H, W = frame.shape[:2]
-        if (W, H) != self.equirect_size:
-            raise InputError(
-                f"frame is {W}x{H}; this extractor was built for {self.equirect_size[0]}x{self.equirect_size[1]}"
-            )
-        flags = cv2.INTER_CUBIC if interp == "cubic" else cv2.INTER_LINEAR
-        padded = _pad_equirect(np.ascontiguousarray(frame))
-        out = cv2.remap(padded, self._m1, self._m2, flags, borderMode=cv2.BORDER_REPLICATE)
-        P, Y = self.grid.shape
-        w, h = self.grid.size
-        # Tiles are laid out (P*h, Y*w) (OpenCV limits each side to < 32767 pixels).
-        return np.moveaxis(out.reshape(P, h, Y, w, *out.shape[2:]), 2, 1)
-
-
-@functools.lru_cache(maxsize=4)
-def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
-    W, H = equirect_size
-    dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
-    pitch, yaw = grid.centres_deg()
-    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()  # (N, 3, 3)
-    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
-    mx, my = _equirect_remap_coords(world, W, H)
-    (P, Y), (w, h) = grid.shape, grid.size
-    # Tile the windows as a (P*h, Y*w) image: row block = pitch, column block = yaw.
-    mx = mx.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
-    my = my.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
-    if max(mx.shape) >= 32767:
-        raise InputError(
-            f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows"
-        )
-    m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
-    m1.setflags(write=False)
-    m2.setflags(write=False)
-    return m1, m2

@@ -30,7 +30,9 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.choices import OPACITY_SOURCES
 from simulator.errors import InputError
+from simulator.gridfile import GridFile
 
 __all__ = ["GrainBuckets", "GrainField", "GrfConfig", "cutout_alpha", "grain_count"]
 
@@ -234,3 +236,70 @@ def _buckets(centers: NDArray, reach: float, radius: float, cell: float) -> Grai
     for a in (out.bands, out.cell_start, out.entries):
         a.setflags(write=False)
     return out
+
+
+# ------------------------------------------------------------------------- opacity
+
+
+@dataclass(frozen=True)
+class OpacityRule:
+    """GRF opacity from EPOF (paper 4.2.2).
+
+    Opacity = clamp((EPOF - lo) / (hi - lo), 0, 1) with ``lo``/``hi`` the ``low_pct`` /
+    ``high_pct`` percentiles of the flow of ``source``: ``"grid"`` = every window of
+    every frame of the grid file (the paper's "whole video"), ``"viewing"`` = this
+    viewing's EPOF. ``smoothing_s`` > 0 applies a causal exponential smoothing with that
+    time constant (seconds) to the opacity; 0 (default) = none.
+    """
+
+    low_pct: float = 10.0
+    high_pct: float = 90.0
+    source: str = "grid"
+    smoothing_s: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
+            raise InputError(
+                f"opacity percentiles must satisfy 0 <= low < high <= 100; got {self.low_pct}, {self.high_pct}"
+            )
+        if self.source not in OPACITY_SOURCES:
+            raise InputError(f"opacity source must be grid or viewing; got {self.source!r}")
+        if not (self.smoothing_s >= 0.0 and math.isfinite(self.smoothing_s)):
+            raise InputError(f"opacity smoothing must be >= 0 seconds; got {self.smoothing_s}")
+
+    def fit(self, grid: GridFile | None, epof_dps) -> tuple[float, float]:
+        """``(lo, hi)`` thresholds in deg/s from the grid's flow or this viewing's EPOF."""
+        if self.source == "grid":
+            if grid is None:
+                raise InputError("opacity source 'grid' needs the grid file")
+            vals = np.asarray(grid.pof_dps, np.float64).ravel()
+        else:
+            vals = np.asarray(epof_dps, np.float64).ravel()
+        vals = vals[np.isfinite(vals)]
+        if vals.size == 0:
+            raise InputError("no finite flow values to take opacity percentiles from")
+        lo, hi = np.percentile(vals, [self.low_pct, self.high_pct])
+        return float(lo), float(hi)
+
+    def __call__(self, epof_dps, thresholds_dps: tuple[float, float], *, fps: float | None = None):
+        """Opacity in [0, 1] of each EPOF value (deg/s), shape of ``epof_dps``.
+
+        ``fps`` (frames per second of the samples) is needed only when smoothing.
+        """
+        lo, hi = thresholds_dps
+        e = np.asarray(epof_dps, np.float64)
+        if hi > lo:
+            op = np.clip((e - lo) / (hi - lo), 0.0, 1.0)
+        else:  # constant flow: a step at the threshold
+            op = (e > lo).astype(np.float64)
+        if self.smoothing_s > 0 and op.size > 1:
+            if not fps:
+                raise InputError("opacity smoothing needs the frame rate")
+            a = 1.0 - math.exp(-1.0 / (fps * self.smoothing_s))
+            sm = np.empty_like(op)
+            acc = op.flat[0]
+            for i, x in enumerate(op.ravel()):
+                acc = acc + a * (x - acc)
+                sm.flat[i] = acc
+            op = sm
+        return op

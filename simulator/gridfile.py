@@ -34,9 +34,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.cells import CellGrid
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
-from simulator.geometry import WindowGrid
+from simulator.windows import WindowGrid
 
 __all__ = ["FORMAT", "VERSION", "GridFile", "content_hash", "load_grid", "save_grid"]
 
@@ -231,3 +232,41 @@ def content_hash(
             h.update(b)
             read += len(b)
     return "sha256:" + h.hexdigest()
+
+
+# ---------------------------------------------------------------- sphere-mode field
+#: How a user makes a grid with a field; quoted by every "no field" error.
+MAKE_FIELD_HINT = "vimsim preprocess VIDEO -o GRID.npz --method sphere"
+
+
+def cells_from_meta(meta: dict, *, source: str = "grid") -> CellGrid:
+    """The :class:`CellGrid` described by ``meta["field"]``; InputError if absent/invalid."""
+    fm = meta.get("field") if isinstance(meta, dict) else None
+    if not isinstance(fm, dict) or "cell_deg" not in fm:
+        raise InputError(
+            f"{source}: grid has no sphere-mode field; make one with `{MAKE_FIELD_HINT}`"
+        )
+    return CellGrid(float(fm["cell_deg"]))
+
+
+def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
+    """``(field_dps (T, n_lat, n_lon) float32, cells)`` of a loaded grid file.
+
+    Raises InputError (one line, with the command that makes one) if the grid has no
+    field, e.g. a paper-mode grid.
+    """
+    src = getattr(grid_file, "path", "") or "grid"
+    f = getattr(grid_file, "field_dps", None)
+    if f is None:
+        raise InputError(
+            f"{src}: grid has no sphere-mode field (made in paper mode?); make one with `{MAKE_FIELD_HINT}`"
+        )
+    cells = cells_from_meta(grid_file.meta, source=src)
+    f = np.asarray(f)
+    if f.ndim != 3 or f.shape[1:] != cells.shape:
+        raise InputError(
+            f"{src}: field_dps has shape {f.shape}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells"
+        )
+    if not np.all(np.isfinite(f)):
+        raise InputError(f"{src}: field_dps has non-finite values")
+    return f.astype(np.float32, copy=False), cells

@@ -1,34 +1,46 @@
-"""The CLI as a whole: registry, exit statuses, and choice lists kept in step with the
-modules they mirror (the command modules copy them to stay light to import)."""
+"""The CLI as a whole: registry, exit statuses, and choice lists from simulator.choices."""
 
 from __future__ import annotations
 
+import argparse
 import subprocess
 import sys
 
 import pytest
 
-from simulator import analyze, geometry, headpath, synth
+from simulator import choices, readers, windows
 from simulator.cli import COMMANDS, build_parser, main
-from simulator.commands import analyze as c_analyze
-from simulator.commands import headpath as c_headpath
-from simulator.commands import preprocess as c_preprocess
-from simulator.commands import render as c_render
-from simulator.commands import synth as c_synth
-from simulator.commands import viewport as c_viewport
+from simulator.grf import OPACITY_SOURCES
+from simulator.headpath import SYNTH_KINDS
+from simulator.synth import SCENES
 
 
-def test_choice_lists_match_their_modules():
-    assert c_preprocess._LAYOUTS == geometry.LAYOUTS
-    assert c_render._LAYOUTS == geometry.LAYOUTS
-    assert c_viewport._LAYOUTS == geometry.LAYOUTS
-    assert c_viewport._EYES == geometry.EYES
-    assert c_viewport._INTERPS == geometry.INTERPS
-    assert c_preprocess._GRIDS == tuple(geometry.GRID_PRESETS)
-    assert c_headpath._KINDS == headpath.SYNTH_KINDS
-    assert c_headpath._FORMATS == ("auto", *headpath.FORMATS)
-    assert c_synth._SCENES == synth.SCENES
-    assert c_analyze._FLOW_STATS == analyze.FLOW_STATS
+def _choices(parser: argparse.ArgumentParser, *path: str) -> dict[str, tuple]:
+    """``{option: choices}`` of the subcommand reached by ``path`` (e.g. "headpath", "convert")."""
+    for name in path:
+        sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        parser = sub.choices[name]
+    return {
+        (a.option_strings[0] if a.option_strings else a.dest): tuple(a.choices)
+        for a in parser._actions
+        if a.choices is not None and not isinstance(a, argparse._SubParsersAction)
+    }
+
+
+def test_choice_lists_come_from_one_module():
+    """The parsers offer exactly the library's choices (both read simulator.choices)."""
+    p = build_parser()
+    for cmd in ("preprocess", "render", "viewport"):
+        assert _choices(p, cmd)["--layout"] == choices.LAYOUTS
+    assert _choices(p, "viewport")["--eye"] == choices.EYES
+    assert _choices(p, "viewport")["--interp"] == choices.INTERPS
+    assert _choices(p, "preprocess")["--grid"] == tuple(windows.GRID_PRESETS)
+    assert _choices(p, "preprocess")["--method"] == choices.PREPROCESS_METHODS
+    assert _choices(p, "headpath", "synth")["kind"] == SYNTH_KINDS
+    assert _choices(p, "headpath", "convert")["--format"] == ("auto", *readers.FORMATS)
+    assert _choices(p, "synth")["--scene"] == SCENES
+    assert _choices(p, "epof")["--opacity-source"] == OPACITY_SOURCES
+    assert _choices(p, "analyze")["--flow-stat"] == choices.FLOW_STATS
 
 
 def test_every_command_is_registered():

@@ -14,7 +14,6 @@ from hypothesis import strategies as st
 from simulator.cli import main
 from simulator.epof import (
     EPOF_COLUMNS,
-    OpacityRule,
     compute_epof,
     epof_from_grid,
     read_epof_csv,
@@ -22,9 +21,10 @@ from simulator.epof import (
     weighted_epof,
 )
 from simulator.errors import InputError
-from simulator.geometry import WindowGrid, grid_preset
+from simulator.grf import OpacityRule
 from simulator.gridfile import load_grid, save_grid
 from simulator.headpath import HeadPath, save_headpath_csv, synth
+from simulator.windows import WindowGrid, grid_preset
 
 
 # ------------------------------------------------------------ independent reference

@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 
 from simulator import geometry as g
 from simulator.errors import InputError
+from simulator.windows import WindowExtractor, WindowGrid, grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -261,30 +262,30 @@ def test_check_equirect_aspect():
 
 # ------------------------------------------------------------------------- window grid
 def test_grid_presets():
-    d = g.grid_preset("default")
+    d = grid_preset("default")
     assert d.n_windows == 264 and d.shape == (11, 24)
     assert d.pitch_deg[0] == -37.5 and d.pitch_deg[-1] == 37.5
     assert np.allclose(np.diff(d.yaw_deg), 15) and d.yaw_deg[0] == -180
-    p = g.grid_preset("paper-198")
+    p = grid_preset("paper-198")
     assert p.n_windows == 198 and p.shape == (11, 18)
     assert np.allclose(np.diff(p.yaw_deg), 20)
-    assert g.WindowGrid.from_dict(d.to_dict()) == d
+    assert WindowGrid.from_dict(d.to_dict()) == d
     with pytest.raises(InputError, match="preset"):
-        g.grid_preset("nope")
+        grid_preset("nope")
     with pytest.raises(InputError, match="divide 360"):
-        g.WindowGrid(yaw_step_deg=7)
+        WindowGrid(yaw_step_deg=7)
     with pytest.raises(InputError, match="fov"):
-        g.grid_preset(hfov_deg=180)
+        grid_preset(hfov_deg=180)
 
 
 def test_window_extractor_equals_extract_view():
-    grid = g.WindowGrid(
+    grid = WindowGrid(
         yaw_step_deg=45, pitch_step_deg=30, pitch_min_deg=-60, pitch_max_deg=60, size=(40, 32)
     )
     img = cv2.GaussianBlur(
         (np.random.default_rng(7).random((128, 256, 3)) * 255).astype(np.uint8), (0, 0), 1
     )
-    ex = g.WindowExtractor(grid, (256, 128))
+    ex = WindowExtractor(grid, (256, 128))
     tiles = ex(img)
     P, Y = grid.shape
     assert tiles.shape == (P, Y, 32, 40, 3)

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from simulator.errors import InputError
-from simulator.geometry import grid_preset
 from simulator.gridfile import VERSION, content_hash, load_grid, save_grid
 from simulator.video import MediaInfo
+from simulator.windows import grid_preset
 
 
 def _meta(video_path, n=5, **video):

@@ -17,11 +17,10 @@ from simulator.headpath import (
     CoarseSamplingWarning,
     HeadPath,
     RadiansWarning,
-    detect_format,
-    load_headpath,
     save_headpath_csv,
     synth,
 )
+from simulator.readers import detect_format, load_headpath, load_keyframes
 
 HT = "headtraces"
 
@@ -127,7 +126,7 @@ def test_synth_kinds(tmp_path):
             ]
         ),
     )
-    k = synth("keyframes", 0, rate_hz=10, keyframes=str(kf))
+    k = synth("keyframes", 0, rate_hz=10, keyframes=load_keyframes(kf))
     assert k.end_s == pytest.approx(2.0)
     assert k.sample_angles_deg([1.0])[0][0] == pytest.approx(45.0)
 
@@ -341,7 +340,7 @@ def test_synth_api_refuses_negative_seed_and_too_many_samples(tmp_path):
         synth("static", 1e308)
     kf = _write(tmp_path, "k.csv", "time_s,yaw_deg,pitch_deg\n0,0,0\n1,10,0\n")
     with pytest.raises(InputError, match="at most"):
-        synth("keyframes", 1e9, rate_hz=100, keyframes=str(kf))
+        synth("keyframes", 1e9, rate_hz=100, keyframes=load_keyframes(kf))
 
 
 def test_loaders_warn_when_poses_are_more_than_90_deg_apart(tmp_path, capsys):

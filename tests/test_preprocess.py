@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 from simulator import geometry
 from simulator.cli import main
 from simulator.errors import InputError
-from simulator.geometry import grid_preset, head_rotation, perspective_rays
+from simulator.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.preprocess import (
     PreprocessInterrupted,
@@ -25,6 +25,7 @@ from simulator.preprocess import (
     preprocess_video,
 )
 from simulator.video import VideoWriter
+from simulator.windows import grid_preset
 
 OBLIQUE = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
 FPS = 30.0
@@ -209,7 +210,7 @@ def test_real_kill9_subprocess(tmp_path, videos):
     out = tmp_path / "g.npz"
     code = (
         "import os, signal, sys\n"
-        "from simulator.geometry import grid_preset\n"
+        "from simulator.windows import grid_preset\n"
         "from simulator.preprocess import preprocess_video\n"
         "def hook(row):\n"
         "    if row == 4: os.kill(os.getpid(), signal.SIGKILL)\n"

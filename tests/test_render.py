@@ -21,6 +21,8 @@ import pytest
 from simulator.errors import InputError
 from simulator.geometry import perspective_rays
 from simulator.grf import GrfConfig
+from simulator.render import EyeRenderer, RenderConfig
+from simulator.viewing import OUTDIR_FILES, render_viewing
 
 REPO = Path(__file__).resolve().parents[1]
 GOLDEN = REPO / "tests" / "golden"
@@ -274,7 +276,7 @@ def test_parallax_only_with_grain_distance(ctx):
 
 # ------------------------------------------------------------------- renderer bits
 def test_shader_compile_error_names_file_and_line(ctx, monkeypatch):
-    import simulator.render as R
+    import simulator.render.gl as R
 
     orig = R.load_shader_source
 
@@ -290,7 +292,7 @@ def test_shader_compile_error_names_file_and_line(ctx, monkeypatch):
     with pytest.raises(
         R.ShaderError, match=r"shaders/eye\.frag:\d+: .*`vec3 d = u_head \* d_head \+;`"
     ):
-        R.EyeRenderer(ctx, R.RenderConfig(eye_size=(32, 32), grf=None))
+        EyeRenderer(ctx, RenderConfig(eye_size=(32, 32), grf=None))
     ctx.error  # noqa: B018 - reading clears a stale error from the failed compile
 
 
@@ -470,8 +472,8 @@ def test_cli_render_grid_from_another_video(ctx, tmp_path, capsys):
     from simulator.cli import main
 
     pytest.importorskip("simulator.preprocess")
-    from simulator.geometry import WindowGrid
     from simulator.gridfile import save_grid
+    from simulator.windows import WindowGrid
 
     vid = tmp_path / "m.mp4"
     _tiny_video(vid, n=4, fps=10)
@@ -649,8 +651,8 @@ def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
 
     monkeypatch.setattr(os, "replace", rec)
     cfg = R.RenderConfig(eye_size=(32, 32), grf=GrfConfig(seed=1))
-    s = R.render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
-    assert sorted(renamed) == sorted(R.OUTDIR_FILES) and renamed[-1] == "summary.json"
+    s = render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
+    assert sorted(renamed) == sorted(OUTDIR_FILES) and renamed[-1] == "summary.json"
     from simulator.fileio import json_text
 
     assert json.loads((tmp_path / "o" / "summary.json").read_text()) == json.loads(json_text(s))
@@ -661,8 +663,8 @@ def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
 def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_at):
     """A re-run into an existing OUTDIR that fails must not leave the previous run's
     epof.csv/summary.json beside new (or no) MP4s; other files in OUTDIR are kept."""
-    import simulator.epof
     import simulator.render as R
+    import simulator.viewing
     from simulator.cli import main
 
     vid = tmp_path / "m.mp4"
@@ -679,7 +681,7 @@ def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_a
     if fail_at == "render":
         monkeypatch.setattr(R.EyeRenderer, "render", boom)
     else:
-        monkeypatch.setattr(simulator.epof, "write_epof_csv", boom)
+        monkeypatch.setattr(simulator.viewing, "write_epof_csv", boom)
     with pytest.raises(RuntimeError, match="simulated"):
         main(argv)
     left = sorted(p.name for p in out.iterdir())

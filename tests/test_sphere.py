@@ -10,11 +10,22 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from simulator import sphere as S
+import simulator.preprocess.sphere
+from simulator.cells import CellGrid, Frustum, viewport_weights, window_pof
+from simulator.epof import ViewportQuery, viewport_epof
 from simulator.errors import InputError
-from simulator.geometry import grid_preset, head_rotation, perspective_rays
-from simulator.gridfile import load_grid, save_grid
+from simulator.geometry import head_rotation, perspective_rays
+from simulator.gridfile import load_grid, require_field, save_grid
 from simulator.headsets import HEADSETS, get_headset, resolve_fov
+from simulator.preprocess import (
+    FieldEstimator,
+    SphereConfig,
+    field_from_frames,
+    field_meta,
+    preprocess_sphere,
+)
+from simulator.preprocess.sphere import _FieldRows
+from simulator.windows import grid_preset
 
 CELL = 4.0
 
@@ -22,7 +33,7 @@ CELL = 4.0
 def _smooth_field(seed: int, cell: float = CELL, T: int = 1) -> np.ndarray:
     """A smooth positive random field (T, n_lat, n_lon) from a few dipoles/quadrupoles."""
     rng = np.random.default_rng(seed)
-    cells = S.CellGrid(cell)
+    cells = CellGrid(cell)
     lon, lat = cells.centres_lonlat()
     LON, LAT = np.meshgrid(lon, lat)
     d = np.stack([np.cos(LAT) * np.sin(LON), np.sin(LAT), np.cos(LAT) * np.cos(LON)], -1)
@@ -48,13 +59,13 @@ def _reference_epof(field2d, cell, R, frustum, n=256) -> float:
     world = dirs.reshape(-1, 3) @ R.T
     lon = np.arctan2(world[:, 0], world[:, 2])
     lat = np.arcsin(np.clip(world[:, 1], -1, 1))
-    idx = S.CellGrid(cell).index(lon, lat)
+    idx = CellGrid(cell).index(lon, lat)
     return float((field2d.ravel()[idx] * sa.ravel()).sum() / sa.sum())
 
 
 # ----------------------------------------------------------------------------- cells
 def test_cells_solid_angle_and_index():
-    cells = S.CellGrid(CELL)
+    cells = CellGrid(CELL)
     assert cells.shape == (45, 90)
     assert cells.solid_angles().sum() == pytest.approx(4 * math.pi, rel=1e-12)
     lon, lat = cells.centres_lonlat()
@@ -68,7 +79,7 @@ def test_cells_solid_angle_and_index():
 @pytest.mark.parametrize("bad", [0, 7, 50, -4, float("nan")])
 def test_cells_bad_size(bad):
     with pytest.raises(InputError, match="divide 180"):
-        S.CellGrid(bad)
+        CellGrid(bad)
 
 
 # ----------------------------------------------------------------------- integration
@@ -81,7 +92,7 @@ def test_viewport_weights_sum_to_view_solid_angle(fov):
         [rng.uniform(-180, 180, 40), rng.uniform(-90, 90, 40), rng.uniform(-180, 180, 40)]
     )
     R = head_rotation(ypr[:, 0], ypr[:, 1], ypr[:, 2]).as_matrix()
-    w = S.viewport_weights(CELL, R, S.Frustum.symmetric(h, v))
+    w = viewport_weights(CELL, R, Frustum.symmetric(h, v))
     assert np.abs(w.sum(axis=1) / true - 1).max() < 0.015
 
 
@@ -97,21 +108,21 @@ def test_exact_epof_matches_dense_ray_reference(yaw, pitch, roll, headset, seed)
     """Exact EPOF (analytic cell coverage, and the binned fast query) against >= 256^2
     rays per viewport: within 1% at any orientation, roll and asymmetric frusta included."""
     f = _smooth_field(seed)
-    fr = S.Frustum.symmetric(107) if headset is None else S.Frustum.from_headset(headset)
+    fr = Frustum.symmetric(107) if headset is None else Frustum.from_headset(headset)
     R = head_rotation(yaw, pitch, roll).as_matrix()
     ref = _reference_epof(f[0], CELL, R, fr)
-    w = S.viewport_weights(CELL, R, fr)
+    w = viewport_weights(CELL, R, fr)
     assert float(w @ f[0].ravel() / w.sum()) == pytest.approx(ref, rel=0.01)
-    got = S.viewport_epof(f, CELL, yaw, pitch, roll, frustum=fr)[0]
+    got = viewport_epof(f, CELL, yaw, pitch, roll, frustum=fr)[0]
     assert got == pytest.approx(ref, rel=0.01)
 
 
 def test_query_equals_weights_on_bins_and_is_yaw_shift_invariant():
     f = _smooth_field(3)[0]
-    fr = S.Frustum.symmetric(100, 90)
-    q = S.ViewportQuery(CELL, fr, step_deg=0.5)
+    fr = Frustum.symmetric(100, 90)
+    q = ViewportQuery(CELL, fr, step_deg=0.5)
     for yaw, pitch, roll in [(12.5, 20.0, 5.0), (-179.5, -88.0, 0.0), (90.0, 45.5, -170.0)]:
-        w = S.viewport_weights(CELL, head_rotation(yaw, pitch, roll).as_matrix(), fr)
+        w = viewport_weights(CELL, head_rotation(yaw, pitch, roll).as_matrix(), fr)
         assert q(f, yaw, pitch, roll) == pytest.approx(float(w @ f.ravel() / w.sum()), rel=1e-5)
     # A field rotated in longitude by k cells, looked at with yaw + k cells: same EPOF.
     g = np.roll(f, 7, axis=1)
@@ -119,18 +130,16 @@ def test_query_equals_weights_on_bins_and_is_yaw_shift_invariant():
 
 
 def test_uniform_field_gives_constant_everywhere():
-    f = np.full((3, *S.CellGrid(CELL).shape), 12.5, np.float32)
-    e = S.viewport_epof(
-        f, CELL, [0, 170, -60], [0, 89, -45], [0, 30, 180], hfov_deg=80, vfov_deg=110
-    )
+    f = np.full((3, *CellGrid(CELL).shape), 12.5, np.float32)
+    e = viewport_epof(f, CELL, [0, 170, -60], [0, 89, -45], [0, 30, 180], hfov_deg=80, vfov_deg=110)
     assert np.allclose(e, 12.5, rtol=1e-6)
-    dps, px = S.window_pof(f, CELL, grid_preset("paper-198", hfov_deg=90), fps=30.0)
+    dps, px = window_pof(f, CELL, grid_preset("paper-198", hfov_deg=90), fps=30.0)
     assert dps.shape == (3, 11, 18) and px.shape == dps.shape
     assert np.allclose(dps, 12.5, rtol=1e-5)
     # Pixel measure: linear in the field, larger for a smaller FOV at the same window size.
-    _, px2 = S.window_pof(2 * f, CELL, grid_preset("paper-198", hfov_deg=90), fps=30.0)
+    _, px2 = window_pof(2 * f, CELL, grid_preset("paper-198", hfov_deg=90), fps=30.0)
     assert np.allclose(px2, 2 * px, rtol=1e-5)
-    _, px_narrow = S.window_pof(f, CELL, grid_preset("paper-198", hfov_deg=60), fps=30.0)
+    _, px_narrow = window_pof(f, CELL, grid_preset("paper-198", hfov_deg=60), fps=30.0)
     assert px_narrow.mean() > px.mean()
 
 
@@ -157,11 +166,11 @@ def test_field_of_rotating_panorama_matches_truth():
     within 10% median of the analytic truth (oblique axis, 30 deg/s)."""
     fps = 30.0
     frames, sc = _rotating_frames(4, 30.0, (0.3, 0.8, 0.2), fps=fps)
-    field = S.field_from_frames(frames, (512, 256), fps, S.SphereConfig(tile_size=128))
+    field = field_from_frames(frames, (512, 256), fps, SphereConfig(tile_size=128))
     assert field.shape == (4, 45, 90) and field.dtype == np.float32
     assert np.array_equal(field[0], field[1])  # frame 0 repeats frame 1
     grid = grid_preset("default")
-    dps, _ = S.window_pof(field, CELL, grid, fps)
+    dps, _ = window_pof(field, CELL, grid, fps)
     truth = _window_truth(sc, grid, 1.5 / fps)
     rel = np.abs(dps[1:].mean(axis=0).ravel() - truth) / truth
     assert np.median(rel) < 0.10
@@ -169,21 +178,21 @@ def test_field_of_rotating_panorama_matches_truth():
 
 def test_still_video_gives_near_zero_field():
     frames, _ = _rotating_frames(1, 30.0, (0, 1, 0))
-    field = S.field_from_frames([frames[0]] * 3, (512, 256), 30.0, S.SphereConfig(tile_size=96))
+    field = field_from_frames([frames[0]] * 3, (512, 256), 30.0, SphereConfig(tile_size=96))
     assert float(np.abs(field).max()) < 0.5
 
 
 def test_estimator_bad_input():
     with pytest.raises(InputError, match="even width"):
-        S.FieldEstimator((501, 250), 30.0)
+        FieldEstimator((501, 250), 30.0)
     with pytest.raises(InputError, match="frame rate"):
-        S.FieldEstimator((512, 256), 0.0)
+        FieldEstimator((512, 256), 0.0)
     with pytest.raises(InputError, match="at least 2 frames"):
-        S.field_from_frames([np.zeros((256, 512), np.uint8)], (512, 256), 30.0)
+        field_from_frames([np.zeros((256, 512), np.uint8)], (512, 256), 30.0)
     with pytest.raises(InputError, match="tile FOV"):
-        S.SphereConfig(tile_fov_deg=80)
+        SphereConfig(tile_fov_deg=80)
     with pytest.raises(InputError, match="half-angle"):
-        S.Frustum(0.0, 40, 40, 40)
+        Frustum(0.0, 40, 40, 40)
 
 
 # -------------------------------------------------------------------------- grid files
@@ -210,7 +219,7 @@ def test_query_on_grid_without_field_says_how_to_make_one(tmp_path):
     save_grid(tmp_path / "paper.npz", z, z, grid, _meta())
     g = load_grid(tmp_path / "paper.npz")
     with pytest.raises(InputError) as e:
-        S.require_field(g)
+        require_field(g)
     msg = str(e.value)
     assert (
         "no sphere-mode field" in msg
@@ -222,17 +231,17 @@ def test_query_on_grid_without_field_says_how_to_make_one(tmp_path):
 def test_grid_with_field_round_trip(tmp_path):
     grid = grid_preset("default")
     f = _smooth_field(0, T=2)
-    dps, px = S.window_pof(f, CELL, grid, 30.0)
-    meta = {**_meta(), "field": S.field_meta(S.SphereConfig(cell_deg=CELL))}
+    dps, px = window_pof(f, CELL, grid, 30.0)
+    meta = {**_meta(), "field": field_meta(SphereConfig(cell_deg=CELL))}
     save_grid(tmp_path / "s.npz", dps, px, grid, meta, field_dps=f.astype(np.float16))
-    field, cells = S.require_field(load_grid(tmp_path / "s.npz"))
+    field, cells = require_field(load_grid(tmp_path / "s.npz"))
     assert cells.cell_deg == CELL and field.shape == f.shape and field.dtype == np.float32
     assert np.allclose(field, f, rtol=1e-3)
     # A field of the wrong shape for its meta is refused.
-    bad = {**meta, "field": S.field_meta(S.SphereConfig(cell_deg=5.0))}
+    bad = {**meta, "field": field_meta(SphereConfig(cell_deg=5.0))}
     save_grid(tmp_path / "b.npz", dps, px, grid, bad, field_dps=f)
     with pytest.raises(InputError, match="expected"):
-        S.require_field(load_grid(tmp_path / "b.npz"))
+        require_field(load_grid(tmp_path / "b.npz"))
 
 
 def test_preprocess_sphere_writes_a_grid_file(tmp_path):
@@ -244,17 +253,17 @@ def test_preprocess_sphere_writes_a_grid_file(tmp_path):
         for fr in frames:
             vw.write(np.repeat(fr[..., None], 3, axis=2))
     grid = grid_preset("paper-198", hfov_deg=90)
-    out = S.preprocess_sphere(
-        vid, tmp_path / "g.npz", grid=grid, config=S.SphereConfig(tile_size=96), progress=False
+    out = preprocess_sphere(
+        vid, tmp_path / "g.npz", grid=grid, config=SphereConfig(tile_size=96), progress=False
     )
     g = load_grid(out)
     assert g.pof_dps.shape == (3, 11, 18) and g.meta["method"] == "sphere"
     assert g.meta["grid"]["hfov_deg"] == 90
-    field, cells = S.require_field(g)
+    field, cells = require_field(g)
     assert field.shape == (3, *cells.shape) and g.field_dps.dtype == np.float16
     assert 20 < float(np.median(g.pof_dps[1])) < 40  # yaw pan at 30 deg/s
     with pytest.raises(InputError, match="at least 2"):
-        S.preprocess_sphere(vid, tmp_path / "h.npz", grid=grid, start_s=0.07, progress=False)
+        preprocess_sphere(vid, tmp_path / "h.npz", grid=grid, start_s=0.07, progress=False)
     assert not (tmp_path / "h.npz").exists()
 
 
@@ -274,10 +283,10 @@ def test_preprocess_sphere_checks_output_dir_before_any_work(tmp_path, monkeypat
     def no_work(*a, **k):
         raise AssertionError("field computed before the output directory was checked")
 
-    monkeypatch.setattr(S, "field_from_video", no_work)
+    monkeypatch.setattr(simulator.preprocess.sphere, "field_from_video", no_work)
     out = tmp_path / "missing" / "g.npz"
     with pytest.raises(InputError, match="output directory .* does not exist"):
-        S.preprocess_sphere(vid, out, grid=grid_preset("default"), progress=False)
+        preprocess_sphere(vid, out, grid=grid_preset("default"), progress=False)
 
 
 def test_preprocess_sphere_frame_range_is_paper_modes(tmp_path):
@@ -285,15 +294,16 @@ def test_preprocess_sphere_frame_range_is_paper_modes(tmp_path):
     vid = _rot_video(tmp_path / "rot.mp4")
     grid = grid_preset("default")
     with pytest.raises(InputError, match="past the end of the video"):
-        S.preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=5.0, progress=False)
+        preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=5.0, progress=False)
     with pytest.raises(InputError, match="--start must be seconds >= 0"):
-        S.preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=-1.0, progress=False)
+        preprocess_sphere(vid, tmp_path / "g.npz", grid=grid, start_s=-1.0, progress=False)
     assert not (tmp_path / "g.npz").exists()
 
 
 def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
     """A torch:MODEL.pt is loaded and validated once, not once per use."""
     import simulator.flow as F
+    import simulator.preprocess.sphere as PS
 
     vid = _rot_video(tmp_path / "rot.mp4")
     calls = []
@@ -303,12 +313,12 @@ def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
         calls.append((spec, size))
         return real(spec, size=size)
 
-    monkeypatch.setattr(F, "make_backend", counting)
-    out = S.preprocess_sphere(
+    monkeypatch.setattr(PS, "make_backend", counting)
+    out = preprocess_sphere(
         vid,
         tmp_path / "g.npz",
         grid=grid_preset("paper-198"),
-        config=S.SphereConfig(tile_size=96),
+        config=SphereConfig(tile_size=96),
         flow="dis",
         progress=False,
     )
@@ -329,8 +339,8 @@ def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
 )
 def test_frustum_symmetric_uses_the_one_fov_rule(fov, match):
     with pytest.raises(InputError, match=match):
-        S.Frustum.symmetric(*fov)
-    assert S.Frustum.symmetric(179.0).hfov_deg == 179.0
+        Frustum.symmetric(*fov)
+    assert Frustum.symmetric(179.0).hfov_deg == 179.0
 
 
 # ---------------------------------------------------------------------------- headsets
@@ -344,7 +354,7 @@ def test_headset_profiles():
     for h in HEADSETS.values():
         assert h.source
         assert 60 < h.hfov_deg < 130 and 60 < h.vfov_deg < 130
-    fr = S.Frustum.from_headset("pimax-crystal", "right")
+    fr = Frustum.from_headset("pimax-crystal", "right")
     assert fr.hfov_deg == pytest.approx(93.30) and fr.left_deg == pytest.approx(41.65)
 
 
@@ -381,14 +391,14 @@ def test_compute_epof_uses_the_field(tmp_path):
         pytest.skip("issue 7 patch /tmp/sphere_patches/simulator_epof.py.diff not applied")
     grid = grid_preset("default")
     f = _smooth_field(2, T=4)
-    dps, px = S.window_pof(f, CELL, grid, 30.0)
-    meta = {**_meta(), "n_frames": 4, "field": S.field_meta(S.SphereConfig(cell_deg=CELL))}
+    dps, px = window_pof(f, CELL, grid, 30.0)
+    meta = {**_meta(), "n_frames": 4, "field": field_meta(SphereConfig(cell_deg=CELL))}
     save_grid(tmp_path / "s.npz", dps, px, grid, meta, field_dps=f)
     g = load_grid(tmp_path / "s.npz")
     hp = synth("sine", 1.0, rate_hz=60.0)
     auto = compute_epof(g, hp, hfov_deg=90.0, vfov_deg=70.0)
     yaw, pitch, roll = hp.sample_angles_deg(np.arange(4) / 30.0)
-    exact = S.viewport_epof(f, CELL, yaw, pitch, roll, hfov_deg=90.0, vfov_deg=70.0)
+    exact = viewport_epof(f, CELL, yaw, pitch, roll, hfov_deg=90.0, vfov_deg=70.0)
     assert np.allclose(auto.epof_dps, exact, rtol=1e-9) and auto.meta["method"] == "sphere"
     assert compute_epof(g, hp, method="paper").meta["method"] == "paper"
     z = np.zeros((4, *grid.shape), np.float32)
@@ -401,7 +411,7 @@ def test_compute_epof_uses_the_field(tmp_path):
 def test_field_rows_grow_and_repeat_row_one(expected):
     """The field accumulator: rows in order whatever the expected count (grown when it
     was short, trimmed when long), row 0 a copy of row 1."""
-    rows = S._FieldRows((2, 3), expected)
+    rows = _FieldRows((2, 3), expected)
     data = [np.full((2, 3), k + 1.0, np.float32) for k in range(5)]
     for d in data:
         rows.append(d)

@@ -285,10 +285,10 @@ def test_cli_synth_writes_clip(tmp_path, capsys):
 @pytest.mark.parametrize("scene,bound", [("rotate", 0.05), ("forward", 0.05)])
 def test_preprocess_matches_truth_on_small_clip(tmp_path, scene, bound):
     """CI-sized version of bench/accuracy.py: DIS on a 384x192 clip, 8 x 3 windows."""
-    from simulator.geometry import WindowGrid
     from simulator.gridfile import load_grid
     from simulator.preprocess import preprocess_video
     from simulator.synth import window_truth_dps
+    from simulator.windows import WindowGrid
 
     cfg = SynthConfig(
         scene, seconds=0.4, fps=10, size=(384, 192), axis=(1.0, 2.0, 0.5), omega_dps=40.0

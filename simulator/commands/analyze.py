@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-__all__ = ["register", "run"]
+from simulator.choices import FLOW_STATS
 
-_FLOW_STATS = ("mean", "median", "sum")  # = simulator.analyze.FLOW_STATS (light import)
+__all__ = ["register", "run"]
 
 
 def _conditions(text: str) -> tuple[str, str]:
@@ -54,7 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--flow-stat",
-        choices=_FLOW_STATS,
+        choices=FLOW_STATS,
         default="mean",
         help="session flow from an EPOF CSV: mean, median or sum of epof_dps (deg/s); "
         "default mean. The 'flow' column, where given, is used as is",

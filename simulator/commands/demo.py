@@ -42,11 +42,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run the demo; 0 when every output was written, 1 if the renderer failed."""
+    from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.demo import DemoConfig, run_demo
 
-    s = run_demo(
-        args.output, DemoConfig(seconds=args.seconds, seed=args.seed), progress=not args.no_progress
-    )
+    def note(text: str) -> None:
+        print(f"vimsim demo: {text}", file=sys.stderr, flush=True)
+
+    with (
+        warnings_to_stderr("vimsim demo"),
+        progress_bar("demo", enabled=not args.no_progress) as bar,
+    ):
+        s = run_demo(
+            args.output, DemoConfig(seconds=args.seconds, seed=args.seed), progress=bar, note=note
+        )
     print(
         f"wrote {len(s['files'])} files to {args.output} in {s['timings_s']['total']:.1f} s (see README.txt)"
     )

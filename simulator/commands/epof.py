@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from simulator.choices import EPOF_METHODS, OPACITY_SOURCES
 from simulator.commands._types import add_fov_arguments, fov_from_args
 
 __all__ = ["register", "run"]
@@ -70,7 +71,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
     p.add_argument(
         "--method",
-        choices=("auto", "paper", "sphere"),
+        choices=EPOF_METHODS,
         default="auto",
         help="paper: overlap-weighted window POFs (paper 3.5); sphere: exact EPOF, the field of a "
         "'vimsim preprocess --method sphere' grid integrated over the actual viewport (any FOV); "
@@ -96,7 +97,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--opacity-source",
-        choices=("grid", "viewing"),
+        choices=OPACITY_SOURCES,
         default="grid",
         help="percentiles of every window of every frame (grid, the paper) or of this viewing's EPOF",
     )
@@ -131,8 +132,10 @@ def _check_output_file(path: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
-    from simulator.commands.headpath import load_headpath_args, warnings_to_stderr
-    from simulator.epof import OpacityRule, compute_epof, plot_epof, write_epof_csv
+    from simulator.commands._progress import warnings_to_stderr
+    from simulator.commands.headpath import load_headpath_args
+    from simulator.epof import compute_epof, plot_epof, write_epof_csv
+    from simulator.grf import OpacityRule
     from simulator.gridfile import load_grid
 
     for out in (args.output, args.plot):

@@ -11,23 +11,11 @@ import argparse
 import math
 import sys
 
+from simulator.choices import HEADPATH_FORMATS, SYNTH_KINDS
+from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import nonneg_int, positive_float
 
-__all__ = ["add_reader_options", "load_headpath_args", "register", "run", "warnings_to_stderr"]
-
-_KINDS = ("static", "sweep", "sine", "look-around", "keyframes")  # = headpath.SYNTH_KINDS
-_FORMATS = (
-    "auto",
-    "canonical",
-    "quat",
-    "keyframes-json",
-    "corbillon",
-    "corbillon-euler",
-    "salient360-dyn",
-    "salient360-static",
-    "avtrack360",
-    "360vidstr",
-)  # = ("auto",) + headpath.FORMATS (light import)
+__all__ = ["add_reader_options", "load_headpath_args", "register", "run"]
 
 
 def _float(text: str) -> float:
@@ -56,7 +44,7 @@ def add_reader_options(p: argparse.ArgumentParser) -> None:
     """--format, --video, --user (shared with ``vimsim epof``)."""
     p.add_argument(
         "--format",
-        choices=_FORMATS,
+        choices=("auto", *HEADPATH_FORMATS),
         default="auto",
         help="head path format (default auto: detected from the content); see docs/headpath.md",
     )
@@ -98,7 +86,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
             "roll_deg), Slerp between them."
         ),
     )
-    s.add_argument("kind", choices=_KINDS, metavar="KIND", help=", ".join(_KINDS))
+    s.add_argument("kind", choices=SYNTH_KINDS, metavar="KIND", help=", ".join(SYNTH_KINDS))
     s.add_argument("-o", "--output", required=True, metavar="PATH.csv")
     s.add_argument(
         "--seconds",
@@ -196,27 +184,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     w.set_defaults(func=run, headpath_command="show")
 
 
-def warnings_to_stderr(prog: str):
-    """Context manager printing warnings as one line ``<prog>: warning: ...`` on stderr."""
-    import warnings
-
-    cm = warnings.catch_warnings()
-
-    class _Ctx:
-        def __enter__(self):
-            cm.__enter__()
-            warnings.simplefilter("always")
-            warnings.showwarning = lambda msg, *a, **k: print(
-                f"{prog}: warning: {msg}", file=sys.stderr
-            )
-            return self
-
-        def __exit__(self, *exc):
-            return cm.__exit__(*exc)
-
-    return _Ctx()
-
-
 def load_headpath_args(args: argparse.Namespace, path, prog: str):
     """Load the head path ``path`` with the options of :func:`add_reader_options` in ``args``
     (missing ones = defaults), reader warnings printed as ``<prog>: warning: ...`` on stderr.
@@ -224,7 +191,7 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
     For commands reading a head path (``vimsim epof``, ``vimsim render``): add
     :func:`add_reader_options` to the parser and call this. InputError on bad input.
     """
-    from simulator.headpath import load_headpath
+    from simulator.readers import load_headpath
 
     with warnings_to_stderr(prog):
         return load_headpath(
@@ -238,6 +205,8 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
 def run(args: argparse.Namespace) -> int:
     """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
     from simulator import headpath as hp_mod
+    from simulator.errors import InputError
+    from simulator.readers import load_headpath, load_keyframes
 
     with warnings_to_stderr("vimsim headpath"):
         if args.headpath_command == "synth":
@@ -252,16 +221,16 @@ def run(args: argparse.Namespace) -> int:
                 "pitch_freq": args.pitch_freq,
             }
             if args.kind == "keyframes":
-                params = {"keyframes": args.keyframes}
+                params = {"keyframes": load_keyframes(args.keyframes)}
             elif args.seconds is None:
-                raise hp_mod.InputError(f"synth {args.kind}: --seconds is required")
+                raise InputError(f"synth {args.kind}: --seconds is required")
             hp = hp_mod.synth(
                 args.kind, args.seconds or 0.0, rate_hz=args.rate, seed=args.seed, **params
             )
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
-        hp = hp_mod.load_headpath(args.input, args.format, video=args.video, user=args.user)
+        hp = load_headpath(args.input, args.format, video=args.video, user=args.user)
         if args.headpath_command == "convert":
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.start_s:.3f}..{hp.end_s:.3f} s")

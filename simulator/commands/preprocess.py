@@ -5,12 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from simulator.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
 from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float
 
 __all__ = ["register", "run"]
-
-_LAYOUTS = ("mono", "top-bottom", "side-by-side")  # = simulator.geometry.LAYOUTS (light import)
-_GRIDS = ("default", "paper-198")  # = simulator.geometry.GRID_PRESETS
 
 
 def _window_size(text: str) -> int:
@@ -55,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", metavar="GRID.npz", required=True, help="grid file to write")
     p.add_argument(
         "--grid",
-        choices=_GRIDS,
+        choices=GRID_PRESET_NAMES,
         default="default",
         help="window grid: default (15 deg yaw steps, 264 windows) or paper-198 (20 deg, 198)",
     )
@@ -76,13 +74,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--layout",
-        choices=_LAYOUTS,
+        choices=LAYOUTS,
         default="mono",
         help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left)",
     )
     p.add_argument(
         "--eye",
-        choices=("left", "right"),
+        choices=EYES,
         default="left",
         help="eye of a stereo video (default left)",
     )
@@ -102,7 +100,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("paper", "sphere"),
+        choices=PREPROCESS_METHODS,
         default="paper",
         help="paper: flow per window (the paper, default); sphere: flow once per frame on 6 cube "
         "tiles, stored as an angular-speed field on lon/lat cells (field_dps) from which the "
@@ -141,9 +139,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Preprocess; 0 when the grid file was written, 2 on bad input, 130 when interrupted."""
+    from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.errors import InputError
-    from simulator.geometry import grid_preset
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
+    from simulator.windows import grid_preset
 
     hfov, vfov = fov_from_args(args, (107.0, 107.0))
     grid = grid_preset(
@@ -152,24 +151,28 @@ def run(args: argparse.Namespace) -> int:
     if args.threads is not None and args.threads < 1:
         raise InputError(f"--threads must be >= 1; got {args.threads}")
     if args.method == "sphere":
-        from simulator.sphere import SphereConfig, preprocess_sphere
+        from simulator.preprocess import SphereConfig, preprocess_sphere
 
         if args.resume:
             raise InputError(
                 "--resume is for --method paper; sphere mode runs in real time and keeps no checkpoint"
             )
-        out = preprocess_sphere(
-            args.video,
-            args.output,
-            grid=grid,
-            config=SphereConfig(cell_deg=args.cell),
-            flow=args.flow,
-            layout=args.layout,
-            eye=args.eye,
-            start_s=args.start,
-            end_s=args.end,
-            progress=not args.no_progress,
-        )
+        with (
+            warnings_to_stderr("vimsim preprocess"),
+            progress_bar("preprocess (sphere)", enabled=not args.no_progress) as bar,
+        ):
+            out = preprocess_sphere(
+                args.video,
+                args.output,
+                grid=grid,
+                config=SphereConfig(cell_deg=args.cell),
+                flow=args.flow,
+                layout=args.layout,
+                eye=args.eye,
+                start_s=args.start,
+                end_s=args.end,
+                progress=bar,
+            )
         print(f"wrote {out}")
         return 0
     import signal
@@ -182,20 +185,24 @@ def run(args: argparse.Namespace) -> int:
     except ValueError:  # not the main thread
         old_term = None
     try:
-        out = preprocess_video(
-            args.video,
-            args.output,
-            grid=grid,
-            flow=args.flow,
-            layout=args.layout,
-            eye=args.eye,
-            start_s=args.start,
-            end_s=args.end,
-            resume=args.resume,
-            checkpoint_every_s=args.checkpoint_every,
-            threads=args.threads,
-            progress=not args.no_progress,
-        )
+        with (
+            warnings_to_stderr("vimsim preprocess"),
+            progress_bar("preprocess", enabled=not args.no_progress) as bar,
+        ):
+            out = preprocess_video(
+                args.video,
+                args.output,
+                grid=grid,
+                flow=args.flow,
+                layout=args.layout,
+                eye=args.eye,
+                start_s=args.start,
+                end_s=args.end,
+                resume=args.resume,
+                checkpoint_every_s=args.checkpoint_every,
+                threads=args.threads,
+                progress=bar,
+            )
     except PreprocessInterrupted as e:
         print(f"vimsim preprocess: {e.message}", file=sys.stderr)
         return 130

@@ -8,12 +8,10 @@ from __future__ import annotations
 import argparse
 import sys
 
+from simulator.choices import LAYOUTS, X264_PRESETS
 from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
 
 __all__ = ["register", "run"]
-
-_LAYOUTS = ("mono", "top-bottom", "side-by-side")  # = simulator.geometry.LAYOUTS (light import)
-_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
 
 def _opacity(text: str) -> float | str:
@@ -86,7 +84,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--layout",
-        choices=_LAYOUTS,
+        choices=LAYOUTS,
         default="mono",
         help="stereo layout of VIDEO: top-bottom = left eye on top, side-by-side = left eye on the left (default mono: both eyes see the same frame)",
     )
@@ -131,7 +129,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="hold the head path's first/last pose where it does not cover the video",
     )
     p.add_argument(
-        "--preset", choices=_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
+        "--preset", choices=X264_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
     )
     p.add_argument(
         "--crf",
@@ -147,11 +145,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Parse the options and run :func:`simulator.render.render_viewing`; InputError -> exit 2."""
-    from simulator.commands.headpath import warnings_to_stderr
+    from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
-    from simulator.headpath import load_headpath
-    from simulator.render import RenderConfig, render_viewing
+    from simulator.readers import load_headpath
+    from simulator.render import RenderConfig
+    from simulator.viewing import render_viewing
 
     hfov, vfov = fov_from_args(args, (107.0, 107.0))
     with warnings_to_stderr("vimsim render"):
@@ -174,20 +173,24 @@ def run(args: argparse.Namespace) -> int:
             distance_m=args.grain_distance,
         )
     config = RenderConfig(eye_size=args.eye_size, hfov_deg=hfov, vfov_deg=vfov, grf=grf)
-    s = render_viewing(
-        args.video_file,
-        hp,
-        args.output,
-        grid=grid,
-        config=config,
-        opacity=args.opacity,
-        layout=args.layout,
-        hold=args.hold_last,
-        preset=args.preset,
-        crf=args.crf,
-        progress=not args.no_progress,
-        note=note,
-    )
+    with (
+        warnings_to_stderr("vimsim render"),
+        progress_bar("render", enabled=not args.no_progress) as bar,
+    ):
+        s = render_viewing(
+            args.video_file,
+            hp,
+            args.output,
+            grid=grid,
+            config=config,
+            opacity=args.opacity,
+            layout=args.layout,
+            hold=args.hold_last,
+            preset=args.preset,
+            crf=args.crf,
+            progress=bar,
+            note=note,
+        )
     w, h = s["eye_size"]
     print(
         f"vimsim render: {s['frames_written']} frames x 2 eyes {w}x{h} -> {s['outdir']}/left.mp4, "

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from simulator.choices import SCENES, SYNTH_LAYOUTS
 from simulator.commands._types import nonneg_int, positive_float, size_wxh
 
 __all__ = ["register", "run"]
-
-_SCENES = ("rotate", "forward", "coaster")  # = simulator.synth.SCENES (light import)
 
 
 def _axis(text: str) -> tuple[float, float, float]:
@@ -54,7 +53,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "output", metavar="OUT.mp4", help="output clip (H.264); OUT.truth.npz is written beside it"
     )
-    p.add_argument("--scene", required=True, choices=_SCENES, help="which motion")
+    p.add_argument("--scene", required=True, choices=SCENES, help="which motion")
     p.add_argument(
         "--seconds", type=positive_float, default=3.0, help="clip length, seconds (default 3)"
     )
@@ -73,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--layout",
-        choices=("mono", "top-bottom"),
+        choices=SYNTH_LAYOUTS,
         default="mono",
         help="mono, or top-bottom stereo (left eye on top, eyes 64 mm apart)",
     )
@@ -127,6 +126,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Render the clip and its truth file; print what was written."""
+    from simulator.commands._progress import progress_bar
     from simulator.synth import SynthConfig, synthesize
 
     cfg = SynthConfig(
@@ -142,7 +142,8 @@ def run(args: argparse.Namespace) -> int:
         speed_mps=args.speed,
         truth_cell_deg=args.truth_cell,
     )
-    video, truth = synthesize(cfg, args.output, crf=args.crf, progress=True)
+    with progress_bar(f"synth {cfg.scene}") as bar:
+        video, truth = synthesize(cfg, args.output, crf=args.crf, progress=bar)
     w, h = cfg.size
     print(
         f"wrote {video} ({cfg.scene}, {cfg.n_frames} frames at {cfg.fps:g} fps, "

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 
+from simulator.choices import EYES, INTERPS, LAYOUTS
 from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
 from simulator.errors import InputError
 
@@ -15,9 +16,6 @@ DEFAULT_SIZE = (512, 512)
 DEFAULT_FOV_DEG = 107.0
 
 # = simulator.geometry.LAYOUTS / EYES / INTERPS (kept light: no numpy/cv2 import here).
-_LAYOUTS = ("mono", "top-bottom", "side-by-side")
-_EYES = ("left", "right")
-_INTERPS = ("cubic", "lagrange", "linear", "nearest")
 
 
 def _angle_deg(text: str) -> float:
@@ -80,16 +78,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--layout",
-        choices=_LAYOUTS,
+        choices=LAYOUTS,
         default="mono",
         help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left (default mono)",
     )
     p.add_argument(
-        "--eye", choices=_EYES, default="left", help="eye of a stereo source (default left)"
+        "--eye", choices=EYES, default="left", help="eye of a stereo source (default left)"
     )
     p.add_argument(
         "--interp",
-        choices=_INTERPS,
+        choices=INTERPS,
         default="cubic",
         help="cubic = OpenCV bicubic (as the window grid); lagrange = ffmpeg v360's cubic (default cubic)",
     )

@@ -1,4 +1,4 @@
-"""The paper's pre-processing (sections 3.2-3.4): a video's sliding-window POF matrix.
+"""Paper-mode preprocessing (sections 3.2-3.4): a video's sliding-window POF matrix.
 
 For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.geometry.WindowGrid`
 is extracted from both frames (gray, bicubic, :class:`~simulator.geometry.WindowExtractor`),
@@ -37,8 +37,8 @@ import itertools
 import json
 import math
 import os
-import sys
 import time
+import warnings
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
@@ -49,27 +49,24 @@ from numpy.typing import NDArray
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
 from simulator.flow import FlowBackend, RayAngles, make_backend
-from simulator.geometry import WindowExtractor, WindowGrid, perspective_rays
+from simulator.geometry import perspective_rays
 from simulator.gridfile import content_hash, save_grid
+from simulator.preprocess.common import (
+    PreprocessInterrupted,
+    check_output_dir,
+    common_meta,
+    frame_range,
+)
+from simulator.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
+from simulator.windows import WindowExtractor, WindowGrid
 
-__all__ = [
-    "PreprocessInterrupted",
-    "WindowFlowReducer",
-    "checkpoint_path",
-    "preprocess_video",
-]
+__all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video"]
 
 _CKPT_FORMAT = "vimsim-preprocess-checkpoint"
+
+
 _CKPT_VERSION = 1
-
-
-class PreprocessInterrupted(KeyboardInterrupt):
-    """Ctrl-C during :func:`preprocess_video`; the checkpoint was saved (message says where)."""
-
-    def __init__(self, message: str):
-        super().__init__(message)
-        self.message = message
 
 
 class WindowFlowReducer:
@@ -199,81 +196,6 @@ def _load_checkpoint(path: Path, identity: dict) -> tuple[list, list]:
     return list(dps), list(px)
 
 
-def check_output_dir(output: str | os.PathLike) -> Path:
-    """``output`` as a Path after checking that its directory exists and is writable
-    (InputError otherwise): called before any work, so a typo fails at once."""
-    out = Path(output)
-    parent = out.parent if str(out.parent) else Path(".")
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise InputError(f"{out}: output directory {parent} does not exist or is not writable")
-    return out
-
-
-def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
-    """Video frames ``start <= i < end`` of ``--start``/``--end`` (seconds) for preprocess
-    (both modes): ``start = round(start_s * fps)``, ``end = round(end_s * fps)`` capped at
-    the video's frame count. InputError (naming ``src``) for a negative or non-finite
-    start, an end not after the start, a start past the end of the video, or fewer than
-    2 frames (flow needs a pair)."""
-    fps = info.fps
-    if not (start_s >= 0 and math.isfinite(start_s)):
-        raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
-    s = round(start_s * fps)
-    e = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
-    if end_s is not None and not (end_s > start_s):
-        raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
-    if s >= info.n_frames:
-        raise InputError(
-            f"{src}: --start {start_s} s is past the end of the video ({info.duration_s:.3f} s)"
-        )
-    if e - s < 2:
-        raise InputError(
-            f"{src}: {e - s} frame(s) in the chosen range; flow needs at least 2 frames "
-            f"(video: {info.n_frames} frames at {fps:g} fps)"
-        )
-    return s, e
-
-
-def common_meta(
-    video,
-    info,
-    *,
-    n_rows: int,
-    start_frame: int,
-    flow: dict,
-    layout: str,
-    eye: str,
-    content_hash: str,
-    units: dict,
-) -> dict:
-    """The grid-file ``meta`` both methods write (paper and sphere mode): frames, flow,
-    layout, eye, the frame range, units and the video's identity (``GridFile.check_video``
-    compares it with a video)."""
-    fps = info.fps
-    return {
-        "fps": fps,
-        "n_frames": n_rows,
-        "flow": flow,
-        "layout": layout,
-        "eye": eye,
-        "start_frame": start_frame,
-        "end_frame": start_frame + n_rows,
-        "start_s": start_frame / fps,
-        "eye_size": list(info.eye_size(layout)),
-        "units": units,
-        "frame0": "repeats frame 1",
-        "video": {
-            "path": str(Path(video).resolve()),
-            "width": info.width,
-            "height": info.height,
-            "sar": info.sar,
-            "codec": info.codec,
-            "n_frames": info.n_frames,
-            "content_hash": content_hash,
-        },
-    }
-
-
 def preprocess_video(
     video: str | os.PathLike,
     output: str | os.PathLike,
@@ -287,7 +209,7 @@ def preprocess_video(
     resume: bool = False,
     checkpoint_every_s: float = 60.0,
     threads: int | None = None,
-    progress: bool = True,
+    progress: Progress | None = None,
     on_frame: Callable[[int], None] | None = None,
 ) -> Path:
     """Compute a video's grid file (``pof_dps``, ``pof_px``; see the module docstring).
@@ -303,7 +225,7 @@ def preprocess_video(
     resume : continue from ``checkpoint_path(output)`` if it exists
     checkpoint_every_s : wall-clock seconds between periodic checkpoints (0: every frame)
     threads : worker threads for the flow (default: CPU count)
-    progress : show a tqdm bar (frames/s, ETA) on stderr
+    progress : ``progress(done, total)`` in frames, called as rows complete (the CLI draws a bar)
     on_frame : called with the grid row index after each row (tests use it to interrupt)
 
     Returns
@@ -350,11 +272,8 @@ def preprocess_video(
                 "continue it or delete it to start again"
             )
         dps_rows, px_rows = _load_checkpoint(ckpt, identity)
-    elif resume and progress:
-        print(
-            f"vimsim preprocess: no checkpoint {ckpt}; starting from the first frame",
-            file=sys.stderr,
-        )
+    elif resume:
+        warnings.warn(f"no checkpoint {ckpt}; starting from the first frame", stacklevel=2)
 
     extractor = WindowExtractor(grid, (eye_w, eye_h))
     reducer = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg)
@@ -378,18 +297,7 @@ def preprocess_video(
     # repeats row 1 and is stored when row 1 is known.
     first_row = max(done, 1)
     decode_from = start_f + first_row - 1
-    from tqdm import tqdm
-
-    bar = tqdm(
-        total=total,
-        initial=done,
-        unit="frame",
-        desc="preprocess",
-        disable=not progress,
-        mininterval=0.5,
-        dynamic_ncols=True,
-        file=sys.stderr,
-    )
+    bar = Counter(progress, total, done)
     last_ckpt = time.monotonic()
     prev_win: NDArray | None = None
     frames = windows = None
@@ -473,10 +381,7 @@ def preprocess_video(
         },
     )
     if n_rows != total:
-        print(
-            f"vimsim preprocess: warning: {src}: expected {total} frames, decoded {n_rows}",
-            file=sys.stderr,
-        )
+        warnings.warn(f"{src}: expected {total} frames, decoded {n_rows}", stacklevel=2)
     save_grid(out, np.stack(dps_rows), np.stack(px_rows), grid, meta)
     ckpt.unlink(missing_ok=True)
     return out

@@ -1,4 +1,4 @@
-"""Synthetic 360 deg clips with analytic ground-truth optical flow.
+"""Synthetic 360 deg scenes (camera motions through a static world) and their analytic angular speed.
 
 Three scenes (:data:`SCENES`), all described as a camera moving through a static world:
 
@@ -38,35 +38,22 @@ and the unit ray ``d = q / r`` (``r = |q|``, the depth along the ray) moves at::
 The angular speed is ``|dd/dt|`` (rad/s), reported in deg/s. For the rotating panorama
 ``r`` is infinite and ``w_c = -omega a``, giving ``omega |a x d|``. An eye offset ``e``
 (camera frame) from the rig centre moves at ``v_c + w_c x e``.
-
-The truth file (``OUT.truth.npz``, no pickles; :func:`load_truth`) holds, per frame
-``t``, this speed at the centres of a coarse lon/lat grid, evaluated at the middle of the
-frame interval from ``t - 1`` to ``t`` (time ``(t - 0.5) / fps``), like the grid file's
-``pof_dps`` (frame t = motion from frame t-1 to t; frame 0 repeats frame 1). The
-per-frame displacement angle differs from ``speed / fps`` by O((motion per frame)^2).
 """
 
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import math
-import os
-from dataclasses import dataclass, field
-from importlib import resources
-from pathlib import Path
-from typing import Literal
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
+from simulator.choices import SCENES, SYNTH_LAYOUTS
 from simulator.errors import InputError
-from simulator.fileio import atomic_output
 from simulator.geometry import (
-    WindowGrid,
     check_equirect_aspect,
     equirect_pixel_lonlat,
     equirect_remap_coords,
@@ -75,175 +62,29 @@ from simulator.geometry import (
     pad_equirect,
     perspective_rays,
 )
+from simulator.synth.textures import _MipTexture, load_texture
+from simulator.windows import WindowGrid
 
 __all__ = [
     "SCENES",
-    "Scene",
     "SynthConfig",
     "SynthScene",
-    "Truth",
     "angular_speed_dps",
-    "load_texture",
-    "load_truth",
     "make_scene",
-    "procedural_panorama",
-    "synthesize",
-    "truth_path_for",
     "window_truth_dps",
 ]
 
-Scene = Literal["rotate", "forward", "coaster"]
-SCENES: tuple[str, ...] = ("rotate", "forward", "coaster")
-SynthLayout = Literal["mono", "top-bottom"]
-SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
-TRUTH_FORMAT = "vimsim-synth-truth"
-TRUTH_VERSION = 1
-_BUNDLED = "panorama.jpg"
+
 #: Upper bounds of a clip (a typo such as ``--fps 1e9`` fails at once, not after hours).
 MAX_FPS = 240.0
+
+
 MAX_FRAMES = 100_000
+
+
 _G = 9.81  # m/s^2, for the coaster's banking
 
 
-# --------------------------------------------------------------------------- textures
-def _bundled_texture_path() -> Path:
-    return Path(str(resources.files("simulator") / "data" / _BUNDLED))
-
-
-def load_texture(path: str | os.PathLike | None = None) -> tuple[NDArray[np.uint8], str]:
-    """An RGB texture ``(H, W, 3)`` uint8 and a short name for it.
-
-    ``None`` loads the panorama bundled in ``simulator/data/`` (procedural, see
-    ``simulator/data/CREDITS.md``). Any image Pillow reads is accepted (for the rotate
-    scene it should be a 2:1 equirect panorama; for the box scenes it is tiled).
-    """
-    from PIL import Image, UnidentifiedImageError
-
-    p = _bundled_texture_path() if path is None else Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: texture file not found")
-    try:
-        with Image.open(p) as im:
-            im.load()
-            rgb = np.asarray(im.convert("RGB"))
-    except (UnidentifiedImageError, OSError, ValueError) as e:
-        raise InputError(
-            f"{p}: texture is not a readable image ({type(e).__name__}: {e})"
-        ) from None
-    if rgb.shape[0] < 8 or rgb.shape[1] < 8:
-        raise InputError(f"{p}: texture is {rgb.shape[1]}x{rgb.shape[0]}; need at least 8x8 pixels")
-    return np.ascontiguousarray(rgb), ("bundled:" + _BUNDLED if path is None else str(p))
-
-
-def procedural_panorama(size: tuple[int, int] = (1024, 512), seed: int = 0) -> NDArray[np.uint8]:
-    """A richly textured equirect panorama ``(H, W, 3)`` uint8 made of 3-D noise on the sphere.
-
-    Multi-octave smooth (cubic) noise sampled at the unit direction of each pixel, so it
-    is seamless at the +-180 deg seam and at the poles. Colour from two low-frequency
-    channels, luminance detail from two more, and contour lines for sharp edges (optical
-    flow needs texture at every scale). This made ``simulator/data/panorama.jpg``
-    (``size=(1024, 512), seed=0``).
-    """
-    from scipy import ndimage
-
-    W, H = int(size[0]), int(size[1])
-    rng = np.random.default_rng(seed)
-    lon, lat = equirect_pixel_lonlat(W, H)
-    LO, LA = np.meshgrid(lon, lat)
-    d = lonlat_to_dir(LO, LA).reshape(-1, 3)
-    chans = []
-    for beta, octaves in (
-        (0.9, (2, 4, 8, 16)),
-        (0.9, (2, 4, 8, 16, 32)),
-        (0.7, (4, 8, 16, 32, 64, 128)),
-        (0.4, (16, 32, 64, 128)),
-    ):
-        acc = np.zeros(H * W)
-        for f in octaves:
-            n = 2 * f + 4
-            lattice = rng.standard_normal((n, n, n))
-            coords = (d * f + n / 2).T + rng.uniform(0, 1, (3, 1))
-            acc += ndimage.map_coordinates(lattice, coords, order=3, mode="grid-wrap") * f ** (
-                -beta
-            )
-        acc = (acc - acc.mean()) / acc.std()
-        chans.append(acc.reshape(H, W))
-    z0, z1, z2, z3 = chans
-    hue = (np.arctan2(z0, z1) / (2 * np.pi) + 0.5) * 179
-    sat = np.clip(0.5 + 0.25 * np.tanh(z0), 0, 1) * 255
-    lum = 0.5 + 0.25 * np.tanh(1.2 * z2) + 0.15 * np.tanh(1.5 * z3)
-    lines = 0.55 + 0.45 * (np.abs(np.sin(3.0 * z1 + 2.0 * z2)) > 0.25)
-    val = np.clip(lum * lines, 0, 1) * 255
-    hsv = np.stack([hue, sat, val], -1).astype(np.uint8)
-    return cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
-
-
-class _MipTexture:
-    """A periodic texture with a mip pyramid packed into one atlas, for trilinear lookups.
-
-    The image is mirror-tiled 2 x 2 (so it repeats without seams), halved with box
-    filtering down to 8 pixels, and each level is padded by wrapping so that bilinear
-    taps at a tile edge read the other side. Two ``cv2.remap`` calls per frame.
-    """
-
-    _P = 2  # wrap padding, pixels
-
-    def __init__(self, img: NDArray[np.uint8]):
-        tile = np.concatenate([img, img[:, ::-1]], axis=1)
-        tile = np.concatenate([tile, tile[::-1]], axis=0)
-        h, w = tile.shape[:2]
-        # Even sizes all the way down: crop to a multiple of 2^k.
-        levels = [tile.astype(np.float32)]
-        while min(levels[-1].shape[:2]) >= 16 and all(s % 2 == 0 for s in levels[-1].shape[:2]):
-            prev = levels[-1]
-            levels.append(
-                cv2.resize(
-                    prev, (prev.shape[1] // 2, prev.shape[0] // 2), interpolation=cv2.INTER_AREA
-                )
-            )
-        p = self._P
-        padded = [np.pad(lv, ((p, p), (p, p), (0, 0)), mode="wrap") for lv in levels]
-        width = padded[0].shape[1]
-        offs, rows = [], 0
-        for pl in padded:
-            offs.append(rows)
-            rows += pl.shape[0]
-        atlas = np.zeros((rows, width, 3), np.float32)
-        for o, pl in zip(offs, padded):
-            atlas[o : o + pl.shape[0], : pl.shape[1]] = pl
-        self.atlas = atlas
-        self.size = (w, h)  # texels of level 0 per period
-        self.n_levels = len(levels)
-        self._w = np.array([lv.shape[1] for lv in levels], np.float32)
-        self._h = np.array([lv.shape[0] for lv in levels], np.float32)
-        self._off = np.array(offs, np.float32)
-
-    def _coords(self, u: NDArray, v: NDArray, level: NDArray) -> tuple[NDArray, NDArray]:
-        s = np.exp2(-level.astype(np.float32))
-        w, h = self._w[level], self._h[level]
-        x = np.mod(u * s - 0.5, w) + self._P
-        y = np.mod(v * s - 0.5, h) + (self._P + self._off[level])
-        return x, y
-
-    def sample(self, u: NDArray, v: NDArray, lod: NDArray) -> NDArray[np.float32]:
-        """Trilinear lookup at level-0 texel coordinates ``u, v`` (any float) and level of
-        detail ``lod`` (log2 of the footprint in texels); returns ``(..., 3)`` float32."""
-        # Reduce to one period in float64 once (every level's period is the same in
-        # level-0 texels), then work in float32.
-        u = np.mod(u, self.size[0]).astype(np.float32)
-        v = np.mod(v, self.size[1]).astype(np.float32)
-        lod = np.clip(lod, 0.0, self.n_levels - 1.0)
-        l0 = np.floor(lod).astype(np.intp)
-        l1 = np.minimum(l0 + 1, self.n_levels - 1)
-        f = (lod - l0).astype(np.float32)[..., None]
-        x0, y0 = self._coords(u, v, l0)
-        x1, y1 = self._coords(u, v, l1)
-        a = cv2.remap(self.atlas, x0, y0, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        b = cv2.remap(self.atlas, x1, y1, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return a * (1.0 - f) + b * f
-
-
-# ------------------------------------------------------------------------ trajectories
 @dataclass(frozen=True)
 class SynthConfig:
     """Everything that defines a synthetic clip (validated on construction).
@@ -642,187 +483,3 @@ def make_scene(cfg: SynthConfig) -> SynthScene:
     """Load the texture and build the scene of ``cfg``."""
     tex, name = load_texture(cfg.texture)
     return SynthScene(cfg, tex, name)
-
-
-# ------------------------------------------------------------------------- truth file
-@dataclass(frozen=True)
-class Truth:
-    """A loaded truth file (``OUT.truth.npz``).
-
-    speed_dps : ndarray, shape (T, n_lat, n_lon), float32, deg/s
-        Left (or mono) eye's angular speed at cell centres; row t = interval t-1 -> t.
-    speed_dps_right : same for the right eye (top-bottom clips), else None
-    lon_deg : ndarray, shape (n_lon,), cell-centre longitudes, -180 + c/2 .. 180 - c/2
-    lat_deg : ndarray, shape (n_lat,), cell-centre latitudes, from +90 - c/2 (top) down
-    time_s : ndarray, shape (T,), time at which each row is evaluated
-    meta : dict (``config``, ``trajectory``, conventions)
-    """
-
-    speed_dps: NDArray[np.float32]
-    lon_deg: NDArray[np.float64]
-    lat_deg: NDArray[np.float64]
-    time_s: NDArray[np.float64]
-    meta: dict
-    speed_dps_right: NDArray[np.float32] | None = field(default=None, repr=False)
-
-    @property
-    def config(self) -> SynthConfig:
-        c = dict(self.meta["config"])
-        c["size"] = tuple(c["size"])
-        c["axis"] = tuple(c["axis"])
-        return SynthConfig(**c)
-
-    def scene(self) -> SynthScene:
-        """Rebuild the scene (for analytic truth at any ray)."""
-        return make_scene(self.config)
-
-
-def truth_path_for(video_path: str | os.PathLike) -> Path:
-    """``OUT.mp4`` -> ``OUT.truth.npz``."""
-    p = Path(video_path)
-    return p.with_name(p.stem + ".truth.npz")
-
-
-def _interval_times(n_frames: int, fps: float) -> NDArray[np.float64]:
-    t = (np.arange(n_frames) - 0.5) / fps
-    t[0] = t[1] if n_frames > 1 else 0.0
-    return t
-
-
-def load_truth(path: str | os.PathLike) -> Truth:
-    """Read a truth file written by :func:`synthesize` (``allow_pickle=False``)."""
-    import zipfile
-
-    p = Path(path)
-    if not p.is_file():
-        raise InputError(f"{p}: truth file not found")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            arrs = {k: z[k] for k in z.files}
-        meta = json.loads(str(arrs["meta"]))
-    except (zipfile.BadZipFile, ValueError, OSError, KeyError, json.JSONDecodeError) as e:
-        raise InputError(f"{p}: not a vimsim truth file ({type(e).__name__})") from None
-    if meta.get("format") != TRUTH_FORMAT or meta.get("version") != TRUTH_VERSION:
-        raise InputError(f"{p}: not a vimsim truth file version {TRUTH_VERSION}")
-    return Truth(
-        speed_dps=arrs["speed_dps"],
-        lon_deg=arrs["lon_deg"],
-        lat_deg=arrs["lat_deg"],
-        time_s=arrs["time_s"],
-        meta=meta,
-        speed_dps_right=arrs.get("speed_dps_right"),
-    )
-
-
-def _texture_hash(cfg: SynthConfig) -> str:
-    p = _bundled_texture_path() if cfg.texture is None else Path(cfg.texture)
-    return "sha256:" + hashlib.sha256(p.read_bytes()).hexdigest()
-
-
-def synthesize(
-    cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: bool = False
-) -> tuple[Path, Path]:
-    """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
-
-    ``crf`` is the x264 constant rate factor, an integer 0..51 (lower is better).
-    Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
-    written after the video, so a truth file implies a complete video.
-    """
-    from simulator.video import VideoWriter
-
-    out = Path(out)
-    if out.suffix.lower() != ".mp4":
-        raise InputError(f"{out}: output must be an .mp4 file")
-    if isinstance(crf, bool) or not isinstance(crf, (int, np.integer)) or not 0 <= crf <= 51:
-        raise InputError(f"x264 crf must be an integer 0..51 (lower is better); got {crf!r}")
-    scene = make_scene(cfg)
-    W, H = cfg.size
-    n = cfg.n_frames
-    frame_size = (W, H * len(cfg.eyes))
-    it = range(n)
-    if progress:
-        from tqdm import tqdm
-
-        it = tqdm(it, desc=f"synth {cfg.scene}", unit="frame", leave=False)
-    # Frames are independent: render a few ahead on worker threads (numpy and cv2 release
-    # the GIL for most of the work), write them in order.
-    from concurrent.futures import ThreadPoolExecutor
-
-    workers = max(1, min(4, os.cpu_count() or 1))
-    with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw, ThreadPoolExecutor(workers) as pool:
-        pending = []
-        for k in it:
-            pending.append(pool.submit(scene.render, k / cfg.fps))
-            if len(pending) > 2 * workers:
-                vw.write(pending.pop(0).result())
-        for f in pending:
-            vw.write(f.result())
-
-    # Truth on the coarse grid (cell centres), per eye, per frame interval.
-    c = cfg.truth_cell_deg
-    n_lat, n_lon = round(180 / c), round(360 / c)
-    lon_deg = -180.0 + c * (np.arange(n_lon) + 0.5)
-    lat_deg = 90.0 - c * (np.arange(n_lat) + 0.5)
-    LO, LA = np.meshgrid(np.radians(lon_deg), np.radians(lat_deg))
-    dirs = lonlat_to_dir(LO, LA)
-    times = _interval_times(n, cfg.fps)
-    fields = {e: np.empty((n, n_lat, n_lon), np.float32) for e in cfg.eyes}
-    traj = {
-        "frame_time_s": [],
-        "position_m": [],
-        "quat_xyzw": [],
-        "interval_time_s": [],
-        "omega_cam_dps": [],
-        "velocity_cam_mps": [],
-    }
-    for k in range(n):
-        for e in cfg.eyes:
-            fields[e][k] = scene.speed_dps(float(times[k]), dirs, e)
-        tk = k / cfg.fps
-        traj["frame_time_s"].append(tk)
-        traj["position_m"].append(scene.position(tk).round(9).tolist())
-        traj["quat_xyzw"].append(scene.rotation(tk).as_quat().round(12).tolist())
-        traj["interval_time_s"].append(float(times[k]))
-        traj["omega_cam_dps"].append(scene.omega_cam_dps(float(times[k])).round(9).tolist())
-        traj["velocity_cam_mps"].append(
-            scene.eye_velocity_cam(float(times[k]), "mono").round(9).tolist()
-        )
-    meta = {
-        "format": TRUTH_FORMAT,
-        "version": TRUTH_VERSION,
-        "config": cfg.to_dict(),
-        "video": {
-            "path": out.name,
-            "width": frame_size[0],
-            "height": frame_size[1],
-            "fps": cfg.fps,
-            "n_frames": n,
-        },
-        "texture": {"name": scene.texture_name, "hash": _texture_hash(cfg)},
-        "speed_mps": scene.cfg.speed,
-        "room_m": None
-        if scene.box is None
-        else {"lo": list(scene.box.lo), "hi": list(scene.box.hi)},
-        "eyes": list(cfg.eyes),
-        "units": "deg/s of visual angle",
-        "cells": (
-            f"speed_dps[t, i, j]: cell centre lon_deg[j] = -180 + {c:g} (j + 0.5), "
-            f"lat_deg[i] = 90 - {c:g} (i + 0.5) (row 0 at the top), camera frame = equirect frame"
-        ),
-        "time": "row t covers frames t-1 -> t, evaluated at (t - 0.5) / fps; row 0 repeats row 1",
-        "frames": "camera: +x right, +y up, +z forward; quat_xyzw/position_m: camera->world pose at frame_time_s",
-        "trajectory": traj,
-    }
-    arrays = {
-        "speed_dps": fields[cfg.eyes[0]],
-        "lon_deg": lon_deg,
-        "lat_deg": lat_deg,
-        "time_s": times,
-        "meta": np.array(json.dumps(meta)),
-    }
-    if "right" in fields:
-        arrays["speed_dps_right"] = fields["right"]
-    tpath = truth_path_for(out)
-    with atomic_output(tpath) as tmp, open(tmp, "wb") as f:
-        np.savez_compressed(f, **arrays)
-    return out, tpath

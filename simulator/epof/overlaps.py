@@ -1,4 +1,4 @@
-"""Estimated perceived optical flow (EPOF) of a viewing, and the GRF opacity it drives.
+"""Paper-mode EPOF: overlap weights of a viewport with the sliding windows, and their weighted mean.
 
 The paper's section 3.5: the EPOF of a viewport is the overlap-weighted mean of the
 perceived optical flow (POF) of every sliding window overlapping it::
@@ -23,66 +23,24 @@ of the windows (runs of window-relative longitude per latitude band, so every ya
 difference on the table's lattice is done at once with a cumulative sum). A query
 interpolates the table trilinearly (pitch, roll, yaw offset) and pairs the overlaps
 with the window POFs rotated by the whole number of yaw steps.
-
-GRF opacity (paper 4.2.2): 0 at the 10th percentile of the whole video's flow, 1 at the
-90th, linear in between, clamped (:class:`OpacityRule`; percentiles, their source and an
-optional causal smoothing are configurable).
 """
 
 from __future__ import annotations
 
 import functools
-import io
 import math
-import os
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
 
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_input_file
-from simulator.geometry import (
-    WindowGrid,
-    check_fov,
-    head_angles_deg,
-    head_rotation,
-    perspective_rays,
-)
+from simulator.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
 from simulator.gridfile import GridFile
-from simulator.headpath import HeadPath
+from simulator.windows import WindowGrid
 
-__all__ = [
-    "EPOF_COLUMNS",
-    "EpofResult",
-    "OpacityRule",
-    "OpacitySource",
-    "ViewportOverlaps",
-    "compute_epof",
-    "epof_from_grid",
-    "plot_epof",
-    "read_epof_csv",
-    "viewport_overlaps",
-    "weighted_epof",
-    "write_epof_csv",
-]
-
-EPOF_COLUMNS: tuple[str, ...] = (
-    "frame",
-    "time_s",
-    "yaw_deg",
-    "pitch_deg",
-    "roll_deg",
-    "epof_dps",
-    "opacity",
-)
-OpacitySource = Literal["grid", "viewing"]
-OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")
+__all__ = ["ViewportOverlaps", "epof_from_grid", "viewport_overlaps", "weighted_epof"]
 
 
-# ------------------------------------------------------------------- overlap table
 def _window_runs(grid: WindowGrid, lat_step_deg: float, lon_step_deg: float):
     """Membership of each window row as runs of window-relative longitude per latitude band.
 
@@ -481,228 +439,3 @@ def epof_from_grid(
 @functools.lru_cache(maxsize=8)
 def _overlaps_for(grid_key: tuple, hfov_deg: float, vfov_deg: float) -> ViewportOverlaps:
     return viewport_overlaps(WindowGrid.from_dict(dict(grid_key)), hfov_deg, vfov_deg)
-
-
-# ------------------------------------------------------------------------- opacity
-@dataclass(frozen=True)
-class OpacityRule:
-    """GRF opacity from EPOF (paper 4.2.2).
-
-    Opacity = clamp((EPOF - lo) / (hi - lo), 0, 1) with ``lo``/``hi`` the ``low_pct`` /
-    ``high_pct`` percentiles of the flow of ``source``: ``"grid"`` = every window of
-    every frame of the grid file (the paper's "whole video"), ``"viewing"`` = this
-    viewing's EPOF. ``smoothing_s`` > 0 applies a causal exponential smoothing with that
-    time constant (seconds) to the opacity; 0 (default) = none.
-    """
-
-    low_pct: float = 10.0
-    high_pct: float = 90.0
-    source: str = "grid"
-    smoothing_s: float = 0.0
-
-    def __post_init__(self) -> None:
-        if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
-            raise InputError(
-                f"opacity percentiles must satisfy 0 <= low < high <= 100; got {self.low_pct}, {self.high_pct}"
-            )
-        if self.source not in OPACITY_SOURCES:
-            raise InputError(f"opacity source must be grid or viewing; got {self.source!r}")
-        if not (self.smoothing_s >= 0.0 and math.isfinite(self.smoothing_s)):
-            raise InputError(f"opacity smoothing must be >= 0 seconds; got {self.smoothing_s}")
-
-    def fit(self, grid: GridFile | None, epof_dps) -> tuple[float, float]:
-        """``(lo, hi)`` thresholds in deg/s from the grid's flow or this viewing's EPOF."""
-        if self.source == "grid":
-            if grid is None:
-                raise InputError("opacity source 'grid' needs the grid file")
-            vals = np.asarray(grid.pof_dps, np.float64).ravel()
-        else:
-            vals = np.asarray(epof_dps, np.float64).ravel()
-        vals = vals[np.isfinite(vals)]
-        if vals.size == 0:
-            raise InputError("no finite flow values to take opacity percentiles from")
-        lo, hi = np.percentile(vals, [self.low_pct, self.high_pct])
-        return float(lo), float(hi)
-
-    def __call__(self, epof_dps, thresholds_dps: tuple[float, float], *, fps: float | None = None):
-        """Opacity in [0, 1] of each EPOF value (deg/s), shape of ``epof_dps``.
-
-        ``fps`` (frames per second of the samples) is needed only when smoothing.
-        """
-        lo, hi = thresholds_dps
-        e = np.asarray(epof_dps, np.float64)
-        if hi > lo:
-            op = np.clip((e - lo) / (hi - lo), 0.0, 1.0)
-        else:  # constant flow: a step at the threshold
-            op = (e > lo).astype(np.float64)
-        if self.smoothing_s > 0 and op.size > 1:
-            if not fps:
-                raise InputError("opacity smoothing needs the frame rate")
-            a = 1.0 - math.exp(-1.0 / (fps * self.smoothing_s))
-            sm = np.empty_like(op)
-            acc = op.flat[0]
-            for i, x in enumerate(op.ravel()):
-                acc = acc + a * (x - acc)
-                sm.flat[i] = acc
-            op = sm
-        return op
-
-
-# ------------------------------------------------------------------------- viewing
-@dataclass(frozen=True)
-class EpofResult:
-    """EPOF of one viewing, one row per video frame (frame time = frame / fps; ``frame``
-    counts from the video's first frame, also for a grid of part of it).
-
-    Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
-    ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
-    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV).
-    """
-
-    frame: NDArray[np.int64]
-    time_s: NDArray[np.float64]
-    yaw_deg: NDArray[np.float64]
-    pitch_deg: NDArray[np.float64]
-    roll_deg: NDArray[np.float64]
-    epof_dps: NDArray[np.float64]
-    opacity: NDArray[np.float64]
-    thresholds_dps: tuple[float, float] = (math.nan, math.nan)
-    meta: dict = field(default_factory=dict, compare=False)
-
-    def __post_init__(self) -> None:
-        n = len(self.frame)
-        for c in EPOF_COLUMNS:
-            if len(getattr(self, c)) != n:
-                raise ValueError(
-                    f"EpofResult: column {c} has {len(getattr(self, c))} rows; frame has {n}"
-                )
-
-
-def compute_epof(
-    grid: GridFile,
-    hp: HeadPath,
-    *,
-    hfov_deg: float | None = None,
-    vfov_deg: float | None = None,
-    top_k: int | None = None,
-    rule: OpacityRule = OpacityRule(),
-    hold: bool = False,
-    method: str = "auto",
-) -> EpofResult:
-    """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
-
-    Frame i of the grid is video frame ``start_frame + i`` (``meta["start_frame"]``, 0
-    unless the grid was made with ``preprocess --start``) at ``(start_frame + i) / fps``
-    seconds; those are the ``frame`` and ``time_s`` columns. The head path must cover
-    every such time unless ``hold`` holds its first/last pose (InputError otherwise,
-    saying where it ends).
-
-    ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
-    ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual
-    viewport (:func:`simulator.sphere.viewport_epof`; any FOV, roll included; InputError
-    naming the command that makes a field if the grid has none); ``"auto"`` (default) =
-    sphere when the grid has a field and ``top_k`` is not given, else paper.
-    """
-    if method not in ("auto", "paper", "sphere"):
-        raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
-    sphere = method == "sphere" or (
-        method == "auto" and grid.field_dps is not None and top_k is None
-    )
-    if sphere and top_k is not None:
-        raise InputError(
-            "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
-            "field over the viewport: drop --top-k or use --method paper"
-        )
-    frames, t = _frames(grid)
-    hp.check_covers(
-        float(t[-1]),
-        hold=hold,
-        video=grid.meta.get("video", {}).get("path", "") or grid.path,
-        start_s=float(t[0]),
-    )
-    yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    if sphere:
-        from simulator.sphere import require_field, viewport_epof
-
-        field, cells = require_field(grid)
-        h, v = _fov(grid, hfov_deg, vfov_deg)
-        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
-    else:
-        rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
-        e = epof_from_grid(
-            grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
-        )
-    thr = rule.fit(grid, e)
-    op = rule(e, thr, fps=grid.fps)
-    h, v = _fov(grid, hfov_deg, vfov_deg)
-    meta = {
-        "hfov_deg": h,
-        "vfov_deg": v,
-        "top_k": top_k,
-        "rule": rule,
-        "fps": grid.fps,
-        "method": "sphere" if sphere else "paper",
-    }
-    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
-
-
-def write_epof_csv(path: str | os.PathLike, result: EpofResult) -> None:
-    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically."""
-    buf = io.StringIO()
-    buf.write(",".join(EPOF_COLUMNS) + "\n")
-    cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
-    for i, fr in enumerate(result.frame):
-        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + "\n")
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(buf.getvalue())
-
-
-def read_epof_csv(path: str | os.PathLike) -> EpofResult:
-    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed)."""
-    p = check_input_file(path, "EPOF")
-    lines = [
-        ln for ln in p.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()
-    ]
-    cols = [c.strip() for c in lines[0].split(",")]
-    if cols != list(EPOF_COLUMNS):
-        raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
-    if len(lines) < 2:
-        raise InputError(f"{p}: EPOF file has a header but no rows")
-    try:
-        data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
-    except ValueError:
-        raise InputError(f"{p}: non-numeric value in an EPOF row") from None
-    if data.ndim != 2 or data.shape[1] != len(EPOF_COLUMNS):
-        raise InputError(f"{p}: every row needs {len(EPOF_COLUMNS)} fields")
-    if not np.all(np.isfinite(data)):
-        raise InputError(f"{p}: EPOF file has NaN or infinite values")
-    arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}
-    arrs["frame"] = arrs["frame"].astype(np.int64)
-    return EpofResult(**arrs)
-
-
-def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
-    """Plot EPOF (deg/s) and GRF opacity over time into a PNG (atomic)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=110)
-    ax.plot(result.time_s, result.epof_dps, color="tab:blue", lw=1.2, label="EPOF")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("EPOF (deg/s)", color="tab:blue")
-    lo, hi = result.thresholds_dps
-    for v, name in ((lo, "lo"), (hi, "hi")):
-        if math.isfinite(v):
-            ax.axhline(v, color="tab:blue", ls=":", lw=0.8)
-            ax.annotate(f"{name} {v:.3g}", (result.time_s[0], v), fontsize=7, color="tab:blue")
-    ax2 = ax.twinx()
-    ax2.plot(result.time_s, result.opacity, color="tab:red", lw=1.0, label="opacity")
-    ax2.set_ylim(-0.02, 1.02)
-    ax2.set_ylabel("GRF opacity", color="tab:red")
-    ax.set_title(title or "EPOF and GRF opacity")
-    fig.tight_layout()
-    with atomic_output(path) as tmp:
-        fig.savefig(tmp)
-    plt.close(fig)

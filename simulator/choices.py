@@ -1,0 +1,98 @@
+"""Every fixed list of choices (modes, layouts, formats), once: light enough for the CLI to import.
+
+Library modules take their ``Literal`` types and tuples from here and the CLI's
+``choices=`` use the same tuples, so the two cannot drift apart. Nothing here imports
+anything heavier than :mod:`typing`.
+"""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+__all__ = [
+    "DIS_PRESETS",
+    "EPOF_METHODS",
+    "EYES",
+    "FLOW_CHOICES",
+    "FLOW_STATS",
+    "GRID_PRESET_NAMES",
+    "HEADPATH_FORMATS",
+    "INTERPS",
+    "LAYOUTS",
+    "OPACITY_SOURCES",
+    "PREPROCESS_METHODS",
+    "SCENES",
+    "SYNTH_KINDS",
+    "SYNTH_LAYOUTS",
+    "X264_PRESETS",
+    "DISPreset",
+    "Eye",
+    "Interp",
+]
+
+#: Stereo layouts of an equirect frame: ``top-bottom`` (left eye on top),
+#: ``side-by-side`` (left eye on the left).
+LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
+
+#: Eyes of a stereo source or render.
+Eye = Literal["left", "right"]
+EYES: tuple[str, ...] = get_args(Eye)
+
+#: Interpolation kernels of :func:`simulator.geometry.sample_equirect`. ``cubic``: OpenCV's
+#: bicubic (Keys, a = -0.75); ``lagrange``: ffmpeg v360's 4-point Lagrange kernel.
+Interp = Literal["cubic", "lagrange", "linear", "nearest"]
+INTERPS: tuple[str, ...] = get_args(Interp)
+
+#: Window-grid presets (:data:`simulator.windows.GRID_PRESETS`).
+GRID_PRESET_NAMES: tuple[str, ...] = ("default", "paper-198")
+
+#: Preprocessing methods: the paper's windows, or one field per frame on the sphere.
+PREPROCESS_METHODS: tuple[str, ...] = ("paper", "sphere")
+
+#: EPOF methods: ``auto`` = exact (sphere) when the grid holds a field, else paper.
+EPOF_METHODS: tuple[str, ...] = ("auto", "paper", "sphere")
+
+#: OpenCV DIS presets (:class:`simulator.flow.DISFlow`).
+DISPreset = Literal["ultrafast", "fast", "medium"]
+DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
+
+#: Flow backends as ``--flow`` spells them.
+FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
+
+#: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
+OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")
+
+#: Scripted head paths (:func:`simulator.headpath.synth`).
+SYNTH_KINDS: tuple[str, ...] = ("static", "sweep", "sine", "look-around", "keyframes")
+
+#: Head-path file formats :func:`simulator.readers.load_headpath` reads (``auto`` detects
+#: one of these from the content).
+HEADPATH_FORMATS: tuple[str, ...] = (
+    "canonical",
+    "quat",
+    "keyframes-json",
+    "corbillon",
+    "corbillon-euler",
+    "salient360-dyn",
+    "salient360-static",
+    "avtrack360",
+    "360vidstr",
+)
+
+#: Synthetic scenes (:mod:`simulator.synth`) and their layouts.
+SCENES: tuple[str, ...] = ("rotate", "forward", "coaster")
+SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
+
+#: How a session's flow is summarised from its EPOF CSV (:mod:`simulator.analyze`).
+FLOW_STATS: tuple[str, ...] = ("mean", "median", "sum")
+
+#: x264 presets ``vimsim render --preset`` accepts.
+X264_PRESETS: tuple[str, ...] = (
+    "ultrafast",
+    "superfast",
+    "veryfast",
+    "faster",
+    "fast",
+    "medium",
+    "slow",
+)

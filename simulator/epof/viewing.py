@@ -1,0 +1,202 @@
+"""The EPOF of one viewing: a head path sampled at every frame of a grid, its opacity, its CSV and plot.
+
+Frame i of a grid is video frame ``start_frame + i`` at ``(start_frame + i) / fps``
+seconds. ``method`` chooses paper mode (:mod:`simulator.epof.overlaps`) or exact sphere
+mode (:mod:`simulator.epof.exact`). Units: EPOF in deg/s of visual angle; angles in
+degrees (yaw + right, pitch + up, roll + right ear down); times in seconds.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.epof.exact import viewport_epof
+from simulator.epof.overlaps import _fov, _frames, epof_from_grid
+from simulator.errors import InputError
+from simulator.fileio import atomic_output, check_input_file
+from simulator.grf import OpacityRule
+from simulator.gridfile import GridFile, require_field
+from simulator.headpath import HeadPath
+
+__all__ = [
+    "EPOF_COLUMNS",
+    "EpofResult",
+    "compute_epof",
+    "plot_epof",
+    "read_epof_csv",
+    "write_epof_csv",
+]
+
+EPOF_COLUMNS: tuple[str, ...] = (
+    "frame",
+    "time_s",
+    "yaw_deg",
+    "pitch_deg",
+    "roll_deg",
+    "epof_dps",
+    "opacity",
+)
+
+
+@dataclass(frozen=True)
+class EpofResult:
+    """EPOF of one viewing, one row per video frame (frame time = frame / fps; ``frame``
+    counts from the video's first frame, also for a grid of part of it).
+
+    Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
+    ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
+    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV).
+    """
+
+    frame: NDArray[np.int64]
+    time_s: NDArray[np.float64]
+    yaw_deg: NDArray[np.float64]
+    pitch_deg: NDArray[np.float64]
+    roll_deg: NDArray[np.float64]
+    epof_dps: NDArray[np.float64]
+    opacity: NDArray[np.float64]
+    thresholds_dps: tuple[float, float] = (math.nan, math.nan)
+    meta: dict = field(default_factory=dict, compare=False)
+
+    def __post_init__(self) -> None:
+        n = len(self.frame)
+        for c in EPOF_COLUMNS:
+            if len(getattr(self, c)) != n:
+                raise ValueError(
+                    f"EpofResult: column {c} has {len(getattr(self, c))} rows; frame has {n}"
+                )
+
+
+def compute_epof(
+    grid: GridFile,
+    hp: HeadPath,
+    *,
+    hfov_deg: float | None = None,
+    vfov_deg: float | None = None,
+    top_k: int | None = None,
+    rule: OpacityRule = OpacityRule(),
+    hold: bool = False,
+    method: str = "auto",
+) -> EpofResult:
+    """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
+
+    Frame i of the grid is video frame ``start_frame + i`` (``meta["start_frame"]``, 0
+    unless the grid was made with ``preprocess --start``) at ``(start_frame + i) / fps``
+    seconds; those are the ``frame`` and ``time_s`` columns. The head path must cover
+    every such time unless ``hold`` holds its first/last pose (InputError otherwise,
+    saying where it ends).
+
+    ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
+    ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual
+    viewport (:func:`simulator.sphere.viewport_epof`; any FOV, roll included; InputError
+    naming the command that makes a field if the grid has none); ``"auto"`` (default) =
+    sphere when the grid has a field and ``top_k`` is not given, else paper.
+    """
+    if method not in ("auto", "paper", "sphere"):
+        raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
+    sphere = method == "sphere" or (
+        method == "auto" and grid.field_dps is not None and top_k is None
+    )
+    if sphere and top_k is not None:
+        raise InputError(
+            "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
+            "field over the viewport: drop --top-k or use --method paper"
+        )
+    frames, t = _frames(grid)
+    hp.check_covers(
+        float(t[-1]),
+        hold=hold,
+        video=grid.meta.get("video", {}).get("path", "") or grid.path,
+        start_s=float(t[0]),
+    )
+    yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
+    if sphere:
+        field, cells = require_field(grid)
+        h, v = _fov(grid, hfov_deg, vfov_deg)
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
+    else:
+        rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
+        e = epof_from_grid(
+            grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
+        )
+    thr = rule.fit(grid, e)
+    op = rule(e, thr, fps=grid.fps)
+    h, v = _fov(grid, hfov_deg, vfov_deg)
+    meta = {
+        "hfov_deg": h,
+        "vfov_deg": v,
+        "top_k": top_k,
+        "rule": rule,
+        "fps": grid.fps,
+        "method": "sphere" if sphere else "paper",
+    }
+    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
+
+
+def write_epof_csv(path: str | os.PathLike, result: EpofResult) -> None:
+    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically."""
+    buf = io.StringIO()
+    buf.write(",".join(EPOF_COLUMNS) + "\n")
+    cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
+    for i, fr in enumerate(result.frame):
+        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + "\n")
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(buf.getvalue())
+
+
+def read_epof_csv(path: str | os.PathLike) -> EpofResult:
+    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed)."""
+    p = check_input_file(path, "EPOF")
+    lines = [
+        ln for ln in p.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()
+    ]
+    cols = [c.strip() for c in lines[0].split(",")]
+    if cols != list(EPOF_COLUMNS):
+        raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
+    if len(lines) < 2:
+        raise InputError(f"{p}: EPOF file has a header but no rows")
+    try:
+        data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    except ValueError:
+        raise InputError(f"{p}: non-numeric value in an EPOF row") from None
+    if data.ndim != 2 or data.shape[1] != len(EPOF_COLUMNS):
+        raise InputError(f"{p}: every row needs {len(EPOF_COLUMNS)} fields")
+    if not np.all(np.isfinite(data)):
+        raise InputError(f"{p}: EPOF file has NaN or infinite values")
+    arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}
+    arrs["frame"] = arrs["frame"].astype(np.int64)
+    return EpofResult(**arrs)
+
+
+def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
+    """Plot EPOF (deg/s) and GRF opacity over time into a PNG (atomic)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=110)
+    ax.plot(result.time_s, result.epof_dps, color="tab:blue", lw=1.2, label="EPOF")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("EPOF (deg/s)", color="tab:blue")
+    lo, hi = result.thresholds_dps
+    for v, name in ((lo, "lo"), (hi, "hi")):
+        if math.isfinite(v):
+            ax.axhline(v, color="tab:blue", ls=":", lw=0.8)
+            ax.annotate(f"{name} {v:.3g}", (result.time_s[0], v), fontsize=7, color="tab:blue")
+    ax2 = ax.twinx()
+    ax2.plot(result.time_s, result.opacity, color="tab:red", lw=1.0, label="opacity")
+    ax2.set_ylim(-0.02, 1.02)
+    ax2.set_ylabel("GRF opacity", color="tab:red")
+    ax.set_title(title or "EPOF and GRF opacity")
+    fig.tight_layout()
+    with atomic_output(path) as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)

@@ -1,0 +1,94 @@
+"""What both preprocessing methods share: frame ranges, output checks and the grid meta they write."""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from simulator.errors import InputError
+
+__all__ = ["PreprocessInterrupted"]
+
+
+class PreprocessInterrupted(KeyboardInterrupt):
+    """Ctrl-C during :func:`preprocess_video`; the checkpoint was saved (message says where)."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+
+def check_output_dir(output: str | os.PathLike) -> Path:
+    """``output`` as a Path after checking that its directory exists and is writable
+    (InputError otherwise): called before any work, so a typo fails at once."""
+    out = Path(output)
+    parent = out.parent if str(out.parent) else Path(".")
+    if not parent.is_dir() or not os.access(parent, os.W_OK):
+        raise InputError(f"{out}: output directory {parent} does not exist or is not writable")
+    return out
+
+
+def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[int, int]:
+    """Video frames ``start <= i < end`` of ``--start``/``--end`` (seconds) for preprocess
+    (both modes): ``start = round(start_s * fps)``, ``end = round(end_s * fps)`` capped at
+    the video's frame count. InputError (naming ``src``) for a negative or non-finite
+    start, an end not after the start, a start past the end of the video, or fewer than
+    2 frames (flow needs a pair)."""
+    fps = info.fps
+    if not (start_s >= 0 and math.isfinite(start_s)):
+        raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
+    s = round(start_s * fps)
+    e = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
+    if end_s is not None and not (end_s > start_s):
+        raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
+    if s >= info.n_frames:
+        raise InputError(
+            f"{src}: --start {start_s} s is past the end of the video ({info.duration_s:.3f} s)"
+        )
+    if e - s < 2:
+        raise InputError(
+            f"{src}: {e - s} frame(s) in the chosen range; flow needs at least 2 frames "
+            f"(video: {info.n_frames} frames at {fps:g} fps)"
+        )
+    return s, e
+
+
+def common_meta(
+    video,
+    info,
+    *,
+    n_rows: int,
+    start_frame: int,
+    flow: dict,
+    layout: str,
+    eye: str,
+    content_hash: str,
+    units: dict,
+) -> dict:
+    """The grid-file ``meta`` both methods write (paper and sphere mode): frames, flow,
+    layout, eye, the frame range, units and the video's identity (``GridFile.check_video``
+    compares it with a video)."""
+    fps = info.fps
+    return {
+        "fps": fps,
+        "n_frames": n_rows,
+        "flow": flow,
+        "layout": layout,
+        "eye": eye,
+        "start_frame": start_frame,
+        "end_frame": start_frame + n_rows,
+        "start_s": start_frame / fps,
+        "eye_size": list(info.eye_size(layout)),
+        "units": units,
+        "frame0": "repeats frame 1",
+        "video": {
+            "path": str(Path(video).resolve()),
+            "width": info.width,
+            "height": info.height,
+            "sar": info.sar,
+            "codec": info.codec,
+            "n_frames": info.n_frames,
+            "content_hash": content_hash,
+        },
+    }

@@ -1,0 +1,120 @@
+"""Readers of recorded head paths: vimsim's own formats and the public datasets, one module per family.
+
+:func:`load_headpath` reads any of :data:`FORMATS` (``auto`` detects the format from the
+content) into a :class:`simulator.headpath.HeadPath` in the project's conventions (degrees;
+yaw + right, pitch + up, roll + right ear down; seconds from the video start). The mapping
+of each dataset's axes to ours is documented in ``docs/headpath.md`` and beside each reader.
+"""
+
+from __future__ import annotations
+
+import os
+
+from simulator.choices import HEADPATH_FORMATS as FORMATS
+from simulator.errors import InputError
+from simulator.fileio import check_input_file
+from simulator.headpath import CANONICAL_COLUMNS, HeadPath
+from simulator.readers.avtrack360 import _read_avtrack360
+from simulator.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat
+from simulator.readers.common import _first_line, _warn_if_coarse
+from simulator.readers.corbillon import _read_corbillon, _read_corbillon_euler
+from simulator.readers.salient360 import _read_salient360_dyn, _read_salient360_static
+from simulator.readers.vidstr360 import _read_360vidstr
+
+__all__ = ["FORMATS", "detect_format", "load_headpath", "load_keyframes"]
+
+
+def detect_format(path: str | os.PathLike) -> str:
+    """Guess the format (one of :data:`FORMATS`) from the file's content."""
+    p = check_input_file(path, "head path")
+    head = _first_line(p)
+    low = head.lower()
+    if head.startswith(("{", "[")):
+        with open(p, encoding="utf-8", errors="replace") as fh:
+            text = fh.read(1 << 16)
+        if "pitch_yaw_roll_data_hmd" in text:
+            return "avtrack360"
+        return "keyframes-json"
+    toks = set(low.replace(",", " ").split())
+    if {"timestamp", "viewpoint", "w", "x", "y", "z"} <= toks:
+        return "corbillon"
+    if {"timestamp", "viewpoint", "yaw", "pitch", "roll"} <= toks:
+        return "corbillon-euler"
+    if {"cam_pitch", "cam_yaw", "cam_roll"} <= toks:
+        return "salient360-dyn"
+    if "camerarotation.x" in toks and "camerarotation.w" in toks:
+        return "salient360-static"
+    if "time_s" in toks and {"qw", "qx", "qy", "qz"} <= toks:
+        return "quat"
+    if "time_s" in toks:
+        return "canonical"
+    try:
+        [float(v) for v in head.split()]
+        return "360vidstr"
+    except ValueError:
+        pass
+    raise InputError(
+        f"{p}: cannot tell the head path format from its first line {head[:80]!r}; expected a "
+        f"CSV with header {','.join(CANONICAL_COLUMNS)} (or pass --format, one of {', '.join(FORMATS)})"
+    )
+
+
+def load_headpath(
+    path: str | os.PathLike,
+    format: str = "auto",
+    *,
+    video: str | None = None,
+    user: int | None = None,
+) -> HeadPath:
+    """Read a head path file.
+
+    Parameters
+    ----------
+    path : file name
+    format : ``auto`` or one of :data:`FORMATS`
+    video : str, AVTrack360 only: which video's trace (``"6.mp4"`` or ``"6"``)
+    user : int, 360VidStr only: which user (1-based, as the dataset's readMe counts)
+
+    Raises
+    ------
+    InputError
+        One line naming the file and the problem (empty, unknown columns, NaN, time not
+        increasing, zero-length quaternion, ...). Angles that look like radians where
+        degrees are expected give a :class:`RadiansWarning`.
+    """
+    p = check_input_file(path, "head path")
+    fmt = detect_format(p) if format == "auto" else format
+    if fmt not in FORMATS:
+        raise InputError(
+            f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(FORMATS)}"
+        )
+    if fmt == "avtrack360":
+        hp = _read_avtrack360(p, video)
+    elif fmt == "360vidstr":
+        hp = _read_360vidstr(p, user)
+    else:
+        hp = _READERS[fmt](p)
+    _warn_if_coarse(hp)
+    return hp
+
+
+_READERS = {
+    "canonical": _read_canonical,
+    "quat": _read_quat,
+    "keyframes-json": _read_keyframes_json,
+    "corbillon": _read_corbillon,
+    "corbillon-euler": _read_corbillon_euler,
+    "salient360-dyn": _read_salient360_dyn,
+    "salient360-static": _read_salient360_static,
+}
+
+
+def load_keyframes(path: str | os.PathLike) -> HeadPath:
+    """Read a keyframe file (JSON list, or a canonical CSV) for ``headpath.synth("keyframes")``."""
+    p = check_input_file(path, "keyframes")
+    fmt = detect_format(p)
+    if fmt not in ("keyframes-json", "canonical"):
+        raise InputError(
+            f"{p}: keyframes must be a JSON list or a CSV with header {','.join(CANONICAL_COLUMNS)}"
+        )
+    return load_headpath(p, fmt)

@@ -1,0 +1,48 @@
+"""360VidStr head traces: aggregated files holding many users of one video."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from simulator.errors import InputError
+from simulator.headpath import HeadPath
+from simulator.readers.common import _check_finite, _check_increasing
+
+
+def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
+    """360VidStr aggregated ``<video>.txt``: line 1 times (s, 10 Hz), then per user a line of
+    pitch and a line of yaw, radians; no roll. Signs/origin undocumented (taken as ours:
+    yaw + right, pitch + up). A user's lines may be shorter than the time line: the path
+    ends at that user's last sample."""
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        lines = [ln for ln in fh.read().splitlines() if ln.strip()]
+    try:
+        rows = [np.array(ln.split(), dtype=float) for ln in lines]
+    except ValueError:
+        raise InputError(f"{p}: not a 360VidStr aggregated file (non-numeric values)") from None
+    if len(rows) < 3 or len(rows) % 2 == 0:
+        raise InputError(
+            f"{p}: a 360VidStr file has 2n+1 lines (times, then pitch and yaw per user); found {len(rows)}"
+        )
+    n_users = (len(rows) - 1) // 2
+    if user is None:
+        if n_users == 1:
+            user = 1
+        else:
+            raise InputError(f"{p}: holds {n_users} users; choose one with --user 1..{n_users}")
+    if not 1 <= user <= n_users:
+        raise InputError(f"{p}: no user {user}; choose --user 1..{n_users}")
+    pitch, yaw = rows[2 * user - 1], rows[2 * user]
+    n = min(len(pitch), len(yaw), len(rows[0]))
+    if n < 1:
+        raise InputError(f"{p}: user {user} has no samples")
+    t = rows[0][:n]
+    data = np.stack([t, yaw[:n], pitch[:n]], axis=1)
+    labels = list(range(1, n + 1))  # 1-based sample (column) numbers
+    _check_finite(p, ["time", "yaw", "pitch"], data, labels, "sample")
+    _check_increasing(p, t, labels, "sample")
+    return HeadPath.from_angles_deg(
+        t, np.degrees(yaw[:n]), np.degrees(pitch[:n]), 0.0, source=f"{p}:user{user}"
+    )

@@ -1,0 +1,405 @@
+"""The eye renderer: one eye's view of an equirect frame, with the GRF overlay, in one GL pass.
+
+Per eye, one full-screen pass (``shaders/fullscreen.vert`` + ``shaders/eye.frag``)
+computes each pixel's view ray from the eye's perspective projection (exact hfov/vfov,
+pixel centres as :func:`simulator.geometry.perspective_rays`) and the head rotation
+(the 3x3 head->world matrix of :func:`simulator.geometry.head_rotation`, passed as a
+uniform), converts it to lon/lat with the project's conventions and samples the eye's
+equirect frame:
+
+* magnification (a texel covers more than a pixel): bicubic, ffmpeg v360's 4-point
+  Lagrange kernel, with longitude wrap-around at the +-180 deg seam and continuation
+  across the poles;
+* minification (e.g. a 4K frame into a small eye): mipmaps, trilinear, at the level of
+  detail of the pixel's angular footprint on the sphere against the equirect's angular
+  row height (``pi / H``). No texture-coordinate derivatives are used, so there is no
+  seam line at +-180 deg and no blur or anisotropic-filter artefacts near the poles
+  (llvmpipe's anisotropic filter speckles there; the equirect is oversampled in
+  longitude near the poles anyway).
+
+Granulated rest frames (:mod:`simulator.grf`) are drawn in the same pass: world-fixed
+grain coverage, rendered once per renderer into an equirect texture from a lat-band
+bucket grid of the grains (shader storage buffers, ``shaders/grf_mask.frag``) and looked
+up per pixel, times the head-fixed cutout and the frame's opacity.
+
+The shader is compiled in variants (defines) so that llvmpipe, which runs both sides of
+a branch, never pays for a path that cannot be taken: cubic only when no pixel minifies,
+no grain-mask mip level when no pixel outside the cutout is larger than a mask texel, no
+parallax ray for grains at infinity. For the encoder the same pass writes the luma (Y)
+plane and ``shaders/chroma420.frag`` the U and V planes, so that frames leave the GPU as
+yuv420p (no CPU flip, alpha drop or swscale conversion per frame).
+
+Images are ``(H, W, 3)`` uint8 RGB, origin top-left; the one flip is at the framebuffer
+boundary: eye.frag draws image row 0 into GL row 0, so the readback (GL row 0 first)
+comes out top row first. The EGL context is created in exactly one function,
+:func:`create_context`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.choices import Eye
+from simulator.errors import InputError
+from simulator.geometry import check_fov, head_rotation
+from simulator.grf import GrainField, GrfConfig
+from simulator.render.gl import _check_gl, _gl_limit, _program
+
+__all__ = ["EyeRenderer", "RenderConfig", "render_view"]
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """What one eye sees: image size, exact FOVs, filtering, and the GRF.
+
+    eye_size : (width, height), pixels (default 1440x1440, the paper's HMD per eye)
+    hfov_deg, vfov_deg : exact horizontal / vertical FOV, degrees (default 107 x 107)
+    grf : GRF parameters, or None for no overlay
+    """
+
+    eye_size: tuple[int, int] = (1440, 1440)
+    hfov_deg: float = 107.0
+    vfov_deg: float = 107.0
+    grf: GrfConfig | None = field(default_factory=GrfConfig)
+
+    def __post_init__(self) -> None:
+        try:
+            w, h = (int(v) for v in self.eye_size)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"eye size must be (width, height) pixels, e.g. 1440x1440; got {self.eye_size!r}"
+            ) from None
+        if w <= 0 or h <= 0:
+            raise InputError(f"eye size must be positive, e.g. 1440x1440; got {w}x{h}")
+        object.__setattr__(self, "eye_size", (w, h))
+        hfov, vfov = check_fov(self.hfov_deg, self.vfov_deg)  # the one FOV rule
+        object.__setattr__(self, "hfov_deg", hfov)
+        object.__setattr__(self, "vfov_deg", vfov)
+
+    @property
+    def pixel_angle_rad(self) -> float:
+        """Largest angular size of one pixel (at the view centre), radians."""
+        w, h = self.eye_size
+        return max(
+            2.0 * math.tan(math.radians(self.hfov_deg) / 2.0) / w,
+            2.0 * math.tan(math.radians(self.vfov_deg) / 2.0) / h,
+        )
+
+
+def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
+    """Render the GRF's world-fixed grain coverage once, as an equirect R8 texture
+    (``shaders/grf_mask.frag``), with texels no larger than the eye's largest pixel
+    (capped at 8192 x 4096, at least 512 x 256); magnified bilinearly, its 1-texel
+    antialiased edges stay within about a pixel.
+
+    Returns ``(texture, lod)``. ``lod``: some pixel where grains can show (eccentricity
+    >= ``grf.inner_deg``) may be larger than a texel row (small eyes, against the
+    512-texel floor), so the texture is mipmapped and eye.frag picks the level from the
+    pixel's footprint; otherwise (e.g. 1440 px eyes) every such pixel magnifies and level
+    0 alone gives the same result. A perspective pixel at eccentricity e spans at most
+    ``pixel_angle_rad * cos(e)``; 1 deg of slack covers llvmpipe's per-quad derivatives.
+    """
+    import moderngl
+
+    limit = min(8192, _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"))
+    w = math.ceil(2.0 * math.pi / pixel_angle_rad)
+    w = min(max(512, w + (w % 2)), limit)
+    h = w // 2
+    reach = math.radians(max(grf.inner_deg - 1.0, 0.0))
+    lod = pixel_angle_rad * math.cos(reach) > 0.99 * math.pi / h
+    field_ = GrainField.from_config(grf)
+    # Lookup reach: half a texel row (the antialiasing ramp) plus slack for float32 edges.
+    b = field_.buckets(0.5 * math.pi / h + 1e-4)
+    prog = _program(ctx, "fullscreen.vert", "grf_mask.frag", {})
+    vao = ctx.vertex_array(prog, [])
+    ssbos = [
+        ctx.buffer(np.ascontiguousarray(arr).tobytes())
+        for arr in (b.bands, b.cell_start, b.entries)
+    ]
+    tex = ctx.texture((w, h), 1, dtype="f1")
+    fbo = ctx.framebuffer(color_attachments=[tex])
+    try:
+        for i, sb in enumerate(ssbos):
+            sb.bind_to_storage_buffer(i)
+        prog["u_size"].value = (float(w), float(h))
+        prog["u_cell"].value = b.cell_rad
+        prog["u_n_bands"].value = b.n_bands
+        fbo.use()
+        fbo.viewport = (0, 0, w, h)
+        vao.render(moderngl.TRIANGLES, vertices=3)
+        tex.repeat_x = True
+        tex.repeat_y = False
+        if lod:
+            tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+            tex.build_mipmaps()
+        else:
+            tex.filter = (moderngl.LINEAR, moderngl.LINEAR)
+    finally:
+        outer_fbo.use()
+        fbo.release()
+        for sb in ssbos:
+            sb.release()
+        vao.release()
+        prog.release()
+    _check_gl(ctx, "after rendering the grain mask")
+    return tex, lod
+
+
+class EyeRenderer:
+    """Renders eye views of equirect frames into an offscreen framebuffer.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context from :func:`create_context`
+    config : RenderConfig
+
+    Use :meth:`upload` once per video frame and eye (``"left"``, ``"right"``; for mono
+    upload to ``"left"`` only and render both eyes from it), then :meth:`render`.
+    """
+
+    def __init__(self, ctx, config: RenderConfig = RenderConfig()):
+        import moderngl
+
+        self.ctx = ctx
+        self.config = config
+        # Bound again on release: releasing the bound FBO leaves moderngl restoring a dead
+        # name on the next framebuffer creation (GL_INVALID_OPERATION).
+        self._outer_fbo = ctx.fbo if ctx.fbo is not None else ctx.detect_framebuffer(0)
+        w, h = config.eye_size
+        limit = min(
+            _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE"),
+            _gl_limit(ctx, "GL_MAX_VIEWPORT_DIMS"),
+            _gl_limit(ctx, "GL_MAX_RENDERBUFFER_SIZE"),
+        )
+        if w > limit or h > limit:
+            raise InputError(
+                f"eye size {w}x{h} exceeds this OpenGL's limit of {limit} pixels per side"
+            )
+        self._max_tex = _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE")
+        self._moderngl = moderngl
+        grf = config.grf
+        self.grain_mask = None
+        grain_lod = False
+        if grf is not None:
+            self.grain_mask, grain_lod = _grain_mask(
+                ctx, grf, config.pixel_angle_rad, self._outer_fbo
+            )
+        self._defines = {
+            "GRF": int(grf is not None),
+            "GRAIN_LOD": int(grain_lod),
+            "GRAIN_PARALLAX": int(grf is not None and grf.distance_m is not None),
+        }
+        # Keyed by MIPMAP; the general variant (cubic or trilinear per pixel) is built now,
+        # the cubic-only one on the first frame that needs no mipmaps.
+        self._progs: dict[bool, tuple] = {}
+        self._program(True)
+        # eye.frag's outputs: RGB (a texture: chroma420.frag reads it) and luma (Y plane).
+        self._color = ctx.texture((w, h), 4, dtype="f1")
+        self._luma = ctx.renderbuffer((w, h), 1, dtype="f1")
+        self.fbo = ctx.framebuffer(color_attachments=[self._color, self._luma])
+        self._buf = np.empty((2, h, w, 4), np.uint8)  # readback: preallocated, one per eye
+        self._yuv = None  # chroma pass and yuv420p buffers, built on first use
+        self._tex: dict[str, object] = {}
+        _check_gl(ctx, "after setting up the eye renderer")
+
+    def _program(self, mipmap: bool):
+        """eye.frag for ``MIPMAP = mipmap`` with its constant uniforms set: (program, vao)."""
+        pv = self._progs.get(mipmap)
+        if pv is not None:
+            return pv
+        cfg, grf = self.config, self.config.grf
+        prog = _program(
+            self.ctx, "fullscreen.vert", "eye.frag", {**self._defines, "MIPMAP": int(mipmap)}
+        )
+        values = {
+            "u_tan_half": (
+                math.tan(math.radians(cfg.hfov_deg) / 2),
+                math.tan(math.radians(cfg.vfov_deg) / 2),
+            ),
+            "u_size": (float(cfg.eye_size[0]), float(cfg.eye_size[1])),
+            "u_equirect": 0,
+        }
+        if grf is not None:
+            values |= {
+                "u_grains": 1,
+                "u_cutout": (math.radians(grf.inner_deg), math.radians(grf.outer_deg)),
+                "u_eye_offset": (0.0, 0.0, 0.0),
+                "u_opacity": 0.0,
+            }
+        for name, value in values.items():
+            if name in prog:
+                prog[name].value = value
+        pv = self._progs[mipmap] = (prog, self.ctx.vertex_array(prog, []))
+        return pv
+
+    def upload(self, frame: NDArray[np.uint8], eye: Eye = "left") -> None:
+        """Upload one eye's equirect frame ``(h, w, 3)`` uint8 RGB (top row first) and
+        rebuild its mipmaps. The texture is (re)allocated when the size changes."""
+        h, w = frame.shape[:2]
+        if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
+            raise ValueError(f"frame must be (h, w, 3) uint8; got {frame.shape} {frame.dtype}")
+        if w > self._max_tex or h > self._max_tex:
+            raise InputError(
+                f"equirect frame {w}x{h} exceeds this OpenGL's texture limit of {self._max_tex} pixels"
+            )
+        tex = self._tex.get(eye)
+        # Mipmaps only when some pixel is larger than a texel row (minification).
+        mips = self.config.pixel_angle_rad > 0.95 * math.pi / h
+        if tex is None or tex.size != (w, h) or tex.extra != mips:
+            if tex is not None:
+                tex.release()
+            mgl = self._moderngl
+            tex = self.ctx.texture((w, h), 3, dtype="f1", alignment=1)
+            tex.repeat_x = True  # longitude wraps at the seam
+            tex.repeat_y = False  # latitude is clamped at the poles
+            tex.filter = (mgl.LINEAR_MIPMAP_LINEAR if mips else mgl.LINEAR, mgl.LINEAR)
+            tex.extra = mips
+            self._tex[eye] = tex
+        tex.write(np.ascontiguousarray(frame))
+        if mips:
+            tex.build_mipmaps()
+
+    def _draw(self, rotation, eye, source, opacity, eye_offset) -> None:
+        tex = self._tex.get(source or eye)
+        if tex is None:
+            raise RuntimeError(f"no frame uploaded for eye {source or eye!r}")
+        prog, vao = self._program(bool(tex.extra))
+        R = np.asarray(rotation, np.float32).reshape(3, 3)
+        prog["u_head"].write(R.T.tobytes())  # GLSL mat3 is column-major
+        if self.config.grf is not None:
+            prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
+            if "u_eye_offset" in prog:
+                prog["u_eye_offset"].value = tuple(float(v) for v in eye_offset)
+        tex.use(0)
+        if self.grain_mask is not None:
+            self.grain_mask.use(1)
+        self.fbo.use()
+        vao.render(self._moderngl.TRIANGLES, vertices=3)
+
+    def _yuv_pass(self):
+        if self._yuv is None:
+            w, h = self.config.eye_size
+            if w % 2 or h % 2:
+                raise InputError(f"yuv420p needs an even eye size, e.g. 1440x1440; got {w}x{h}")
+            prog = _program(self.ctx, "fullscreen.vert", "chroma420.frag", {})
+            prog["u_rgb"].value = 0
+            vao = self.ctx.vertex_array(prog, [])
+            planes = [self.ctx.renderbuffer((w // 2, h // 2), 1, dtype="f1") for _ in range(2)]
+            fbo = self.ctx.framebuffer(color_attachments=planes)
+            bufs = np.empty((2, h * 3 // 2, w), np.uint8)
+            self._yuv = (prog, vao, fbo, planes, bufs)
+        return self._yuv
+
+    def render(
+        self,
+        rotation: NDArray,
+        eye: Eye = "left",
+        *,
+        source: Eye | None = None,
+        opacity: float = 0.0,
+        eye_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
+        pix_fmt: Literal["rgb24", "yuv420p"] = "rgb24",
+    ) -> NDArray[np.uint8]:
+        """Render one eye and read it back.
+
+        Parameters
+        ----------
+        rotation : ndarray, shape (3, 3)
+            Head -> world rotation matrix (``head_rotation(yaw, pitch, roll).as_matrix()``).
+        eye : which readback buffer to use ("left" / "right"); the result stays valid
+            until the next render of the same eye
+        source : texture to sample (default ``eye``; mono: "left" for both eyes)
+        opacity : GRF opacity (0..1) for this frame
+        eye_offset : eye position in the world frame in units of the grain distance
+            (parallax of finite-distance grains; zeros = grains at infinity)
+        pix_fmt : ``"rgb24"``, or ``"yuv420p"`` (even eye sizes): converted on the GL
+            side (Y from ``eye.frag``, U and V from ``shaders/chroma420.frag``; BT.601
+            limited range, 2 x 2 chroma means, as swscale's rgb24 -> yuv420p) into the
+            planar layout of ``av.VideoFrame.from_ndarray(..., format="yuv420p")``
+
+        Returns
+        -------
+        rgb24: ndarray, shape (height, width, 3), uint8, a view (rows top first);
+        yuv420p: ndarray, shape (height * 3 // 2, width), uint8, contiguous (Y rows, then
+        U, then V, each top first)
+        """
+        if pix_fmt not in ("rgb24", "yuv420p"):
+            raise ValueError(f"pix_fmt must be 'rgb24' or 'yuv420p'; got {pix_fmt!r}")
+        self._draw(rotation, eye, source, opacity, eye_offset)
+        slot = 0 if eye == "left" else 1
+        # eye.frag draws image row 0 into GL row 0 (the one flip), so the readback, bottom
+        # GL row first, comes out top row first.
+        if pix_fmt == "yuv420p":
+            _prog, vao, fbo, _, bufs = self._yuv_pass()
+            w, h = self.config.eye_size
+            out = bufs[slot]
+            self.fbo.read_into(out, components=1, attachment=1, alignment=1)  # Y
+            self._color.use(0)
+            fbo.use()
+            vao.render(self._moderngl.TRIANGLES, vertices=3)
+            for k in (0, 1):  # U, V
+                fbo.read_into(
+                    out, components=1, attachment=k, alignment=1, write_offset=w * h * (4 + k) // 4
+                )
+            return out
+        self.fbo.read_into(self._buf[slot], components=4, alignment=1)
+        return self._buf[slot, :, :, :3]
+
+    def eye_offset(self, rotation: NDArray, eye: Eye) -> tuple[float, float, float]:
+        """World-frame eye offset / grain distance for stereo grain parallax (zeros when the
+        GRF has no finite distance). Left eye at -ipd/2 on the head's +x axis."""
+        grf = self.config.grf
+        if grf is None or grf.distance_m is None:
+            return (0.0, 0.0, 0.0)
+        sign = -1.0 if eye == "left" else 1.0
+        off = np.asarray(rotation, float) @ np.array([sign * grf.ipd_m / 2.0, 0.0, 0.0])
+        return tuple(float(v) for v in off / grf.distance_m)
+
+    def release(self) -> None:
+        for t in self._tex.values():
+            t.release()
+        if self.grain_mask is not None:
+            self.grain_mask.release()
+        self._outer_fbo.use()
+        self.fbo.release()
+        self._color.release()
+        self._luma.release()
+        if self._yuv is not None:
+            prog, vao, fbo, planes, _ = self._yuv
+            fbo.release()
+            for rb in planes:
+                rb.release()
+            vao.release()
+            prog.release()
+        for prog, vao in self._progs.values():
+            vao.release()
+            prog.release()
+
+
+def render_view(
+    ctx,
+    img: NDArray[np.uint8],
+    yaw_deg: float,
+    pitch_deg: float,
+    roll_deg: float = 0.0,
+    *,
+    config: RenderConfig = RenderConfig(eye_size=(256, 256), grf=None),
+    opacity: float = 1.0,
+) -> NDArray[np.uint8]:
+    """One eye's view of an equirect image ``(h, w, 3)`` uint8 (a copy).
+
+    Orientation in degrees (yaw + right, pitch + up, roll + right ear down; applied yaw,
+    pitch, roll). ``opacity`` is the GRF opacity when ``config.grf`` is set.
+    """
+    r = EyeRenderer(ctx, config)
+    try:
+        r.upload(img)
+        R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
+        return np.array(r.render(R, opacity=opacity))
+    finally:
+        r.release()

@@ -1,0 +1,239 @@
+"""Rendering whole videos: decode, render each eye, encode per-eye H.264 files.
+
+Frames are decoded once (:func:`simulator.video.prefetch`), rendered per eye
+(:class:`simulator.render.eye.EyeRenderer`) and leave the GPU as yuv420p planes for the
+encoder. Output files are written to temporary names and renamed when complete.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+from simulator.fileio import atomic_output
+from simulator.geometry import head_rotation, split_eye
+from simulator.progress import Counter, Progress
+from simulator.render.eye import EyeRenderer, RenderConfig
+from simulator.video import VideoWriter, iter_frames, prefetch, probe
+
+__all__ = ["VideoRenderResult", "render_video"]
+
+
+@dataclass(frozen=True)
+class VideoRenderResult:
+    """What :func:`render_video` did: frames written per eye and wall-clock seconds."""
+
+    n_frames: int
+    eye_size: tuple[int, int]
+    fps: float
+    timings_s: dict[str, float]
+
+    @property
+    def frames_per_s(self) -> float:
+        t = self.timings_s.get("total", 0.0)
+        return self.n_frames / t if t > 0 else float("nan")
+
+
+def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
+    """Encode one frame already in yuv420p (``(h * 3 // 2, w)`` uint8, the layout of
+    :meth:`EyeRenderer.render` ``pix_fmt="yuv420p"``) with a ``simulator.video.VideoWriter``,
+    skipping its rgb24 -> yuv420p conversion (the stream is yuv420p: x264 takes it as is)."""
+    import av
+
+    w, h = writer.size
+    if frame.shape != (h * 3 // 2, w) or frame.dtype != np.uint8:
+        raise ValueError(
+            f"frame must be ({h * 3 // 2}, {w}) uint8 yuv420p; got {frame.shape} {frame.dtype}"
+        )
+    vf = av.VideoFrame.from_ndarray(frame, format="yuv420p")
+    for pkt in writer._stream.encode(vf):
+        writer._container.mux(pkt)
+    writer.n_written += 1
+
+
+class _Worker:
+    """A thread draining a bounded queue into ``fn``; errors resurface in :meth:`join`."""
+
+    def __init__(self, fn, maxsize: int = 3, name: str = "worker"):
+        import queue
+        import threading
+
+        self.q: queue.Queue = queue.Queue(maxsize=maxsize)
+        self.fn = fn
+        self.error: BaseException | None = None
+        self.busy_s = 0.0
+        self.t = threading.Thread(target=self._run, name=name, daemon=True)
+        self.t.start()
+
+    def _run(self) -> None:
+        import time
+
+        while True:
+            item = self.q.get()
+            if item is None:
+                return
+            if self.error is not None:
+                continue  # drain after a failure
+            t0 = time.perf_counter()
+            try:
+                self.fn(item)
+            except BaseException as e:  # noqa: BLE001 - re-raised in join()
+                self.error = e
+            self.busy_s += time.perf_counter() - t0
+
+    def put(self, item) -> None:
+        if self.error is not None:
+            raise self.error
+        self.q.put(item)
+
+    def join(self) -> None:
+        self.q.put(None)
+        self.t.join()
+        if self.error is not None:
+            raise self.error
+
+
+def render_video(
+    ctx,
+    video_path: str,
+    out_paths: tuple[str, str],
+    angles_deg: NDArray[np.float64],
+    *,
+    opacity: NDArray[np.float64] | None = None,
+    config: RenderConfig = RenderConfig(),
+    layout: str = "mono",
+    fps: float | None = None,
+    n_frames: int | None = None,
+    preset: str = "veryfast",
+    crf: int = 18,
+    progress: Progress | None = None,
+) -> VideoRenderResult:
+    """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
+
+    Parameters
+    ----------
+    ctx : moderngl.Context from :func:`create_context`
+    video_path : equirect video (or image: one frame)
+    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename)
+    angles_deg : ndarray, shape (N, 3), float64
+        (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
+        beyond N hold the last pose
+    opacity : ndarray, shape (N,), GRF opacity 0..1 per frame (ignored without ``config.grf``)
+    layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
+        ``side-by-side`` (left eye left)
+    fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
+    preset, crf : x264 speed preset and quality
+
+    A mono video with grains at infinity gives the same image to both eyes: it is
+    rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``. Frames are
+    converted to yuv420p on the GL side (:meth:`EyeRenderer.render` ``pix_fmt``) and
+    handed to x264 as they are.
+
+    Returns
+    -------
+    VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``, ``render``
+    (draw, yuv420p conversion and readback of both eyes), ``encode_wait`` (blocked on the encoders),
+    ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
+    """
+    import contextlib
+    import functools
+    import time
+
+    info = probe(video_path)
+    fps = float(fps or info.fps)
+    total = int(n_frames or info.n_frames)
+    ang = np.asarray(angles_deg, float).reshape(-1, 3)
+    if ang.shape[0] < 1:
+        raise InputError(f"{video_path}: no head orientations to render")
+    op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
+    rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
+    stereo = layout != "mono"
+    # Mono video with grains at infinity: both eyes see exactly the same image, so it is
+    # rendered and encoded once and the file copied (halves the work; same output).
+    same = not stereo and (config.grf is None or config.grf.distance_m is None)
+    eyes = ("left",) if same else ("left", "right")
+    renderer = EyeRenderer(ctx, config)
+    w, h = config.eye_size
+    timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
+    t_start = time.perf_counter()
+    n = 0
+    try:
+        with contextlib.ExitStack() as stack:
+            writers = [
+                stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
+                for p in out_paths[: len(eyes)]
+            ]
+            workers = [
+                _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
+                for i, wr in enumerate(writers)
+            ]
+            try:
+                # Decoding overlaps rendering; decoder buffers are reused, so copy there.
+                frames = stack.enter_context(
+                    contextlib.closing(
+                        prefetch(
+                            (np.array(f) for f in iter_frames(video_path, layout="mono")),
+                            depth=3,
+                        )
+                    )
+                )
+                bar = Counter(progress, total)
+                t0 = time.perf_counter()
+                for frame in frames:
+                    t1 = time.perf_counter()
+                    timings["decode_wait"] += t1 - t0
+                    i = min(n, len(rots) - 1)
+                    if stereo:
+                        renderer.upload(split_eye(frame, layout, "left", source=video_path), "left")
+                        renderer.upload(
+                            split_eye(frame, layout, "right", source=video_path), "right"
+                        )
+                    else:
+                        renderer.upload(frame, "left")
+                    t2 = time.perf_counter()
+                    o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
+                    outs = []
+                    for eye in eyes:
+                        img = renderer.render(
+                            rots[i],
+                            eye,
+                            source=eye if stereo else "left",
+                            opacity=o,
+                            eye_offset=renderer.eye_offset(rots[i], eye),
+                            pix_fmt="yuv420p",
+                        )
+                        outs.append(img.copy())  # the buffer is reused
+                    t3 = time.perf_counter()
+                    for wk, img in zip(workers, outs):
+                        wk.put(img)
+                    t0 = time.perf_counter()
+                    timings["upload"] += t2 - t1
+                    timings["render"] += t3 - t2
+                    timings["encode_wait"] += t0 - t3
+                    n += 1
+                    bar.update(1)
+                bar.close()
+            finally:
+                errors = []
+                for wk in workers:
+                    try:
+                        wk.join()
+                    except BaseException as e:  # noqa: BLE001
+                        errors.append(e)
+                timings["encode_busy"] = sum(wk.busy_s for wk in workers)
+            if errors:
+                raise errors[0]
+            if n == 0:
+                raise InputError(f"{video_path}: no frames decoded")
+        if same:
+            import shutil
+
+            with atomic_output(out_paths[1]) as tmp:
+                shutil.copyfile(out_paths[0], tmp)
+    finally:
+        renderer.release()
+    timings["total"] = time.perf_counter() - t_start
+    return VideoRenderResult(n, (w, h), fps, timings)

@@ -1,0 +1,200 @@
+"""The paper's sliding-window grid (section 3.3) and the extraction of every window of a frame.
+
+Window centres in degrees (yaw + right, pitch + up; windows have no roll); each window is a
+perspective view with exact FOVs (:func:`simulator.geometry.perspective_map`).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from typing import Literal
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.errors import InputError
+from simulator.geometry import (
+    _check_size,
+    check_fov,
+    equirect_remap_coords,
+    head_rotation,
+    pad_equirect,
+    perspective_rays,
+)
+
+__all__ = ["GRID_PRESETS", "WindowExtractor", "WindowGrid", "grid_preset"]
+
+
+@dataclass(frozen=True)
+class WindowGrid:
+    """The sliding-window grid of the paper (section 3.2), in degrees.
+
+    Window centres: yaw ``yaw_start_deg + k * yaw_step_deg`` for k < 360 / yaw_step_deg
+    (wrapping), pitch from ``pitch_min_deg`` to ``pitch_max_deg`` in ``pitch_step_deg``
+    steps. Each window is a perspective view with no roll, ``hfov_deg x vfov_deg``
+    (exact FOVs), sampled at ``size`` pixels.
+
+    Presets (:data:`GRID_PRESETS`): ``default`` = 15 deg yaw x 7.5 deg pitch steps, pitch
+    -37.5..37.5 (24 x 11 = 264 windows); ``paper-198`` = 20 deg yaw steps (18 x 11).
+    """
+
+    yaw_step_deg: float = 15.0
+    pitch_step_deg: float = 7.5
+    pitch_min_deg: float = -37.5
+    pitch_max_deg: float = 37.5
+    yaw_start_deg: float = -180.0
+    hfov_deg: float = 107.0
+    vfov_deg: float = 107.0
+    size: tuple[int, int] = (256, 256)
+    yaw_deg: NDArray = field(init=False, repr=False, compare=False)
+    pitch_deg: NDArray = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        check_fov(self.hfov_deg, self.vfov_deg)
+        _check_size(self.size)
+        object.__setattr__(self, "size", (int(self.size[0]), int(self.size[1])))
+        if not (0 < self.yaw_step_deg <= 360):
+            raise InputError(f"grid yaw step must be in (0, 360] degrees; got {self.yaw_step_deg}")
+        n_yaw = 360.0 / self.yaw_step_deg
+        if abs(n_yaw - round(n_yaw)) > 1e-6:
+            raise InputError(f"grid yaw step must divide 360 degrees; got {self.yaw_step_deg}")
+        if not (self.pitch_step_deg > 0):
+            raise InputError(f"grid pitch step must be > 0 degrees; got {self.pitch_step_deg}")
+        if not (-90 <= self.pitch_min_deg <= self.pitch_max_deg <= 90):
+            raise InputError(
+                f"grid pitch range must satisfy -90 <= min <= max <= 90; got {self.pitch_min_deg}..{self.pitch_max_deg}"
+            )
+        yaw = self.yaw_start_deg + self.yaw_step_deg * np.arange(round(n_yaw))
+        yaw = (yaw + 180.0) % 360.0 - 180.0
+        n_p = math.floor((self.pitch_max_deg - self.pitch_min_deg) / self.pitch_step_deg + 1e-9) + 1
+        pitch = self.pitch_min_deg + self.pitch_step_deg * np.arange(n_p)
+        yaw.setflags(write=False)
+        pitch.setflags(write=False)
+        object.__setattr__(self, "yaw_deg", yaw)
+        object.__setattr__(self, "pitch_deg", pitch)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(P, Y)``: number of pitch rows and yaw columns (the grid file's axis order)."""
+        return len(self.pitch_deg), len(self.yaw_deg)
+
+    @property
+    def n_windows(self) -> int:
+        return len(self.pitch_deg) * len(self.yaw_deg)
+
+    def centres_deg(self) -> tuple[NDArray, NDArray]:
+        """``(pitch, yaw)`` of every window, each shape ``(P, Y)``, degrees."""
+        return np.meshgrid(self.pitch_deg, self.yaw_deg, indexing="ij")
+
+    def to_dict(self) -> dict:
+        return {
+            "yaw_step_deg": self.yaw_step_deg,
+            "pitch_step_deg": self.pitch_step_deg,
+            "pitch_min_deg": self.pitch_min_deg,
+            "pitch_max_deg": self.pitch_max_deg,
+            "yaw_start_deg": self.yaw_start_deg,
+            "hfov_deg": self.hfov_deg,
+            "vfov_deg": self.vfov_deg,
+            "size": list(self.size),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> WindowGrid:
+        d = dict(d)
+        if "size" in d:
+            d["size"] = tuple(d["size"])
+        return cls(**d)
+
+
+GRID_PRESETS: dict[str, dict] = {
+    "default": {
+        "yaw_step_deg": 15.0,
+        "pitch_step_deg": 7.5,
+        "pitch_min_deg": -37.5,
+        "pitch_max_deg": 37.5,
+    },
+    "paper-198": {
+        "yaw_step_deg": 20.0,
+        "pitch_step_deg": 7.5,
+        "pitch_min_deg": -37.5,
+        "pitch_max_deg": 37.5,
+    },
+}
+
+
+def grid_preset(
+    name: str = "default",
+    *,
+    hfov_deg: float = 107.0,
+    vfov_deg: float | None = None,
+    size: tuple[int, int] = (256, 256),
+) -> WindowGrid:
+    """A :class:`WindowGrid` from a preset name (``default`` or ``paper-198``)."""
+    if name not in GRID_PRESETS:
+        raise InputError(f"unknown grid preset {name!r}; expected one of {', '.join(GRID_PRESETS)}")
+    return WindowGrid(
+        **GRID_PRESETS[name],
+        hfov_deg=hfov_deg,
+        vfov_deg=hfov_deg if vfov_deg is None else vfov_deg,
+        size=size,
+    )
+
+
+class WindowExtractor:
+    """Extract every window of a :class:`WindowGrid` from equirect frames of one size, fast.
+
+    The sampling maps of all windows are built once (per grid and frame size), stacked
+    into one tall map and converted to OpenCV's fixed-point form, then every frame is a
+    single ``cv2.remap`` call (bicubic, seam wrap, pole crossing).
+
+    Parameters
+    ----------
+    grid : WindowGrid
+    equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
+
+    Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``.
+    """
+
+    def __init__(self, grid: WindowGrid, equirect_size: tuple[int, int]):
+        self.grid = grid
+        self.equirect_size = _check_size(equirect_size)
+        self._m1, self._m2 = _window_maps(grid, self.equirect_size)
+
+    def __call__(self, frame: NDArray, *, interp: Literal["cubic", "linear"] = "cubic") -> NDArray:
+        H, W = frame.shape[:2]
+        if (W, H) != self.equirect_size:
+            raise InputError(
+                f"frame is {W}x{H}; this extractor was built for {self.equirect_size[0]}x{self.equirect_size[1]}"
+            )
+        flags = cv2.INTER_CUBIC if interp == "cubic" else cv2.INTER_LINEAR
+        padded = pad_equirect(np.ascontiguousarray(frame))
+        out = cv2.remap(padded, self._m1, self._m2, flags, borderMode=cv2.BORDER_REPLICATE)
+        P, Y = self.grid.shape
+        w, h = self.grid.size
+        # Tiles are laid out (P*h, Y*w) (OpenCV limits each side to < 32767 pixels).
+        return np.moveaxis(out.reshape(P, h, Y, w, *out.shape[2:]), 2, 1)
+
+
+@functools.lru_cache(maxsize=4)
+def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
+    W, H = equirect_size
+    dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
+    pitch, yaw = grid.centres_deg()
+    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()  # (N, 3, 3)
+    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
+    mx, my = equirect_remap_coords(world, W, H)
+    (P, Y), (w, h) = grid.shape, grid.size
+    # Tile the windows as a (P*h, Y*w) image: row block = pitch, column block = yaw.
+    mx = mx.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
+    my = my.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
+    if max(mx.shape) >= 32767:
+        raise InputError(
+            f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows"
+        )
+    m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
+    m1.setflags(write=False)
+    m2.setflags(write=False)
+    return m1, m2
