@@ -18,8 +18,6 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-
 from simulator.epof import epof_from_grid, viewport_overlaps
 from simulator.gridfile import load_grid, save_grid
 from simulator.windows import grid_preset
@@ -73,7 +71,7 @@ def main() -> int:
     print(
         f"batch: {qps:,.0f} queries/s ({1e6 / qps:.2f} us each); target {BATCH_TARGET:,.0f}/s, ratio {qps / BATCH_TARGET:.2f}"
     )
-    from test_epof import brute_overlaps
+    from simulator.reference import brute_overlaps
 
     errs = []
     for _ in range(25):

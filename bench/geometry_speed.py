@@ -19,10 +19,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from bench._v360 import v360_time_ms
 from simulator import geometry, video
+from simulator.reference import v360_time_ms
 from simulator.windows import WindowExtractor, grid_preset
 
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"

@@ -15,12 +15,9 @@ import argparse
 import os
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 from PIL import Image
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
 from simulator.flow import make_backend

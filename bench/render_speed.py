@@ -29,11 +29,10 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from bench._v360 import ffmpeg_exe
 from simulator import video
 from simulator.grf import GrfConfig
+from simulator.reference import ffmpeg_exe
 from simulator.render import RenderConfig, create_context, render_video
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"

@@ -21,10 +21,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
 
-from bench._v360 import compare_with_v360, psnr, tile_displacement, v360_view
 from simulator import geometry, video
+from simulator.reference import compare_with_v360, psnr, tile_displacement, v360_view
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL_PSNR_DB = 40.0

@@ -11,7 +11,7 @@ A backend takes a batch of ``N`` window pairs and returns their dense flow::
 :class:`RayAngles` turns pixel flow inside a perspective view into the angle (radians)
 between the ray of each pixel centre and the ray of its flow target: the one formula
 behind paper mode's deg/s (:mod:`simulator.preprocess`) and sphere mode's field
-(:mod:`simulator.sphere`).
+(:mod:`simulator.preprocess.sphere`).
 
 Backends (:func:`make_backend` parses the ``--flow`` text):
 

@@ -13,7 +13,7 @@ A ``.npz`` (no pickles; loaded with ``allow_pickle=False``) holding
     Window centres in degrees (yaw + right, pitch + up; windows have no roll).
 ``meta`` : 0-d str array, a JSON object with at least ``format``
     (:data:`FORMAT`), ``version`` (:data:`VERSION`), ``grid`` (a
-    :class:`~simulator.geometry.WindowGrid` dict: steps, pitch range, ``hfov_deg``,
+    :class:`~simulator.windows.WindowGrid` dict: steps, pitch range, ``hfov_deg``,
     ``vfov_deg``, window ``size``), ``fps``, ``n_frames``, ``flow`` (method and
     parameters), ``layout``, ``eye``, ``video`` (``path``, ``width``, ``height``,
     ``sar``, ``content_hash``).

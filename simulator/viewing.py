@@ -65,7 +65,7 @@ def render_viewing(
     ----------
     video : path of the equirect video (mono or stereo, see ``layout``)
     headpath : :class:`simulator.headpath.HeadPath`, or the path of a head path file
-        (read with :func:`simulator.headpath.load_headpath`, format detected)
+        (read with :func:`simulator.readers.load_headpath`, format detected)
     outdir : output folder (created)
     grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
@@ -133,7 +133,7 @@ def render_viewing(
     thresholds = (float("nan"), float("nan"))
     op_auto = None
     if grid is not None:
-        res = compute_epof(grid, hp, hfov_deg=hfov, vfov_deg=vfov, hold=hold)
+        res = compute_epof(grid, hp, frustum=config.frustum, hold=hold)
         n = min(len(res.epof_dps), nf)
         epof_dps[:n] = res.epof_dps[:n]
         epof_dps[n:] = res.epof_dps[-1]
@@ -193,6 +193,13 @@ def render_viewing(
         "eye_size": [w, h],
         "hfov_deg": hfov,
         "vfov_deg": vfov,
+        "frustum_deg": {
+            "eye": "left (the right eye mirrors left and right)",
+            "left": config.frustum.left_deg,
+            "right": config.frustum.right_deg,
+            "down": config.frustum.down_deg,
+            "up": config.frustum.up_deg,
+        },
         "grf": None
         if grf is None
         else {

@@ -24,57 +24,8 @@ from simulator.errors import InputError
 from simulator.grf import OpacityRule
 from simulator.gridfile import load_grid, save_grid
 from simulator.headpath import HeadPath, save_headpath_csv, synth
+from simulator.reference import brute_overlaps
 from simulator.windows import WindowGrid, grid_preset
-
-
-# ------------------------------------------------------------ independent reference
-def _R(yaw, pitch, roll):
-    """head->world matrix written out by hand: Ry(yaw) Rx(-pitch) Rz(-roll), radians."""
-    cy, sy = np.cos(yaw), np.sin(yaw)
-    cx, sx = np.cos(-pitch), np.sin(-pitch)
-    cz, sz = np.cos(-roll), np.sin(-roll)
-    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    return ry @ rx @ rz
-
-
-def brute_overlaps(grid: WindowGrid, yaw, pitch, roll, hfov, vfov, n=256):
-    """Overlap fractions (P, Y) by n x n rays of the viewport and a membership test of
-    each ray in each window (rays projected into the window's frame)."""
-    tx, ty = np.tan(np.radians(hfov) / 2), np.tan(np.radians(vfov) / 2)
-    u = ((np.arange(n) + 0.5) / n * 2 - 1) * tx
-    v = (1 - (np.arange(n) + 0.5) / n * 2) * ty
-    uu, vv = np.meshgrid(u, v)
-    r = np.sqrt(1 + uu**2 + vv**2)
-    d = np.stack([uu / r, vv / r, 1 / r], -1).reshape(-1, 3)
-    sa = (1 / r**3).ravel()
-    w = (d @ _R(*np.radians([yaw, pitch, roll])).T).astype(np.float32)
-    fwd = _R(*np.radians([yaw, pitch, roll]))[:, 2]
-    # Circumradius of a perspective rectangle; farther centres cannot overlap (exact skip).
-    rad_v = np.arctan(np.hypot(tx, ty))
-    rad_w = np.arctan(
-        np.hypot(np.tan(np.radians(grid.hfov_deg) / 2), np.tan(np.radians(grid.vfov_deg) / 2))
-    )
-    wx, wy = np.tan(np.radians(grid.hfov_deg) / 2), np.tan(np.radians(grid.vfov_deg) / 2)
-    out = np.zeros(grid.shape)
-    near, mats = [], []
-    for i, wp in enumerate(grid.pitch_deg):
-        for j, wy_ in enumerate(grid.yaw_deg):
-            rw = _R(np.radians(wy_), np.radians(wp), 0.0)
-            if np.arccos(np.clip(rw[:, 2] @ fwd, -1, 1)) <= rad_v + rad_w:
-                near.append((i, j))
-                mats.append(rw)
-    m = np.concatenate(mats, axis=1).astype(np.float32)  # (3, 3W)
-    acc = np.zeros(len(near))
-    for s in range(0, len(w), 8192):
-        q = (w[s : s + 8192] @ m).reshape(-1, len(near), 3)  # window-frame coordinates
-        z = q[..., 2]
-        ins = (z > 0) & (np.abs(q[..., 0]) <= wx * z) & (np.abs(q[..., 1]) <= wy * z)
-        acc += sa[s : s + 8192] @ ins
-    for (i, j), v in zip(near, acc):
-        out[i, j] = v / sa.sum()
-    return out
 
 
 def _gridfile(tmp_path, grid: WindowGrid, pof, fps=30.0, name="g.npz", **extra):

@@ -4,7 +4,6 @@ and agreement with ffmpeg's v360 on a real panorama (the full table: bench/v360_
 from __future__ import annotations
 
 import math
-import sys
 from pathlib import Path
 
 import cv2
@@ -306,16 +305,9 @@ def test_window_extractor_equals_extract_view():
 # ------------------------------------------------------------ agreement with ffmpeg v360
 @pytest.fixture(scope="module")
 def v360():
-    sys.path.insert(0, str(REPO))
-    try:
-        from bench import _v360
-    finally:
-        sys.path.remove(str(REPO))
-    try:
-        _v360.ffmpeg_exe()
-    except Exception as e:  # noqa: BLE001
-        pytest.skip(f"imageio-ffmpeg's ffmpeg not available: {e}")
-    return _v360
+    from simulator import reference
+
+    return reference
 
 
 @pytest.mark.parametrize("yaw,pitch,roll", [(0, 0, 0), (-20, 10, 15), (180, -10, 0), (0, 0, -30)])

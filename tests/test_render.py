@@ -11,7 +11,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import sys
 from pathlib import Path
 
 import cv2
@@ -100,16 +99,9 @@ def test_golden(ctx, petra_small, out_dir, yaw, pitch, roll, grf):
 # -------------------------------------------------------------------- v360 agreement
 @pytest.fixture(scope="module")
 def v360():
-    sys.path.insert(0, str(REPO))
-    try:
-        from bench import _v360
-    finally:
-        sys.path.remove(str(REPO))
-    try:
-        _v360.ffmpeg_exe()
-    except Exception as e:  # noqa: BLE001
-        pytest.skip(f"imageio-ffmpeg's ffmpeg not available: {e}")
-    return _v360
+    from simulator import reference
+
+    return reference
 
 
 #: Issue 5 goal. Measured (bench/render_agreement.py, 1024 px, 107 deg): petra 37.5 dB
@@ -751,3 +743,30 @@ def test_cli_render_grf_off_summary_is_strict_json(ctx, tmp_path, capsys):
 
     s = json.loads((out / "summary.json").read_text(), parse_constant=refuse)
     assert s["grf"] is None and s["opacity_thresholds_dps"] == [None, None]
+
+
+def test_asymmetric_frustum_reaches_the_renderer(ctx):
+    """A headset's off-axis frustum moves the view axis off the image centre, mirrored in
+    the right eye: the column showing lon = 0 (a dark meridian) sits where the frustum's
+    tangents put it, ``tan(left) / (tan(left) + tan(right)) * width``."""
+    from simulator.cells import Frustum
+    from simulator.render import EyeRenderer, RenderConfig
+
+    W, H, size = 1024, 512, 200
+    img = np.full((H, W, 3), 255, np.uint8)
+    img[:, W // 2 - 1 : W // 2 + 1] = 0  # lon in [-0.35, 0.35] deg
+    fr = Frustum(35.0, 55.0, 40.0, 40.0)
+    cfg = RenderConfig(eye_size=(size, size), frustum=fr, grf=None)
+    assert (cfg.hfov_deg, cfg.vfov_deg) == (90.0, 80.0)
+    r = EyeRenderer(ctx, cfg)
+    R = np.eye(3)
+    cols = {}
+    for eye in ("left", "right"):
+        r.upload(img, eye)
+        out = r.render(R, eye=eye).astype(float)
+        cols[eye] = float(np.argmin(out[size // 2].mean(axis=1))) + 0.5
+    tl, tr = math.tan(math.radians(35.0)), math.tan(math.radians(55.0))
+    assert abs(cols["left"] - tl / (tl + tr) * size) <= 1.0
+    assert abs(cols["right"] - tr / (tl + tr) * size) <= 1.0
+    sym = RenderConfig(eye_size=(size, size), hfov_deg=90.0, vfov_deg=80.0, grf=None)
+    assert sym.image_plane("left")[1] == (0.0, 0.0)

@@ -1,4 +1,4 @@
-"""Sphere mode (simulator/sphere.py) and headset profiles (simulator/headsets.py)."""
+"""Sphere mode (simulator/preprocess/sphere.py, simulator/cells.py, simulator/epof/exact.py) and headset profiles (simulator/headsets.py)."""
 
 from __future__ import annotations
 
@@ -377,18 +377,12 @@ def test_headset_bad_input_and_resolve_fov():
 
 
 # ------------------------------------------- integration (once the issue 7 patches land)
-def _patched(fn, name: str) -> bool:
-    import inspect
-
-    return name in inspect.signature(fn).parameters
 
 
 def test_compute_epof_uses_the_field(tmp_path):
     from simulator.epof import compute_epof
     from simulator.headpath import synth
 
-    if not _patched(compute_epof, "method"):
-        pytest.skip("issue 7 patch /tmp/sphere_patches/simulator_epof.py.diff not applied")
     grid = grid_preset("default")
     f = _smooth_field(2, T=4)
     dps, px = window_pof(f, CELL, grid, 30.0)
@@ -418,3 +412,28 @@ def test_field_rows_grow_and_repeat_row_one(expected):
     out = rows.result()
     assert out.shape == (6, 2, 3) and out.dtype == np.float32
     assert np.array_equal(out[1:], np.stack(data)) and np.array_equal(out[0], out[1])
+
+
+def test_compute_epof_carries_an_asymmetric_headset_frustum(tmp_path):
+    """The headset's per-eye frustum (not a centred view of the same FOV) reaches exact EPOF."""
+    from simulator.epof import compute_epof
+    from simulator.headpath import synth
+
+    grid = grid_preset("default")
+    f = _smooth_field(5, T=3)
+    dps, px = window_pof(f, CELL, grid, 30.0)
+    meta = {**_meta(), "n_frames": 3, "field": field_meta(SphereConfig(cell_deg=CELL))}
+    save_grid(tmp_path / "s.npz", dps, px, grid, meta, field_dps=f)
+    g = load_grid(tmp_path / "s.npz")
+    hp = synth("sine", 1.0, rate_hz=60.0)
+    fr = Frustum.from_headset("quest-2", "left")
+    assert fr.left_deg != fr.right_deg  # the profile is asymmetric
+    res = compute_epof(g, hp, frustum=fr)
+    yaw, pitch, roll = hp.sample_angles_deg(np.arange(3) / 30.0)
+    exact = viewport_epof(f, CELL, yaw, pitch, roll, frustum=fr)
+    centred = viewport_epof(
+        f, CELL, yaw, pitch, roll, frustum=Frustum.symmetric(fr.hfov_deg, fr.vfov_deg)
+    )
+    assert np.allclose(res.epof_dps, exact, rtol=1e-9)
+    assert np.max(np.abs(exact - centred)) > 1e-3 * np.max(np.abs(exact))
+    assert res.meta["frustum_deg"] == [fr.left_deg, fr.right_deg, fr.down_deg, fr.up_deg]

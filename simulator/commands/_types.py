@@ -6,15 +6,25 @@ Each raises ``argparse.ArgumentTypeError`` with an example of a valid value.
 from __future__ import annotations
 
 import argparse
+import math
 
 __all__ = [
     "add_fov_arguments",
+    "angle_deg",
+    "finite_float",
     "fov_deg",
     "fov_from_args",
+    "frustum_from_args",
+    "nonneg_float",
     "nonneg_int",
+    "number",
+    "percentile",
     "positive_float",
+    "positive_int",
+    "seconds",
     "size_wxh",
     "unit_interval",
+    "x264_crf",
 ]
 
 
@@ -36,54 +46,66 @@ def size_wxh(text: str) -> tuple[int, int]:
     return w, h
 
 
-def fov_deg(text: str) -> float:
-    """Parse a field of view in degrees, strictly inside (0, 180) (e.g. ``107``)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"FOV must be degrees in (0, 180), e.g. 107; got {text!r}"
-        ) from None
-    if not (0.0 < v < 180.0):
-        raise argparse.ArgumentTypeError(f"FOV must be degrees in (0, 180), e.g. 107; got {text!r}")
-    return v
+def number(
+    expected: str,
+    example: str,
+    *,
+    integer: bool = False,
+    lo: float | None = None,
+    hi: float | None = None,
+    lo_open: bool = False,
+    hi_open: bool = False,
+):
+    """A ``type=`` validator of one number: the one factory behind every numeric option.
+
+    ``expected`` is the first half of the error ("expected a number >= 0"), ``example`` a
+    valid value; bounds ``lo``/``hi`` are inclusive unless ``*_open``. Floats must be finite.
+    The error reads ``"<expected>, e.g. <example>; got '<text>'"``.
+    """
+
+    def parse(text: str):
+        msg = f"{expected}, e.g. {example}; got {text!r}"
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(msg) from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(msg)
+        if lo is not None and (v < lo or (lo_open and v == lo)):
+            raise argparse.ArgumentTypeError(msg)
+        if hi is not None and (v > hi or (hi_open and v == hi)):
+            raise argparse.ArgumentTypeError(msg)
+        return v
+
+    parse.__name__ = parse.__qualname__ = "number"
+    parse.__doc__ = f"Parse {expected.removeprefix('expected ')} (e.g. ``{example}``)."
+    return parse
 
 
-def positive_float(text: str) -> float:
-    """Parse a finite number > 0 (e.g. ``30``)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number > 0, e.g. 30; got {text!r}") from None
-    if not (v > 0.0 and v < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a number > 0, e.g. 30; got {text!r}")
-    return v
-
-
-def nonneg_int(text: str) -> int:
-    """Parse an integer >= 0 (e.g. ``0``)."""
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected an integer >= 0, e.g. 0; got {text!r}"
-        ) from None
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, e.g. 0; got {text!r}")
-    return v
-
-
-def unit_interval(text: str) -> float:
-    """Parse a number in [0, 1] (e.g. ``0.5``)."""
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number in [0, 1], e.g. 0.5; got {text!r}"
-        ) from None
-    if not (0.0 <= v <= 1.0):
-        raise argparse.ArgumentTypeError(f"expected a number in [0, 1], e.g. 0.5; got {text!r}")
-    return v
+#: A field of view in degrees, strictly inside (0, 180) (e.g. ``107``).
+fov_deg = number(
+    "FOV must be degrees in (0, 180)", "107", lo=0.0, hi=180.0, lo_open=True, hi_open=True
+)
+#: A finite number > 0 (e.g. ``30``).
+positive_float = number("expected a number > 0", "30", lo=0.0, lo_open=True)
+#: A finite number >= 0 (e.g. ``1000``).
+nonneg_float = number("expected a number >= 0", "1000", lo=0.0)
+#: Seconds >= 0 (e.g. ``1.5``).
+seconds = number("expected seconds >= 0", "1.5", lo=0.0)
+#: An integer >= 0 (e.g. ``0``).
+nonneg_int = number("expected an integer >= 0", "0", integer=True, lo=0)
+#: An integer >= 1 (e.g. ``4``).
+positive_int = number("expected an integer >= 1", "4", integer=True, lo=1)
+#: A number in [0, 1] (e.g. ``0.5``).
+unit_interval = number("expected a number in [0, 1]", "0.5", lo=0.0, hi=1.0)
+#: A percentile in [0, 100] (e.g. ``10``).
+percentile = number("expected a percentile in [0, 100]", "10", lo=0.0, hi=100.0)
+#: A finite number (e.g. ``30``).
+finite_float = number("expected a finite number", "30")
+#: A finite angle in degrees (e.g. ``-30.5``).
+angle_deg = number("expected a finite angle in degrees", "-30.5")
+#: An x264 CRF (e.g. ``16``).
+x264_crf = number("expected an x264 CRF, an integer 0..51", "16", integer=True, lo=0, hi=51)
 
 
 def add_fov_arguments(
@@ -142,3 +164,22 @@ def fov_from_args(args: argparse.Namespace, default):
         vfov_deg=args.vfov,
         default=default,
     )
+
+
+def frustum_from_args(args: argparse.Namespace, default, eye: str = "left"):
+    """The one :class:`simulator.cells.Frustum` of the options of :func:`add_fov_arguments`.
+
+    A headset profile gives its exact (asymmetric) per-eye frustum for ``eye``; FOV options
+    a symmetric one; ``default`` (``(hfov, vfov)`` or ``(None, None)``) when none is given,
+    ``None`` if that is ``(None, None)`` (e.g. "the grid's FOV"). Built and checked once,
+    then carried to EPOF and the renderer.
+    """
+    from simulator.cells import Frustum
+
+    if getattr(args, "headset", None):
+        fov_from_args(args, default)  # refuses --headset together with FOV options
+        return Frustum.from_headset(args.headset, eye)
+    hfov, vfov = fov_from_args(args, default)
+    if hfov is None:
+        return None
+    return Frustum.symmetric(hfov, vfov)

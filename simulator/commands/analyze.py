@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from simulator.choices import FLOW_STATS
+from simulator.commands._types import nonneg_float
 
 __all__ = ["register", "run"]
 
@@ -17,18 +18,6 @@ def _conditions(text: str) -> tuple[str, str]:
             f"expected two different labels A,B, e.g. NR,GR; got {text!r}"
         )
     return parts[0], parts[1]
-
-
-def _nonneg_float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a number >= 0, e.g. 1000; got {text!r}"
-        ) from None
-    if not (0.0 <= v < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected a number >= 0, e.g. 1000; got {text!r}")
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -61,7 +50,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--exclude-below",
-        type=_nonneg_float,
+        type=nonneg_float,
         default=None,
         metavar="X",
         help="exclude sessions whose flow is below X (same unit as the session flow); "

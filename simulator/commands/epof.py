@@ -3,48 +3,17 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from simulator.choices import EPOF_METHODS, OPACITY_SOURCES
-from simulator.commands._types import add_fov_arguments, fov_from_args
+from simulator.commands._types import (
+    add_fov_arguments,
+    frustum_from_args,
+    percentile,
+    positive_int,
+    seconds,
+)
 
 __all__ = ["register", "run"]
-
-
-def _pct(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a percentile in [0, 100], e.g. 10; got {text!r}"
-        ) from None
-    if not (0.0 <= v <= 100.0):
-        raise argparse.ArgumentTypeError(
-            f"expected a percentile in [0, 100], e.g. 10; got {text!r}"
-        )
-    return v
-
-
-def _pos_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected an integer >= 1, e.g. 4; got {text!r}"
-        ) from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, e.g. 4; got {text!r}")
-    return v
-
-
-def _nonneg(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 0.5; got {text!r}") from None
-    if not (0.0 <= v < math.inf):
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 0.5; got {text!r}")
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -79,7 +48,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--top-k",
-        type=_pos_int,
+        type=positive_int,
         default=None,
         metavar="K",
         help="use only the K largest overlaps (the paper's figure shows 4); default all",
@@ -90,10 +59,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="hold the first/last pose where the head path does not cover the video",
     )
     p.add_argument(
-        "--low-pct", type=_pct, default=10.0, metavar="P", help="opacity 0 at this percentile (10)"
+        "--low-pct",
+        type=percentile,
+        default=10.0,
+        metavar="P",
+        help="opacity 0 at this percentile (10)",
     )
     p.add_argument(
-        "--high-pct", type=_pct, default=90.0, metavar="P", help="opacity 1 at this percentile (90)"
+        "--high-pct",
+        type=percentile,
+        default=90.0,
+        metavar="P",
+        help="opacity 1 at this percentile (90)",
     )
     p.add_argument(
         "--opacity-source",
@@ -103,7 +80,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--smooth",
-        type=_nonneg,
+        type=seconds,
         default=0.0,
         metavar="S",
         help="causal exponential smoothing of the opacity, time constant S seconds (default 0 = off)",
@@ -141,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
     for out in (args.output, args.plot):
         if out:
             _check_output_file(out)
-    hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
+    frustum = frustum_from_args(args, (None, None))  # None: the grid's window FOV
     rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
     with warnings_to_stderr("vimsim epof"):
         grid = load_grid(args.grid)
@@ -149,8 +126,7 @@ def run(args: argparse.Namespace) -> int:
     res = compute_epof(
         grid,
         hp,
-        hfov_deg=hfov,
-        vfov_deg=vfov,
+        frustum=frustum,
         top_k=args.top_k,
         rule=rule,
         hold=args.hold_last,

@@ -8,24 +8,13 @@ pitch looks up, positive roll tilts the head right ear down.
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 
 from simulator.choices import HEADPATH_FORMATS, SYNTH_KINDS
 from simulator.commands._progress import warnings_to_stderr
-from simulator.commands._types import nonneg_int, positive_float
+from simulator.commands._types import finite_float, nonneg_int, positive_float
 
 __all__ = ["add_reader_options", "load_headpath_args", "register", "run"]
-
-
-def _float(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, e.g. 30; got {text!r}") from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(f"expected a finite number, e.g. 30; got {text!r}")
-    return v
 
 
 def _user(text: str) -> int:
@@ -107,48 +96,56 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     s.add_argument(
         "--yaw",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="D",
         help="yaw in degrees (static, start of sweep, centre of sine); + turns right",
     )
     s.add_argument(
         "--pitch",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="D",
         help="pitch in degrees; + looks up (e.g. -70 stares at the ground)",
     )
     s.add_argument(
-        "--roll", type=_float, default=None, metavar="D", help="roll in degrees; + right ear down"
+        "--roll",
+        type=finite_float,
+        default=None,
+        metavar="D",
+        help="roll in degrees; + right ear down",
     )
     s.add_argument(
         "--yaw-rate",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="DPS",
         help="sweep: yaw speed in deg/s (default 30; negative turns left)",
     )
     s.add_argument(
-        "--yaw-amp", type=_float, default=None, metavar="D", help="sine: yaw amplitude (default 60)"
+        "--yaw-amp",
+        type=finite_float,
+        default=None,
+        metavar="D",
+        help="sine: yaw amplitude (default 60)",
     )
     s.add_argument(
         "--yaw-freq",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="HZ",
         help="sine: yaw frequency (default 0.1)",
     )
     s.add_argument(
         "--pitch-amp",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="D",
         help="sine: pitch amplitude (default 20)",
     )
     s.add_argument(
         "--pitch-freq",
-        type=_float,
+        type=finite_float,
         default=None,
         metavar="HZ",
         help="sine: pitch frequency (default 0.15)",

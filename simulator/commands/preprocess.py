@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from simulator.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
-from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float
+from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float, seconds
 
 __all__ = ["register", "run"]
 
@@ -22,16 +22,6 @@ def _window_size(text: str) -> int:
         raise argparse.ArgumentTypeError(
             f"window size must be 16..2048 pixels, e.g. 256; got {text!r}"
         )
-    return v
-
-
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 1.5; got {text!r}") from None
-    if not (0.0 <= v < float("inf")):
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 1.5; got {text!r}")
     return v
 
 
@@ -86,14 +76,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--start",
-        type=_seconds,
+        type=seconds,
         default=0.0,
         metavar="S",
         help="first frame at S seconds (default 0)",
     )
     p.add_argument(
         "--end",
-        type=_seconds,
+        type=seconds,
         default=None,
         metavar="S",
         help="stop before S seconds (default: the end)",

@@ -1,6 +1,6 @@
 """``vimsim render``: per-eye videos of what the viewer saw, with the GRF overlay.
 
-Parses the options; the work is :func:`simulator.render.render_viewing`.
+Parses the options; the work is :func:`simulator.viewing.render_viewing`.
 """
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import argparse
 import sys
 
 from simulator.choices import LAYOUTS, X264_PRESETS
-from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
+from simulator.commands._types import add_fov_arguments, frustum_from_args, nonneg_int, size_wxh
 
 __all__ = ["register", "run"]
 
@@ -144,7 +144,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Parse the options and run :func:`simulator.render.render_viewing`; InputError -> exit 2."""
+    """Parse the options and run :func:`simulator.viewing.render_viewing`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
@@ -152,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.render import RenderConfig
     from simulator.viewing import render_viewing
 
-    hfov, vfov = fov_from_args(args, (107.0, 107.0))
+    frustum = frustum_from_args(args, (107.0, 107.0))
     with warnings_to_stderr("vimsim render"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
@@ -172,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             distance_m=args.grain_distance,
         )
-    config = RenderConfig(eye_size=args.eye_size, hfov_deg=hfov, vfov_deg=vfov, grf=grf)
+    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from simulator.choices import SCENES, SYNTH_LAYOUTS
-from simulator.commands._types import nonneg_int, positive_float, size_wxh
+from simulator.commands._types import nonneg_int, positive_float, size_wxh, x264_crf
 
 __all__ = ["register", "run"]
 
@@ -22,19 +22,6 @@ def _axis(text: str) -> tuple[float, float, float]:
     if all(p == 0 for p in parts):
         raise argparse.ArgumentTypeError(f"axis must not be zero, e.g. 0,1,0; got {text!r}")
     return parts[0], parts[1], parts[2]
-
-
-def _crf(text: str) -> int:
-    """Parse an x264 CRF: an integer 0..51 (e.g. ``16``)."""
-    try:
-        v = int(text)
-    except ValueError:
-        v = -1
-    if not 0 <= v <= 51:
-        raise argparse.ArgumentTypeError(
-            f"expected an x264 CRF, an integer 0..51, e.g. 16; got {text!r}"
-        )
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -117,7 +104,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--crf",
-        type=_crf,
+        type=x264_crf,
         default=16,
         help="x264 quality (CRF) 0..51, lower is better (default 16)",
     )

@@ -3,10 +3,15 @@
 from __future__ import annotations
 
 import argparse
-import math
 
 from simulator.choices import EYES, INTERPS, LAYOUTS
-from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
+from simulator.commands._types import (
+    add_fov_arguments,
+    angle_deg,
+    fov_from_args,
+    nonneg_int,
+    size_wxh,
+)
 from simulator.errors import InputError
 
 __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
@@ -16,20 +21,6 @@ DEFAULT_SIZE = (512, 512)
 DEFAULT_FOV_DEG = 107.0
 
 # = simulator.geometry.LAYOUTS / EYES / INTERPS (kept light: no numpy/cv2 import here).
-
-
-def _angle_deg(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected an angle in degrees, e.g. -30.5; got {text!r}"
-        ) from None
-    if not math.isfinite(v):
-        raise argparse.ArgumentTypeError(
-            f"expected a finite angle in degrees, e.g. 30; got {text!r}"
-        )
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -49,14 +40,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "-o", "--output", metavar="OUT.png", required=True, help="output PNG (written atomically)"
     )
     p.add_argument(
-        "--yaw", type=_angle_deg, required=True, metavar="D", help="degrees, + turns right"
+        "--yaw", type=angle_deg, required=True, metavar="D", help="degrees, + turns right"
     )
     p.add_argument(
-        "--pitch", type=_angle_deg, required=True, metavar="D", help="degrees, + looks up"
+        "--pitch", type=angle_deg, required=True, metavar="D", help="degrees, + looks up"
     )
     p.add_argument(
         "--roll",
-        type=_angle_deg,
+        type=angle_deg,
         default=0.0,
         metavar="D",
         help="degrees, + right ear down (default 0)",

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.cells import Frustum
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _fov, _frames, epof_from_grid
 from simulator.errors import InputError
@@ -84,6 +85,7 @@ def compute_epof(
     rule: OpacityRule = OpacityRule(),
     hold: bool = False,
     method: str = "auto",
+    frustum: Frustum | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -95,10 +97,20 @@ def compute_epof(
 
     ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
     ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual
-    viewport (:func:`simulator.sphere.viewport_epof`; any FOV, roll included; InputError
+    viewport (:func:`simulator.epof.exact.viewport_epof`; any FOV, roll included; InputError
     naming the command that makes a field if the grid has none); ``"auto"`` (default) =
     sphere when the grid has a field and ``top_k`` is not given, else paper.
+
+    ``frustum`` (:class:`simulator.cells.Frustum`, e.g. a headset's asymmetric per-eye
+    frustum) is the viewport; it replaces ``hfov_deg``/``vfov_deg``. Sphere mode
+    integrates over exactly that frustum; paper mode's overlap table is tabulated for
+    centred views and uses the frustum's total FOVs (``hfov_deg``, ``vfov_deg``).
+    Default: the symmetric view of ``hfov_deg x vfov_deg`` (default the grid's FOV).
     """
+    if frustum is not None:
+        if not isinstance(frustum, Frustum):
+            raise InputError(f"EPOF frustum must be a Frustum; got {type(frustum).__name__}")
+        hfov_deg, vfov_deg = frustum.hfov_deg, frustum.vfov_deg
     if method not in ("auto", "paper", "sphere"):
         raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
     sphere = method == "sphere" or (
@@ -120,7 +132,8 @@ def compute_epof(
     if sphere:
         field, cells = require_field(grid)
         h, v = _fov(grid, hfov_deg, vfov_deg)
-        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
+        fr = frustum or Frustum.symmetric(h, v)
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)
     else:
         rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
         e = epof_from_grid(
@@ -132,6 +145,9 @@ def compute_epof(
     meta = {
         "hfov_deg": h,
         "vfov_deg": v,
+        "frustum_deg": None
+        if frustum is None
+        else [frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg],
         "top_k": top_k,
         "rule": rule,
         "fps": grid.fps,

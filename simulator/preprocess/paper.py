@@ -1,6 +1,6 @@
 """Paper-mode preprocessing (sections 3.2-3.4): a video's sliding-window POF matrix.
 
-For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.geometry.WindowGrid`
+For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.windows.WindowGrid`
 is extracted from both frames (gray, bicubic, :class:`~simulator.geometry.WindowExtractor`),
 the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
 scalars:

@@ -44,6 +44,7 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.cells import Frustum
 from simulator.choices import Eye
 from simulator.errors import InputError
 from simulator.geometry import check_fov, head_rotation
@@ -55,17 +56,23 @@ __all__ = ["EyeRenderer", "RenderConfig", "render_view"]
 
 @dataclass(frozen=True)
 class RenderConfig:
-    """What one eye sees: image size, exact FOVs, filtering, and the GRF.
+    """What one eye sees: image size, the view frustum, filtering, and the GRF.
 
     eye_size : (width, height), pixels (default 1440x1440, the paper's HMD per eye)
-    hfov_deg, vfov_deg : exact horizontal / vertical FOV, degrees (default 107 x 107)
+    hfov_deg, vfov_deg : exact horizontal / vertical FOV, degrees (default 107 x 107), for
+        a symmetric view; ignored when ``frustum`` is given
     grf : GRF parameters, or None for no overlay
+    frustum : :class:`simulator.cells.Frustum` of the **left** eye (the right eye mirrors
+        left and right), e.g. a headset's asymmetric per-eye frustum
+        (``Frustum.from_headset``); default the symmetric ``hfov_deg x vfov_deg`` view.
+        After construction it is always set, and ``hfov_deg``/``vfov_deg`` are its totals.
     """
 
     eye_size: tuple[int, int] = (1440, 1440)
     hfov_deg: float = 107.0
     vfov_deg: float = 107.0
     grf: GrfConfig | None = field(default_factory=GrfConfig)
+    frustum: Frustum | None = None
 
     def __post_init__(self) -> None:
         try:
@@ -77,18 +84,35 @@ class RenderConfig:
         if w <= 0 or h <= 0:
             raise InputError(f"eye size must be positive, e.g. 1440x1440; got {w}x{h}")
         object.__setattr__(self, "eye_size", (w, h))
-        hfov, vfov = check_fov(self.hfov_deg, self.vfov_deg)  # the one FOV rule
-        object.__setattr__(self, "hfov_deg", hfov)
-        object.__setattr__(self, "vfov_deg", vfov)
+        fr = self.frustum
+        if fr is None:
+            hfov, vfov = check_fov(self.hfov_deg, self.vfov_deg)  # the one FOV rule
+            fr = Frustum.symmetric(hfov, vfov)
+        elif not isinstance(fr, Frustum):
+            raise InputError(f"render frustum must be a Frustum; got {type(fr).__name__}")
+        object.__setattr__(self, "frustum", fr)
+        object.__setattr__(self, "hfov_deg", fr.hfov_deg)
+        object.__setattr__(self, "vfov_deg", fr.vfov_deg)
+
+    def image_plane(self, eye: str = "left") -> tuple[tuple[float, float], tuple[float, float]]:
+        """``((half_width, half_height), (centre_x, centre_y))`` of the eye's image on the
+        plane z = 1: pixel ``(i, j)`` has its ray through ``((i + 0.5) / w * 2 - 1) *
+        half_width + centre_x`` (right) and ``(1 - (j + 0.5) / h * 2) * half_height +
+        centre_y`` (up). Symmetric views have centre 0 (``perspective_rays``); the right
+        eye mirrors the left eye's frustum."""
+        fr = self.frustum
+        lf, rt = math.tan(math.radians(fr.left_deg)), math.tan(math.radians(fr.right_deg))
+        dn, up = math.tan(math.radians(fr.down_deg)), math.tan(math.radians(fr.up_deg))
+        if eye == "right":
+            lf, rt = rt, lf
+        return ((rt + lf) / 2.0, (up + dn) / 2.0), ((rt - lf) / 2.0, (up - dn) / 2.0)
 
     @property
     def pixel_angle_rad(self) -> float:
         """Largest angular size of one pixel (at the view centre), radians."""
         w, h = self.eye_size
-        return max(
-            2.0 * math.tan(math.radians(self.hfov_deg) / 2.0) / w,
-            2.0 * math.tan(math.radians(self.vfov_deg) / 2.0) / h,
-        )
+        (hx, hy), _ = self.image_plane()
+        return max(2.0 * hx / w, 2.0 * hy / h)
 
 
 def _grain_mask(ctx, grf: GrfConfig, pixel_angle_rad: float, outer_fbo):
@@ -217,10 +241,7 @@ class EyeRenderer:
             self.ctx, "fullscreen.vert", "eye.frag", {**self._defines, "MIPMAP": int(mipmap)}
         )
         values = {
-            "u_tan_half": (
-                math.tan(math.radians(cfg.hfov_deg) / 2),
-                math.tan(math.radians(cfg.vfov_deg) / 2),
-            ),
+            "u_tan_half": cfg.image_plane()[0],
             "u_size": (float(cfg.eye_size[0]), float(cfg.eye_size[1])),
             "u_equirect": 0,
         }
@@ -271,6 +292,7 @@ class EyeRenderer:
         prog, vao = self._program(bool(tex.extra))
         R = np.asarray(rotation, np.float32).reshape(3, 3)
         prog["u_head"].write(R.T.tobytes())  # GLSL mat3 is column-major
+        prog["u_tan_offset"].value = self.config.image_plane(eye)[1]
         if self.config.grf is not None:
             prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
             if "u_eye_offset" in prog:

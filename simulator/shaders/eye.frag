@@ -30,7 +30,8 @@
 
 uniform sampler2D u_equirect;      // the eye's equirect frame, mipmapped, RGB8, s repeats
 uniform mat3 u_head;               // head -> world rotation (geometry.head_rotation)
-uniform vec2 u_tan_half;           // tan(hfov / 2), tan(vfov / 2)
+uniform vec2 u_tan_half;           // half width / height of the image on z = 1 (tan(fov / 2))
+uniform vec2 u_tan_offset;         // its centre on z = 1: 0 for a symmetric view
 uniform vec2 u_size;               // eye image size, pixels (width, height)
 
 layout(location = 0) out vec4 frag_color;
@@ -96,8 +97,8 @@ uniform vec3 u_eye_offset;         // eye position in the world frame / grain di
 void main() {
     // Pixel centre on the image plane z = 1 (geometry.perspective_rays).
     vec2 ij = gl_FragCoord.xy;
-    vec2 uv = vec2((ij.x / u_size.x * 2.0 - 1.0) * u_tan_half.x,
-                   (1.0 - ij.y / u_size.y * 2.0) * u_tan_half.y);
+    vec2 uv = vec2((ij.x / u_size.x * 2.0 - 1.0) * u_tan_half.x + u_tan_offset.x,
+                   (1.0 - ij.y / u_size.y * 2.0) * u_tan_half.y + u_tan_offset.y);
     vec3 d_head = normalize(vec3(uv, 1.0));
     vec3 d = u_head * d_head;
 

@@ -1,11 +1,12 @@
-"""Call ffmpeg's ``v360`` filter (the project's outside reference) on numpy frames.
+"""References nobody here wrote, shared by the tests and the benches: ffmpeg's v360 filter and brute-force overlaps.
 
+``v360_*``: ffmpeg's ``v360`` filter (the project's outside reference) on numpy frames.
 The ffmpeg binary is the one shipped by the ``imageio-ffmpeg`` package. Frames go in and
 come out as raw RGB through pipes (no files, no codec): ``format=gbrp`` keeps v360 in
 RGB, so the only differences from our views are v360's geometry and interpolation.
 
 v360's conventions, read from ``libavfilter/vf_v360.c`` and checked by bench/v360_agreement.py
-------------------------------------------------------------------------------------------
+-------------------------------------------------------------------------------------
 - Flat (perspective) output: pixel ``(i, j)`` has its centre at ``(2i + 1) / w - 1`` times
   ``tan(h_fov / 2)`` (same as ours).
 - Equirect input: ``uf = (lon / pi + 1) * W / 2`` is used directly as an array index
@@ -21,18 +22,32 @@ v360's conventions, read from ``libavfilter/vf_v360.c`` and checked by bench/v36
 from __future__ import annotations
 
 import functools
+import os
 import subprocess
+import tempfile
 import time
 
+import cv2
+import imageio_ffmpeg
 import numpy as np
 
-__all__ = ["ffmpeg_exe", "v360_filter", "v360_time_ms", "v360_view"]
+from simulator.geometry import extract_view
+from simulator.windows import WindowGrid
+
+__all__ = [
+    "brute_overlaps",
+    "compare_with_v360",
+    "ffmpeg_exe",
+    "psnr",
+    "tile_displacement",
+    "v360_filter",
+    "v360_time_ms",
+    "v360_view",
+]
 
 
 @functools.lru_cache(maxsize=1)
 def ffmpeg_exe() -> str:
-    import imageio_ffmpeg
-
     return imageio_ffmpeg.get_ffmpeg_exe()
 
 
@@ -109,8 +124,6 @@ def v360_time_ms(
     ``(t_with - t_without) / n`` of the wall-clock times. Threads: ffmpeg's default
     (``-filter_threads`` = cores).
     """
-    import os
-    import tempfile
 
     vfov_deg = hfov_deg if vfov_deg is None else vfov_deg
     H, W = img.shape[:2]
@@ -166,7 +179,6 @@ def tile_displacement(
     Tiles with a gray-level standard deviation below ``min_std`` (flat sky, black bars:
     no texture to correlate) are skipped. Returns ``(n, 2)`` ``(dx, dy)`` per tile.
     """
-    import cv2
 
     def gray(x):
         return (cv2.cvtColor(x, cv2.COLOR_RGB2GRAY) if x.ndim == 3 else x).astype(np.float32)
@@ -202,8 +214,6 @@ def compare_with_v360(
     columns ``k = round(yaw / 360 * W)`` and v360 looks at yaw 0 while we look at the
     exact yaw ``k * 360 / W`` of the unrolled panorama (the same view on the sphere).
     """
-    from simulator.geometry import extract_view
-
     W = img.shape[1]
     ref_img, ref_yaw, our_yaw = img, yaw_deg, yaw_deg
     if abs(yaw_deg) > roll_beyond_deg:
@@ -222,3 +232,53 @@ def compare_with_v360(
         "ours": ours,
         "ref": ref,
     }
+
+
+# ------------------------------------------------- brute-force viewport overlaps
+def _R(yaw, pitch, roll):
+    """head->world matrix written out by hand: Ry(yaw) Rx(-pitch) Rz(-roll), radians."""
+    cy, sy = np.cos(yaw), np.sin(yaw)
+    cx, sx = np.cos(-pitch), np.sin(-pitch)
+    cz, sz = np.cos(-roll), np.sin(-roll)
+    ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+    return ry @ rx @ rz
+
+
+def brute_overlaps(grid: WindowGrid, yaw, pitch, roll, hfov, vfov, n=256):
+    """Overlap fractions (P, Y) by n x n rays of the viewport and a membership test of
+    each ray in each window (rays projected into the window's frame)."""
+    tx, ty = np.tan(np.radians(hfov) / 2), np.tan(np.radians(vfov) / 2)
+    u = ((np.arange(n) + 0.5) / n * 2 - 1) * tx
+    v = (1 - (np.arange(n) + 0.5) / n * 2) * ty
+    uu, vv = np.meshgrid(u, v)
+    r = np.sqrt(1 + uu**2 + vv**2)
+    d = np.stack([uu / r, vv / r, 1 / r], -1).reshape(-1, 3)
+    sa = (1 / r**3).ravel()
+    w = (d @ _R(*np.radians([yaw, pitch, roll])).T).astype(np.float32)
+    fwd = _R(*np.radians([yaw, pitch, roll]))[:, 2]
+    # Circumradius of a perspective rectangle; farther centres cannot overlap (exact skip).
+    rad_v = np.arctan(np.hypot(tx, ty))
+    rad_w = np.arctan(
+        np.hypot(np.tan(np.radians(grid.hfov_deg) / 2), np.tan(np.radians(grid.vfov_deg) / 2))
+    )
+    wx, wy = np.tan(np.radians(grid.hfov_deg) / 2), np.tan(np.radians(grid.vfov_deg) / 2)
+    out = np.zeros(grid.shape)
+    near, mats = [], []
+    for i, wp in enumerate(grid.pitch_deg):
+        for j, wy_ in enumerate(grid.yaw_deg):
+            rw = _R(np.radians(wy_), np.radians(wp), 0.0)
+            if np.arccos(np.clip(rw[:, 2] @ fwd, -1, 1)) <= rad_v + rad_w:
+                near.append((i, j))
+                mats.append(rw)
+    m = np.concatenate(mats, axis=1).astype(np.float32)  # (3, 3W)
+    acc = np.zeros(len(near))
+    for s in range(0, len(w), 8192):
+        q = (w[s : s + 8192] @ m).reshape(-1, len(near), 3)  # window-frame coordinates
+        z = q[..., 2]
+        ins = (z > 0) & (np.abs(q[..., 0]) <= wx * z) & (np.abs(q[..., 1]) <= wy * z)
+        acc += sa[s : s + 8192] @ ins
+    for (i, j), v in zip(near, acc):
+        out[i, j] = v / sa.sum()
+    return out
