@@ -436,6 +436,5 @@ def epof_from_grid(
     )
 
 
-@functools.lru_cache(maxsize=8)
 def _overlaps_for(grid_key: tuple, hfov_deg: float, vfov_deg: float) -> ViewportOverlaps:
     return viewport_overlaps(WindowGrid.from_dict(dict(grid_key)), hfov_deg, vfov_deg)

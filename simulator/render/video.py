@@ -7,6 +7,12 @@ encoder. Output files are written to temporary names and renamed when complete.
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import queue
+import shutil
+import threading
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,8 +64,6 @@ class _Worker:
     """A thread draining a bounded queue into ``fn``; errors resurface in :meth:`join`."""
 
     def __init__(self, fn, maxsize: int = 3, name: str = "worker"):
-        import queue
-        import threading
 
         self.q: queue.Queue = queue.Queue(maxsize=maxsize)
         self.fn = fn
@@ -69,8 +73,6 @@ class _Worker:
         self.t.start()
 
     def _run(self) -> None:
-        import time
-
         while True:
             item = self.q.get()
             if item is None:
@@ -138,10 +140,6 @@ def render_video(
     (draw, yuv420p conversion and readback of both eyes), ``encode_wait`` (blocked on the encoders),
     ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
     """
-    import contextlib
-    import functools
-    import time
-
     info = probe(video_path)
     fps = float(fps or info.fps)
     total = int(n_frames or info.n_frames)
@@ -229,8 +227,6 @@ def render_video(
             if n == 0:
                 raise InputError(f"{video_path}: no frames decoded")
         if same:
-            import shutil
-
             with atomic_output(out_paths[1]) as tmp:
                 shutil.copyfile(out_paths[0], tmp)
     finally:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -81,8 +82,6 @@ def _interval_times(n_frames: int, fps: float) -> NDArray[np.float64]:
 
 def load_truth(path: str | os.PathLike) -> Truth:
     """Read a truth file written by :func:`synthesize` (``allow_pickle=False``)."""
-    import zipfile
-
     p = Path(path)
     if not p.is_file():
         raise InputError(f"{p}: truth file not found")
