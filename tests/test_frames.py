@@ -79,7 +79,7 @@ def golden(ctx, clip):
 
 
 def test_decode_frames_matches_sequential_decoding(real_dir):
-    """Seek-based decoding against decoding every frame (three.js pano.mp4, edit list)."""
+    """Seek-based decoding against decoding every frame (three.js MaryOculus.mp4, real H.264)."""
     from simulator.frames import decode_frames
     from simulator.video import iter_frames
 
