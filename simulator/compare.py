@@ -179,6 +179,10 @@ def compare_dirs(
     rep = Path(report_dir) if report_dir is not None else new_dir / "compare"
     if rep.resolve() == golden_dir.resolve() or golden_dir.resolve() in rep.resolve().parents:
         raise InputError(f"{rep}: the report must not go into the golden folder")
+    if rep.resolve() == new_dir.resolve():
+        raise InputError(
+            f"{rep}: the report must not go into the frames folder (its diffs would be frames)"
+        )
 
     scores = []
     for name, (a, b) in pairs.items():

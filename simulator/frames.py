@@ -319,6 +319,11 @@ def render_frames(
         for f in writes:
             f.result()  # a failed write raises here
         bar.close()
+    except BaseException:
+        pool.shutdown(wait=True, cancel_futures=True)
+        for r in rows:  # no frames.json: this run's PNGs would look like a finished run's
+            (out / r["file"]).unlink(missing_ok=True)
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         renderer.release()

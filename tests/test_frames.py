@@ -223,3 +223,22 @@ def test_cli_compare_bad_goldens(ctx, clip, golden, tmp_path, capsys):
         assert match in err
         assert len(err.strip().splitlines()) == 1
     assert not (new / "compare").exists()  # nothing written
+
+
+def test_failed_frames_run_leaves_no_pngs(ctx, clip, tmp_path, monkeypatch):
+    import simulator.frames as fr
+
+    calls = []
+
+    def flaky(path, img):
+        calls.append(path)
+        if len(calls) == 2:
+            raise OSError(28, "No space left on device")
+        return real(path, img)
+
+    real = fr._write_png
+    monkeypatch.setattr(fr, "_write_png", flaky)
+    with pytest.raises(OSError):
+        _frames(ctx, clip, tmp_path / "o")
+    assert len(calls) >= 2
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == []
