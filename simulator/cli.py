@@ -23,6 +23,8 @@ COMMANDS: dict[str, str] = {
     "headpath": "headpath",
     "epof": "epof",
     "render": "render",
+    "frames": "frames",
+    "compare": "compare",
     "synth": "synth",
     "demo": "demo",
     "analyze": "analyze",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
@@ -20,9 +21,9 @@ from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
-from simulator.video import probe
+from simulator.video import MediaInfo, probe
 
-__all__ = ["OUTDIR_FILES", "render_viewing"]
+__all__ = ["OUTDIR_FILES", "ViewingPlan", "grf_settings", "plan_viewing", "render_viewing"]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
@@ -38,6 +39,115 @@ def _clear_outputs(out) -> None:
             raise InputError(
                 f"{p}: cannot remove the previous run's output ({e.strerror})"
             ) from None
+
+
+@dataclass(frozen=True)
+class ViewingPlan:
+    """One viewing's inputs, checked, and its per-frame poses and GRF opacity.
+
+    info : the video's :class:`simulator.video.MediaInfo`
+    headpath : the head path; grid : the grid file or None
+    times_s : ndarray, shape (N,), time of video frame ``i`` = ``i / fps`` (seconds)
+    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of frame ``i``, degrees
+    epof_dps : ndarray, shape (N,), EPOF (deg/s; NaN without a grid)
+    opacity : ndarray, shape (N,), the GRF opacity rendered at frame ``i`` (0 without GRF)
+    thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
+    """
+
+    info: MediaInfo
+    headpath: HeadPath
+    grid: GridFile | None
+    times_s: np.ndarray
+    angles_deg: np.ndarray
+    epof_dps: np.ndarray
+    opacity: np.ndarray
+    thresholds_dps: tuple[float, float]
+
+
+def grf_settings(grf) -> dict | None:
+    """The GRF parameters as written in ``summary.json`` / ``frames.json`` (None: no GRF)."""
+    if grf is None:
+        return None
+    return {
+        "grain_deg": grf.grain_deg,
+        "density": grf.density,
+        "inner_deg": grf.inner_deg,
+        "outer_deg": grf.outer_deg,
+        "seed": grf.seed,
+        "distance_m": grf.distance_m,
+        "n_grains": grain_count(grf),
+    }
+
+
+def plan_viewing(
+    video,
+    headpath,
+    *,
+    grid=None,
+    config: RenderConfig = RenderConfig(),
+    opacity: float | Literal["auto"] = "auto",
+    layout: str = "mono",
+    hold: bool = False,
+) -> ViewingPlan:
+    """Check a viewing's inputs and work out what every frame shows (no GL, no output).
+
+    What :func:`render_viewing` renders and ``vimsim frames`` renders at chosen moments:
+    the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
+    (``"auto"``: from the EPOF of ``grid``; else the constant). Raises InputError for a
+    bad video, head path, grid or opacity.
+    """
+    grf = config.grf
+    if isinstance(opacity, str):
+        if opacity != "auto":
+            raise InputError(
+                f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}"
+            )
+    elif not (0.0 <= float(opacity) <= 1.0):
+        raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
+
+    info = probe(video)
+    info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
+    if not info.is_video:
+        raise InputError(
+            f"{video}: a still image; render needs a video (vimsim viewport renders images)"
+        )
+    hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
+    duration = (info.n_frames - 1) / info.fps  # time of the last frame
+    hp.check_covers(duration, hold=hold, video=str(video))
+    nf = info.n_frames
+    times = np.arange(nf) / info.fps
+
+    if grid is not None and not isinstance(grid, GridFile):
+        grid = load_grid(grid)
+    if grid is not None:
+        grid.check_video(info, source=grid.path)
+    if grf is not None and opacity == "auto" and grid is None:
+        raise InputError(
+            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
+        )
+
+    # Per-frame head angles and opacity (EPOF rows when a grid is given).
+    yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
+    epof_dps = np.full(nf, np.nan)
+    thresholds = (float("nan"), float("nan"))
+    op_auto = None
+    if grid is not None:
+        res = compute_epof(grid, hp, frustum=config.frustum, hold=hold)
+        n = min(len(res.epof_dps), nf)
+        epof_dps[:n] = res.epof_dps[:n]
+        epof_dps[n:] = res.epof_dps[-1]
+        op_auto = np.empty(nf)
+        op_auto[:n] = res.opacity[:n]
+        op_auto[n:] = res.opacity[-1]
+        thresholds = tuple(float(v) for v in res.thresholds_dps)
+    if grf is None:
+        op = np.zeros(nf)
+    elif opacity == "auto":
+        op = op_auto
+    else:
+        op = np.full(nf, float(opacity))
+    angles = np.stack([yaw, pitch, roll], axis=-1)
+    return ViewingPlan(info, hp, grid, times, angles, epof_dps, op, thresholds)
 
 
 def render_viewing(
@@ -94,59 +204,18 @@ def render_viewing(
     w, h = config.eye_size
     hfov, vfov = config.hfov_deg, config.vfov_deg
     grf = config.grf
-    if isinstance(opacity, str):
-        if opacity != "auto":
-            raise InputError(
-                f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}"
-            )
-    elif not (0.0 <= float(opacity) <= 1.0):
-        raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
     if w % 2 or h % 2:
         raise InputError(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
-
-    info = probe(video)
-    info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
-    if not info.is_video:
-        raise InputError(
-            f"{video}: a still image; render needs a video (vimsim viewport renders images)"
-        )
-    hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    duration = (info.n_frames - 1) / info.fps  # time of the last frame
-    hp.check_covers(duration, hold=hold, video=str(video))
+    plan = plan_viewing(
+        video, headpath, grid=grid, config=config, opacity=opacity, layout=layout, hold=hold
+    )
+    info, hp, grid = plan.info, plan.headpath, plan.grid
     nf = info.n_frames
-    times = np.arange(nf) / info.fps
-
-    if grid is not None and not isinstance(grid, GridFile):
-        grid = load_grid(grid)
-    if grid is not None:
-        grid.check_video(info, source=grid.path)
-    if grf is not None and opacity == "auto" and grid is None:
-        raise InputError(
-            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
-        )
-
-    # Per-frame head angles and opacity (EPOF rows when a grid is given).
-    yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
-    epof_dps = np.full(nf, np.nan)
-    thresholds = (float("nan"), float("nan"))
-    op_auto = None
-    if grid is not None:
-        res = compute_epof(grid, hp, frustum=config.frustum, hold=hold)
-        n = min(len(res.epof_dps), nf)
-        epof_dps[:n] = res.epof_dps[:n]
-        epof_dps[n:] = res.epof_dps[-1]
-        op_auto = np.empty(nf)
-        op_auto[:n] = res.opacity[:n]
-        op_auto[n:] = res.opacity[-1]
-        thresholds = tuple(float(v) for v in res.thresholds_dps)
-    if grf is None:
-        op = np.zeros(nf)
-    elif opacity == "auto":
-        op = op_auto
-    else:
-        op = np.full(nf, float(opacity))
+    times = plan.times_s
+    yaw, pitch, roll = plan.angles_deg.T
+    epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
 
     if ctx is None:
         ctx = create_context()
@@ -200,17 +269,7 @@ def render_viewing(
             "down": config.frustum.down_deg,
             "up": config.frustum.up_deg,
         },
-        "grf": None
-        if grf is None
-        else {
-            "grain_deg": grf.grain_deg,
-            "density": grf.density,
-            "inner_deg": grf.inner_deg,
-            "outer_deg": grf.outer_deg,
-            "seed": grf.seed,
-            "distance_m": grf.distance_m,
-            "n_grains": grain_count(grf),
-        },
+        "grf": grf_settings(grf),
         "opacity": "off" if grf is None else opacity,
         "opacity_thresholds_dps": list(thresholds),
         "epof_dps_percentiles": pct(epof_dps),

@@ -11,7 +11,7 @@ import sys
 from simulator.choices import LAYOUTS, X264_PRESETS
 from simulator.commands._types import add_fov_arguments, frustum_from_args, nonneg_int, size_wxh
 
-__all__ = ["register", "run"]
+__all__ = ["add_view_options", "register", "run", "view_from_args"]
 
 
 def _opacity(text: str) -> float | str:
@@ -30,33 +30,9 @@ def _opacity(text: str) -> float | str:
     return v
 
 
-def register(subparsers: argparse._SubParsersAction) -> None:
-    """Add the ``render`` parser."""
-    from simulator.commands.headpath import add_reader_options
-
-    p = subparsers.add_parser(
-        "render",
-        help="per-eye H.264 videos of what the viewer saw, with the GRF overlay (headless EGL)",
-        description="Render what each eye saw along a head path (OpenGL over EGL, no display "
-        "needed) and composite the granulated rest frame (GRF: world-fixed black grains of "
-        "1.5 deg covering 50% of the view, transparent within 18 deg of the view centre, "
-        "opaque beyond 40 deg) at the EPOF-driven opacity. Writes OUTDIR/left.mp4, "
-        "OUTDIR/right.mp4 (H.264, the video's frame rate, one frame per video frame), "
-        "OUTDIR/epof.csv and, last, OUTDIR/summary.json (the run is complete when it exists). "
-        "Angles in degrees: positive yaw turns "
-        "right, positive pitch looks up, positive roll tilts the head right ear down.",
-    )
-    # dest video_file: --video (add_reader_options) names the trace of an AVTrack360 file
-    p.add_argument("video_file", metavar="VIDEO", help="equirectangular video (mono or stereo)")
-    p.add_argument(
-        "headpath",
-        metavar="PATH.csv",
-        help="head path (time_s,yaw_deg,pitch_deg,roll_deg or another format vimsim headpath "
-        "reads; --format, --video, --user below choose the format and the trace)",
-    )
-    p.add_argument(
-        "-o", "--output", metavar="OUTDIR", required=True, help="output folder (created)"
-    )
+def add_view_options(p: argparse.ArgumentParser) -> None:
+    """The options that say what an eye sees (grid, eye size, FOV, GRF, layout, hold):
+    shared by ``render`` and ``frames``; :func:`view_from_args` reads them."""
     p.add_argument(
         "--grid",
         metavar="GRID.npz",
@@ -128,32 +104,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="hold the head path's first/last pose where it does not cover the video",
     )
-    p.add_argument(
-        "--preset", choices=X264_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
-    )
-    p.add_argument(
-        "--crf",
-        type=nonneg_int,
-        default=18,
-        metavar="N",
-        help="x264 quality, lower = better (default 18)",
-    )
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    add_reader_options(p)
-    p.set_defaults(func=run)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Parse the options and run :func:`simulator.viewing.render_viewing`; InputError -> exit 2."""
-    from simulator.commands._progress import progress_bar, warnings_to_stderr
+def view_from_args(args: argparse.Namespace, command: str = "render"):
+    """``(headpath, grid, config, note)`` from :func:`add_view_options`' options."""
+    from simulator.commands._progress import warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
-    from simulator.viewing import render_viewing
 
     frustum = frustum_from_args(args, (107.0, 107.0))
-    with warnings_to_stderr("vimsim render"):
+    with warnings_to_stderr(f"vimsim {command}"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
 
@@ -173,6 +135,58 @@ def run(args: argparse.Namespace) -> int:
             distance_m=args.grain_distance,
         )
     config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf)
+    return hp, grid, config, note
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``render`` parser."""
+    from simulator.commands.headpath import add_reader_options
+
+    p = subparsers.add_parser(
+        "render",
+        help="per-eye H.264 videos of what the viewer saw, with the GRF overlay (headless EGL)",
+        description="Render what each eye saw along a head path (OpenGL over EGL, no display "
+        "needed) and composite the granulated rest frame (GRF: world-fixed black grains of "
+        "1.5 deg covering 50% of the view, transparent within 18 deg of the view centre, "
+        "opaque beyond 40 deg) at the EPOF-driven opacity. Writes OUTDIR/left.mp4, "
+        "OUTDIR/right.mp4 (H.264, the video's frame rate, one frame per video frame), "
+        "OUTDIR/epof.csv and, last, OUTDIR/summary.json (the run is complete when it exists). "
+        "Angles in degrees: positive yaw turns "
+        "right, positive pitch looks up, positive roll tilts the head right ear down.",
+    )
+    # dest video_file: --video (add_reader_options) names the trace of an AVTrack360 file
+    p.add_argument("video_file", metavar="VIDEO", help="equirectangular video (mono or stereo)")
+    p.add_argument(
+        "headpath",
+        metavar="PATH.csv",
+        help="head path (time_s,yaw_deg,pitch_deg,roll_deg or another format vimsim headpath "
+        "reads; --format, --video, --user below choose the format and the trace)",
+    )
+    p.add_argument(
+        "-o", "--output", metavar="OUTDIR", required=True, help="output folder (created)"
+    )
+    add_view_options(p)
+    p.add_argument(
+        "--preset", choices=X264_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
+    )
+    p.add_argument(
+        "--crf",
+        type=nonneg_int,
+        default=18,
+        metavar="N",
+        help="x264 quality, lower = better (default 18)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    add_reader_options(p)
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Parse the options and run :func:`simulator.viewing.render_viewing`; InputError -> exit 2."""
+    from simulator.commands._progress import progress_bar, warnings_to_stderr
+    from simulator.viewing import render_viewing
+
+    hp, grid, config, note = view_from_args(args)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
