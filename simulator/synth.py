@@ -1,6 +1,6 @@
 """Synthetic 360 deg clips with analytic ground-truth optical flow.
 
-Three scenes (:data:`SCENES`), all described as a camera moving through a static world:
+Four scenes (:data:`SCENES`), all described as a camera moving through a static world:
 
 ``rotate``
     A textured panorama at infinity (an environment map) and a camera turning at a
@@ -15,6 +15,9 @@ Three scenes (:data:`SCENES`), all described as a camera moving through a static
     A figure-eight ride with hills through a textured box room: speed varies along the
     path (accelerations), the camera looks along its velocity (turns, pitch) and banks
     into the turns (roll).
+``trajectory``
+    Any camera path (a CSV of timed poses) through a textured box room:
+    :mod:`simulator.synth_trajectory` (it subclasses :class:`SynthScene`).
 
 Frames and conventions (:mod:`simulator.geometry`): world and camera frames are
 +x right, +y up, +z forward; the equirect frame of the video *is* the camera frame
@@ -92,8 +95,8 @@ __all__ = [
     "window_truth_dps",
 ]
 
-Scene = Literal["rotate", "forward", "coaster"]
-SCENES: tuple[str, ...] = ("rotate", "forward", "coaster")
+Scene = Literal["rotate", "forward", "coaster", "trajectory"]
+SCENES: tuple[str, ...] = ("rotate", "forward", "coaster", "trajectory")
 SynthLayout = Literal["mono", "top-bottom"]
 SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
 TRUTH_FORMAT = "vimsim-synth-truth"
@@ -250,7 +253,8 @@ class SynthConfig:
 
     Parameters
     ----------
-    scene : ``"rotate"``, ``"forward"`` or ``"coaster"``
+    scene : ``"rotate"``, ``"forward"``, ``"coaster"`` or ``"trajectory"`` (needs a camera
+        path: :func:`simulator.synth_trajectory.make_trajectory_scene`)
     seconds : float, clip length in seconds (> 0; at least 2, at most ``MAX_FRAMES``
         = 100,000 frames)
     fps : float, frames per second, in (0, ``MAX_FPS`` = 240]
@@ -447,14 +451,34 @@ class SynthScene:
             if cfg.scene == "forward":
                 length = cfg.speed * cfg.seconds
                 self.box = _Box((-3.0, -1.6, -20.0), (3.0, 2.4, length + 30.0))
-            else:
+            elif cfg.scene == "coaster":
                 self.box = _Box((-17.0, -4.5, -12.5), (17.0, 6.5, 12.5))
                 self._coaster_w = self._coaster_rate(cfg.speed)
-            for t in np.linspace(0, cfg.seconds, 64):
-                if not self.box.contains(self.position(float(t)), margin=0.2):
-                    raise InputError(
-                        f"{cfg.scene}: the camera leaves the room at t = {t:.2f} s; lower --speed or --seconds"
-                    )
+            else:
+                self.box = self._make_room()
+            self._check_inside_room()
+
+    # -- hooks for subclasses (simulator.synth_trajectory) -------------------------------
+    def _make_room(self) -> _Box:
+        """The room of a scene without a built-in one (subclasses override)."""
+        raise InputError(
+            f"the {self.cfg.scene} scene needs a camera path: vimsim synth --camera CAMERA.csv "
+            "(Python: simulator.synth_trajectory.make_trajectory_scene)"
+        )
+
+    def _check_inside_room(self) -> None:
+        """InputError if the camera comes within 0.2 m of a wall."""
+        cfg = self.cfg
+        for t in np.linspace(0, cfg.seconds, 64):
+            if not self.box.contains(self.position(float(t)), margin=0.2):
+                raise InputError(
+                    f"{cfg.scene}: the camera leaves the room at t = {t:.2f} s; lower --speed or --seconds"
+                )
+
+    def truth_extras(self, dirs_cam: NDArray, times_s: NDArray) -> tuple[dict[str, NDArray], dict]:
+        """Extra arrays and meta entries for the truth file (none for the built-in
+        scenes); ``dirs_cam`` are the truth cells' rays, ``times_s`` its row times."""
+        return {}, {}
 
     # -- trajectory ------------------------------------------------------------------
     @staticmethod
@@ -720,11 +744,18 @@ def _texture_hash(cfg: SynthConfig) -> str:
 
 
 def synthesize(
-    cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: bool = False
+    cfg: SynthConfig,
+    out: str | os.PathLike,
+    *,
+    crf: int = 16,
+    progress: bool = False,
+    scene: SynthScene | None = None,
 ) -> tuple[Path, Path]:
     """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
 
     ``crf`` is the x264 constant rate factor, an integer 0..51 (lower is better).
+    ``scene``: an already built scene of ``cfg`` (e.g. a trajectory scene), else
+    :func:`make_scene` builds it.
     Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
     written after the video, so a truth file implies a complete video.
     """
@@ -735,7 +766,10 @@ def synthesize(
         raise InputError(f"{out}: output must be an .mp4 file")
     if isinstance(crf, bool) or not isinstance(crf, (int, np.integer)) or not 0 <= crf <= 51:
         raise InputError(f"x264 crf must be an integer 0..51 (lower is better); got {crf!r}")
-    scene = make_scene(cfg)
+    if scene is None:
+        scene = make_scene(cfg)
+    elif scene.cfg != cfg:
+        raise ValueError("synthesize: scene.cfg differs from cfg")
     W, H = cfg.size
     n = cfg.n_frames
     frame_size = (W, H * len(cfg.eyes))
@@ -813,6 +847,8 @@ def synthesize(
         "frames": "camera: +x right, +y up, +z forward; quat_xyzw/position_m: camera->world pose at frame_time_s",
         "trajectory": traj,
     }
+    extra_arrays, extra_meta = scene.truth_extras(dirs, times)
+    meta.update(extra_meta)
     arrays = {
         "speed_dps": fields[cfg.eyes[0]],
         "lon_deg": lon_deg,
@@ -822,6 +858,7 @@ def synthesize(
     }
     if "right" in fields:
         arrays["speed_dps_right"] = fields["right"]
+    arrays.update(extra_arrays)
     tpath = truth_path_for(out)
     with atomic_output(tpath) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
