@@ -1,4 +1,5 @@
-"""The trajectory scene: CSV reading and bad input, pose conventions, interpolation
+"""The trajectory scene (simulator.synth_trajectory) and camera paths
+(simulator.camera_path): CSV reading and bad input, pose conventions, interpolation
 derivatives, analytic truth against finite differences and against the rotate scene,
 the room, the truth file, the z-up converter, and a small flow-accuracy check."""
 
@@ -8,20 +9,22 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+from simulator.camera_path import (
+    CAMERA_COLUMNS,
+    CameraTrajectory,
+    load_camera_csv,
+    save_camera_csv,
+    trajectory_from_zup,
+)
 from simulator.cli import main
 from simulator.errors import InputError
 from simulator.geometry import head_angles_deg
 from simulator.synth import SynthConfig, load_truth, synthesize, truth_path_for
 from simulator.synth_trajectory import (
-    CAMERA_COLUMNS,
-    CameraTrajectory,
-    load_camera_csv,
     make_trajectory_scene,
-    save_camera_csv,
     scene_from_truth,
     synthesize_trajectory,
     trajectory_config,
-    trajectory_from_zup,
 )
 from simulator.video import probe, read_frame
 
@@ -222,7 +225,7 @@ def test_room_default_size_and_placement():
     assert sc.box.hi == (1.0, 1.0, 5.0)
 
 
-def test_zup_converter_blender_camera():
+def test_zup_converter_blender_camera(tmp_path):
     """Blender: +x right, +y forward, +z up; a camera looks along its local -z. Blender's
     rotation_euler (90, 0, 0) deg (XYZ) looks along +y (our +z): yaw = pitch = roll = 0."""
     eul = np.array([[90, 0, 0], [90, 0, -90], [120, 0, 0], [90, 10, 0], [60, 0, 45]], float)
@@ -247,6 +250,18 @@ def test_zup_converter_blender_camera():
     np.testing.assert_allclose(
         tr.rotations.apply([0, 1.0, 0]), rots.apply([0, 1.0, 0]) @ m.T, atol=1e-12
     )
+    # The recipe of docs/trajectory.md: Blender's time_s,x,y,z,qw,qx,qy,qz rows (camera at
+    # rotation_euler (90, 0, -90) deg, i.e. looking along Blender's +x) -> our CSV.
+    q = Rotation.from_euler("xyz", [90, 0, -90], degrees=True).as_quat()  # x, y, z, w
+    rows = [[t, 1.0, 2.0 + t, 3.0, q[3], q[0], q[1], q[2]] for t in (0.0, 0.5)]
+    blender_csv = tmp_path / "blender_cam.csv"
+    _csv(blender_csv, rows, "time_s,x,y,z,qw,qx,qy,qz")
+    d = np.loadtxt(blender_csv, delimiter=",", skiprows=1)
+    rot = Rotation.from_quat(d[:, [5, 6, 7, 4]])  # scipy wants x, y, z, w
+    traj = trajectory_from_zup(d[:, 0], d[:, 1:4], rot, camera_looks="-z")
+    back = load_camera_csv(save_camera_csv(tmp_path / "CAMERA.csv", traj))
+    np.testing.assert_allclose(np.column_stack(back.angles_deg()), [[90, 0, 0]] * 2, atol=1e-6)
+    np.testing.assert_allclose(back.positions_m, [[1, 3, 2], [1, 3, 2.5]], atol=1e-8)
     # An object with the world's axes (+y forward): identity -> looks along +z.
     tr = trajectory_from_zup([0.0, 1.0], np.zeros((2, 3)), Rotation.identity(2), camera_looks="+y")
     np.testing.assert_allclose(np.column_stack(tr.angles_deg()), 0, atol=1e-12)
@@ -400,3 +415,10 @@ def test_sphere_mode_matches_truth_on_small_walk(tmp_path):
     rel = np.abs(est - truth) / truth
     assert np.median(rel) < 0.10, np.median(rel)
     assert np.corrcoef(est.ravel(), truth.ravel())[0, 1] > 0.8
+
+
+def test_cli_choice_list_matches_module():
+    from simulator import camera_path
+    from simulator.commands import synth as c_synth
+
+    assert c_synth._INTERPS == camera_path.INTERPS

@@ -9,7 +9,7 @@ from simulator.commands._types import nonneg_int, positive_float, size_wxh
 __all__ = ["register", "run"]
 
 _SCENES = ("rotate", "forward", "coaster", "trajectory")  # = simulator.synth.SCENES (light import)
-_INTERPS = ("linear", "cubic")  # = simulator.synth_trajectory.INTERPS
+_INTERPS = ("linear", "cubic")  # = simulator.camera_path.INTERPS
 
 
 def _axis(text: str) -> tuple[float, float, float]:
@@ -94,8 +94,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=None,
         metavar="W,H,D",
         help="trajectory: room size in metres (x, y, z), centred on the path, floor 1.6 m below "
-        "its lowest point; or the corners X0,Y0,Z0,X1,Y1,Z1 (default: the path's bounding box "
-        "+ 3 m on each side, 1.6 m below, 2.4 m above)",
+        "its lowest point; or the corners X0,Y0,Z0,X1,Y1,Z1 (negative first number: write "
+        "--room=-3,...); default: the path's bounding box + 3 m on each side, 1.6 m below, "
+        "2.4 m above",
     )
     p.add_argument(
         "--interp",
@@ -128,7 +129,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="IMG",
         default=None,
         help="texture image: the panorama for rotate (2:1 equirect, checked), tiled on the walls "
-        "for forward/coaster (default: the bundled procedural panorama)",
+        "for forward/coaster/trajectory (default: the bundled procedural panorama)",
     )
     p.add_argument(
         "--seed", type=nonneg_int, default=0, help="texture placement on the walls (default 0)"
