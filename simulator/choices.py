@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Literal, get_args
 
 __all__ = [
+    "CAMERA_INTERPS",
     "DIS_PRESETS",
     "EPOF_METHODS",
     "EYES",
@@ -80,7 +81,10 @@ HEADPATH_FORMATS: tuple[str, ...] = (
 )
 
 #: Synthetic scenes (:mod:`simulator.synth`) and their layouts.
-SCENES: tuple[str, ...] = ("rotate", "forward", "coaster")
+SCENES: tuple[str, ...] = ("rotate", "forward", "coaster", "trajectory")
+
+#: How camera positions are interpolated between the poses of a trajectory CSV.
+CAMERA_INTERPS: tuple[str, ...] = ("linear", "cubic")
 SYNTH_LAYOUTS: tuple[str, ...] = ("mono", "top-bottom")
 
 #: How a session's flow is summarised from its EPOF CSV (:mod:`simulator.analyze`).

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.choices import SCENES, SYNTH_LAYOUTS
+from simulator.choices import CAMERA_INTERPS, SCENES, SYNTH_LAYOUTS
 from simulator.commands._types import nonneg_int, positive_float, size_wxh, x264_crf
 
 __all__ = ["register", "run"]
@@ -24,6 +24,23 @@ def _axis(text: str) -> tuple[float, float, float]:
     return parts[0], parts[1], parts[2]
 
 
+def _room(text: str) -> tuple[float, ...]:
+    """Parse ``W,H,D`` (metres, e.g. ``8,4,20``) or the corners ``X0,Y0,Z0,X1,Y1,Z1``."""
+    try:
+        parts = tuple(float(t) for t in text.split(","))
+        if len(parts) not in (3, 6) or not all(abs(p) < float("inf") for p in parts):
+            raise ValueError
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"room must be W,H,D or X0,Y0,Z0,X1,Y1,Z1 in metres, e.g. 8,4,20; got {text!r}"
+        ) from None
+    if len(parts) == 3 and min(parts) <= 0:
+        raise argparse.ArgumentTypeError(
+            f"room size must be > 0 m on each axis, e.g. 8,4,20; got {text!r}"
+        )
+    return parts
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``synth`` parser."""
     p = subparsers.add_parser(
@@ -35,14 +52,43 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "the camera trajectory. Scenes: rotate (a panorama turning about --axis at "
         "--omega deg/s), forward (the camera moving forward through a textured tunnel at "
         "--speed m/s), coaster (a figure-eight ride with hills, turns, banking and "
-        "changing speed through a textured room). See docs/synth.md.",
+        "changing speed through a textured room), trajectory (any camera path from --camera "
+        "CAMERA.csv through a textured room). See docs/synth.md.",
     )
     p.add_argument(
         "output", metavar="OUT.mp4", help="output clip (H.264); OUT.truth.npz is written beside it"
     )
     p.add_argument("--scene", required=True, choices=SCENES, help="which motion")
     p.add_argument(
-        "--seconds", type=positive_float, default=3.0, help="clip length, seconds (default 3)"
+        "--seconds",
+        type=positive_float,
+        default=None,
+        help="clip length, seconds (default 3; trajectory: the CSV's time span)",
+    )
+    p.add_argument(
+        "--camera",
+        metavar="CAMERA.csv",
+        default=None,
+        help="trajectory: camera poses, columns time_s,x_m,y_m,z_m,yaw_deg,pitch_deg,roll_deg "
+        "(world +x right, +y up, +z forward, metres; positive yaw turns right, pitch looks up, "
+        "roll tilts right ear down), strictly increasing time, any sampling",
+    )
+    p.add_argument(
+        "--room",
+        type=_room,
+        default=None,
+        metavar="W,H,D",
+        help="trajectory: room size in metres (x, y, z), centred on the path, floor 1.6 m below "
+        "its lowest point; or the corners X0,Y0,Z0,X1,Y1,Z1 (negative first number: write "
+        "--room=-3,...); default: the path's bounding box + 3 m on each side, 1.6 m below, "
+        "2.4 m above",
+    )
+    p.add_argument(
+        "--interp",
+        choices=CAMERA_INTERPS,
+        default="cubic",
+        help="trajectory: positions between poses, linear or cubic spline (default cubic); "
+        "orientations always Slerp",
     )
     p.add_argument(
         "--fps",
@@ -68,7 +114,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="IMG",
         default=None,
         help="texture image: the panorama for rotate (2:1 equirect, checked), tiled on the walls "
-        "for forward/coaster (default: the bundled procedural panorama)",
+        "for forward/coaster/trajectory (default: the bundled procedural panorama)",
     )
     p.add_argument(
         "--seed", type=nonneg_int, default=0, help="texture placement on the walls (default 0)"
@@ -114,11 +160,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Render the clip and its truth file; print what was written."""
     from simulator.commands._progress import progress_bar
+    from simulator.errors import InputError
     from simulator.synth import SynthConfig, synthesize
 
+    if args.scene == "trajectory":
+        return _run_trajectory(args)
+    for opt, val in (("--camera", args.camera), ("--room", args.room)):
+        if val is not None:
+            raise InputError(f"{opt} is for --scene trajectory; got --scene {args.scene}")
     cfg = SynthConfig(
         scene=args.scene,
-        seconds=args.seconds,
+        seconds=3.0 if args.seconds is None else args.seconds,
         fps=args.fps,
         size=args.size,
         layout=args.layout,
@@ -134,6 +186,41 @@ def run(args: argparse.Namespace) -> int:
     w, h = cfg.size
     print(
         f"wrote {video} ({cfg.scene}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
+        f"{w}x{h * len(cfg.eyes)} {cfg.layout}) and {truth}"
+    )
+    return 0
+
+
+def _run_trajectory(args: argparse.Namespace) -> int:
+    from simulator.commands._progress import progress_bar
+    from simulator.errors import InputError
+    from simulator.synth.trajectory import synthesize_trajectory
+
+    if args.camera is None:
+        raise InputError("--scene trajectory needs --camera CAMERA.csv (docs/synth.md)")
+    if args.seconds is not None:
+        raise InputError(
+            "--seconds does not apply to --scene trajectory: the clip covers the camera "
+            "CSV's time span"
+        )
+    with progress_bar("synth trajectory") as bar:
+        video, truth, cfg = synthesize_trajectory(
+            args.camera,
+            args.output,
+            room_m=args.room,
+            interp=args.interp,
+            crf=args.crf,
+            progress=bar,
+            fps=args.fps,
+            size=args.size,
+            layout=args.layout,
+            texture=args.texture,
+            seed=args.seed,
+            truth_cell_deg=args.truth_cell,
+        )
+    w, h = cfg.size
+    print(
+        f"wrote {video} (trajectory {args.camera}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
         f"{w}x{h * len(cfg.eyes)} {cfg.layout}) and {truth}"
     )
     return 0

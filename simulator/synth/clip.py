@@ -109,11 +109,18 @@ def _texture_hash(cfg: SynthConfig) -> str:
 
 
 def synthesize(
-    cfg: SynthConfig, out: str | os.PathLike, *, crf: int = 16, progress: Progress | None = None
+    cfg: SynthConfig,
+    out: str | os.PathLike,
+    *,
+    crf: int = 16,
+    progress: Progress | None = None,
+    scene: SynthScene | None = None,
 ) -> tuple[Path, Path]:
     """Render the clip of ``cfg`` to ``out`` (H.264 MP4) and its truth file beside it.
 
     ``crf`` is the x264 constant rate factor, an integer 0..51 (lower is better).
+    ``scene``: an already built scene of ``cfg`` (e.g. a trajectory scene), else
+    :func:`make_scene` builds it.
     Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
     written after the video, so a truth file implies a complete video.
     """
@@ -123,7 +130,10 @@ def synthesize(
         raise InputError(f"{out}: output must be an .mp4 file")
     if isinstance(crf, bool) or not isinstance(crf, (int, np.integer)) or not 0 <= crf <= 51:
         raise InputError(f"x264 crf must be an integer 0..51 (lower is better); got {crf!r}")
-    scene = make_scene(cfg)
+    if scene is None:
+        scene = make_scene(cfg)
+    elif scene.cfg != cfg:
+        raise ValueError("synthesize: scene.cfg differs from cfg")
     W, H = cfg.size
     n = cfg.n_frames
     frame_size = (W, H * len(cfg.eyes))
@@ -198,6 +208,8 @@ def synthesize(
         "frames": "camera: +x right, +y up, +z forward; quat_xyzw/position_m: camera->world pose at frame_time_s",
         "trajectory": traj,
     }
+    extra_arrays, extra_meta = scene.truth_extras(dirs, times)
+    meta.update(extra_meta)
     arrays = {
         "speed_dps": fields[cfg.eyes[0]],
         "lon_deg": lon_deg,
@@ -207,6 +219,7 @@ def synthesize(
     }
     if "right" in fields:
         arrays["speed_dps_right"] = fields["right"]
+    arrays.update(extra_arrays)
     tpath = truth_path_for(out)
     with atomic_output(tpath) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)

@@ -1,6 +1,6 @@
 """Synthetic 360 deg scenes (camera motions through a static world) and their analytic angular speed.
 
-Three scenes (:data:`SCENES`), all described as a camera moving through a static world:
+Four scenes (:data:`SCENES`), all described as a camera moving through a static world:
 
 ``rotate``
     A textured panorama at infinity (an environment map) and a camera turning at a
@@ -15,6 +15,9 @@ Three scenes (:data:`SCENES`), all described as a camera moving through a static
     A figure-eight ride with hills through a textured box room: speed varies along the
     path (accelerations), the camera looks along its velocity (turns, pitch) and banks
     into the turns (roll).
+``trajectory``
+    Any camera path (a CSV of timed poses) through a textured box room:
+    :mod:`simulator.synth.trajectory` (it subclasses :class:`SynthScene`).
 
 Frames and conventions (:mod:`simulator.geometry`): world and camera frames are
 +x right, +y up, +z forward; the equirect frame of the video *is* the camera frame
@@ -91,7 +94,8 @@ class SynthConfig:
 
     Parameters
     ----------
-    scene : ``"rotate"``, ``"forward"`` or ``"coaster"``
+    scene : ``"rotate"``, ``"forward"``, ``"coaster"`` or ``"trajectory"`` (needs a camera
+        path: :func:`simulator.synth.trajectory.make_trajectory_scene`)
     seconds : float, clip length in seconds (> 0; at least 2, at most ``MAX_FRAMES``
         = 100,000 frames)
     fps : float, frames per second, in (0, ``MAX_FPS`` = 240]
@@ -288,14 +292,34 @@ class SynthScene:
             if cfg.scene == "forward":
                 length = cfg.speed * cfg.seconds
                 self.box = _Box((-3.0, -1.6, -20.0), (3.0, 2.4, length + 30.0))
-            else:
+            elif cfg.scene == "coaster":
                 self.box = _Box((-17.0, -4.5, -12.5), (17.0, 6.5, 12.5))
                 self._coaster_w = self._coaster_rate(cfg.speed)
-            for t in np.linspace(0, cfg.seconds, 64):
-                if not self.box.contains(self.position(float(t)), margin=0.2):
-                    raise InputError(
-                        f"{cfg.scene}: the camera leaves the room at t = {t:.2f} s; lower --speed or --seconds"
-                    )
+            else:
+                self.box = self._make_room()
+            self._check_inside_room()
+
+    # -- hooks for subclasses (simulator.synth.trajectory) -------------------------------
+    def _make_room(self) -> _Box:
+        """The room of a scene without a built-in one (subclasses override)."""
+        raise InputError(
+            f"the {self.cfg.scene} scene needs a camera path: vimsim synth --camera CAMERA.csv "
+            "(Python: simulator.synth.trajectory.make_trajectory_scene)"
+        )
+
+    def _check_inside_room(self) -> None:
+        """InputError if the camera comes within 0.2 m of a wall."""
+        cfg = self.cfg
+        for t in np.linspace(0, cfg.seconds, 64):
+            if not self.box.contains(self.position(float(t)), margin=0.2):
+                raise InputError(
+                    f"{cfg.scene}: the camera leaves the room at t = {t:.2f} s; lower --speed or --seconds"
+                )
+
+    def truth_extras(self, dirs_cam: NDArray, times_s: NDArray) -> tuple[dict[str, NDArray], dict]:
+        """Extra arrays and meta entries for the truth file (none for the built-in
+        scenes); ``dirs_cam`` are the truth cells' rays, ``times_s`` its row times."""
+        return {}, {}
 
     # -- trajectory ------------------------------------------------------------------
     @staticmethod
