@@ -22,10 +22,44 @@ from simulator.render.gl import create_context
 from simulator.render.video import render_video
 from simulator.video import probe
 
-__all__ = ["OUTDIR_FILES", "render_viewing"]
+__all__ = ["OUTDIR_FILES", "frame_range", "render_viewing"]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
+
+
+def frame_range(
+    n_frames: int,
+    fps: float,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    *,
+    video: str = "",
+) -> tuple[int, int]:
+    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
+
+    None = the video's start / end. InputError (naming ``video``) for a range outside the
+    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
+    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
+    """
+    dur = n_frames / fps
+    src = f"{video}: " if video else ""
+    s = 0.0 if start_s is None else float(start_s)
+    e = dur if end_s is None else float(end_s)
+    if not (np.isfinite(s) and np.isfinite(e)):
+        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if e <= s:
+        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
+    if s < 0 or s >= dur:
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
+    if e > dur + 1e-6:
+        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
+    eps = 1e-6
+    f0 = int(np.ceil(s * fps - eps))
+    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
+    if f1 <= f0:
+        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
+    return f0, f1
 
 
 def _clear_outputs(out) -> None:
@@ -55,6 +89,8 @@ def render_viewing(
     progress: Progress | None = None,
     note: str | None = None,
     ctx=None,
+    start_s: float | None = None,
+    end_s: float | None = None,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -78,6 +114,9 @@ def render_viewing(
     note : one line for the user, printed on stderr once the inputs are checked and kept
         in ``summary.json``
     ctx : moderngl.Context, or None to create one (:func:`create_context`)
+    start_s, end_s : render only video frames with ``start_s <= i / fps < end_s``
+        (seconds of video time; None = the video's start / end). Head path and grid stay
+        in video time; a grid made of part of the video is accepted if it covers the range.
 
     The inputs (video, head path, grid, options) and the GL context are checked before
     OUTDIR is touched (GL size limits only once rendering starts). Then the previous run's
@@ -113,15 +152,17 @@ def render_viewing(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    duration = (info.n_frames - 1) / info.fps  # time of the last frame
-    hp.check_covers(duration, hold=hold, video=str(video))
-    nf = info.n_frames
-    times = np.arange(nf) / info.fps
+    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
+    ranged = (f0, f1) != (0, info.n_frames)
+    nf = f1 - f0
+    frames = np.arange(f0, f1)
+    times = frames / info.fps
+    hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
 
     if grid is not None and not isinstance(grid, GridFile):
         grid = load_grid(grid)
     if grid is not None:
-        grid.check_video(info, source=grid.path)
+        grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if grf is not None and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
@@ -133,13 +174,11 @@ def render_viewing(
     thresholds = (float("nan"), float("nan"))
     op_auto = None
     if grid is not None:
-        res = compute_epof(grid, hp, hfov_deg=hfov, vfov_deg=vfov, hold=hold)
-        n = min(len(res.epof_dps), nf)
-        epof_dps[:n] = res.epof_dps[:n]
-        epof_dps[n:] = res.epof_dps[-1]
-        op_auto = np.empty(nf)
-        op_auto[:n] = res.opacity[:n]
-        op_auto[n:] = res.opacity[-1]
+        res = compute_epof(grid, hp, hfov_deg=hfov, vfov_deg=vfov, hold=True if ranged else hold)
+        # Grid rows by video frame number (a grid may start later or lack the last frame).
+        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+        epof_dps = res.epof_dps[rows].astype(float)
+        op_auto = res.opacity[rows].astype(float)
         thresholds = tuple(float(v) for v in res.thresholds_dps)
     if grf is None:
         op = np.zeros(nf)
@@ -168,12 +207,13 @@ def render_viewing(
         preset=preset,
         crf=crf,
         progress=progress,
+        start_frame=f0,
     )
 
     # epof.csv: one row per video frame.
     write_epof_csv(
         out / "epof.csv",
-        EpofResult(np.arange(nf), times, yaw, pitch, roll, epof_dps, op, thresholds),
+        EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
     )
 
     def pct(a):
@@ -188,7 +228,9 @@ def render_viewing(
         "grid": None if grid is None else (grid.path or None),
         "layout": layout,
         "fps": info.fps,
-        "frames_video": nf,
+        "frames_video": info.n_frames,
+        "range_s": [float(times[0]), float(times[-1])],
+        "frames_range": [int(f0), int(f1)],
         "frames_written": result.n_frames,
         "eye_size": [w, h],
         "hfov_deg": hfov,

@@ -124,6 +124,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="grain distance, metres, for stereo parallax (default: at infinity, identical for both eyes)",
     )
     p.add_argument(
+        "--start",
+        type=float,
+        default=None,
+        metavar="S",
+        help="render only from S seconds of video time (head path and grid stay in video time)",
+    )
+    p.add_argument(
+        "--end",
+        type=float,
+        default=None,
+        metavar="S",
+        help="render only frames before S seconds of video time (default: the video's end)",
+    )
+    p.add_argument(
         "--hold-last",
         action="store_true",
         help="hold the head path's first/last pose where it does not cover the video",
@@ -190,6 +204,8 @@ def run(args: argparse.Namespace) -> int:
             crf=args.crf,
             progress=bar,
             note=note,
+            start_s=args.start,
+            end_s=args.end,
         )
     w, h = s["eye_size"]
     print(

@@ -110,6 +110,7 @@ def render_video(
     preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
+    start_frame: int = 0,
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
 
@@ -125,6 +126,9 @@ def render_video(
     layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
         ``side-by-side`` (left eye left)
     fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
+    start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
+        (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
+        ``start_frame + j``. Frames before it are decoded (not converted) and skipped.
     preset, crf : x264 speed preset and quality
 
     A mono video with grains at infinity gives the same image to both eyes: it is
@@ -144,7 +148,12 @@ def render_video(
 
     info = probe(video_path)
     fps = float(fps or info.fps)
-    total = int(n_frames or info.n_frames)
+    start_frame = int(start_frame)
+    if not (0 <= start_frame < info.n_frames):
+        raise InputError(
+            f"{video_path}: start frame {start_frame} outside the video's {info.n_frames} frames"
+        )
+    total = int(n_frames or info.n_frames - start_frame)
     ang = np.asarray(angles_deg, float).reshape(-1, 3)
     if ang.shape[0] < 1:
         raise InputError(f"{video_path}: no head orientations to render")
@@ -175,7 +184,15 @@ def render_video(
                 frames = stack.enter_context(
                     contextlib.closing(
                         prefetch(
-                            (np.array(f) for f in iter_frames(video_path, layout="mono")),
+                            (
+                                np.array(f)
+                                for f in iter_frames(
+                                    video_path,
+                                    layout="mono",
+                                    start=start_frame,
+                                    end=start_frame + total,
+                                )
+                            ),
                             depth=3,
                         )
                     )
