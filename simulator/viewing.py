@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from pathlib import Path
@@ -9,10 +10,10 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.epof.viewing import EpofResult, compute_epof, write_epof_csv
+from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
-from simulator.grf import grain_count
+from simulator.grf import OpacityRule, grain_count
 from simulator.gridfile import GridFile, load_grid
 from simulator.headpath import HeadPath
 from simulator.progress import Progress
@@ -62,6 +63,29 @@ def frame_range(
     return f0, f1
 
 
+def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
+    has a row for each of them and no frame beyond the video)."""
+    fr = np.asarray(res.frame, np.int64)
+    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
+        raise InputError(
+            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
+            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
+        )
+    pos = {int(f): i for i, f in enumerate(fr)}
+    missing = [int(f) for f in frames if int(f) not in pos]
+    if missing:
+        raise InputError(
+            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
+            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
+            f"({len(missing)} missing, first {missing[0]})"
+        )
+    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
+    if np.any((op < 0) | (op > 1)):
+        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
+    return op
+
+
 def _clear_outputs(out) -> None:
     """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
     for name in OUTDIR_FILES:
@@ -81,7 +105,7 @@ def render_viewing(
     *,
     grid=None,
     config: RenderConfig = RenderConfig(),
-    opacity: float | Literal["auto"] = "auto",
+    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
     layout: str = "mono",
     hold: bool = False,
     preset: str = "veryfast",
@@ -91,6 +115,8 @@ def render_viewing(
     ctx=None,
     start_s: float | None = None,
     end_s: float | None = None,
+    rule: OpacityRule = OpacityRule(),
+    method: str = "auto",
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -106,8 +132,12 @@ def render_viewing(
     grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
     config : eye size, exact FOVs (degrees) and GRF (``config.grf=None``: no overlay)
-    opacity : ``"auto"`` (from the EPOF, needs ``grid``) or a constant in [0, 1]; ignored
-        without ``config.grf``
+    opacity : ``"auto"`` (from the EPOF, needs ``grid``), a constant in [0, 1], or the path
+        of an EPOF CSV (its ``opacity`` column; it must have a row for every rendered
+        frame, numbered as the video's frames); ignored without ``config.grf``
+    rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
+        the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
+    method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
@@ -133,11 +163,12 @@ def render_viewing(
     w, h = config.eye_size
     hfov, vfov = config.hfov_deg, config.vfov_deg
     grf = config.grf
-    if isinstance(opacity, str):
-        if opacity != "auto":
-            raise InputError(
-                f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}"
-            )
+    op_csv = None
+    if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
+        op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
+        opacity = str(opacity)
+    elif isinstance(opacity, str):
+        pass
     elif not (0.0 <= float(opacity) <= 1.0):
         raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
     if w % 2 or h % 2:
@@ -163,6 +194,8 @@ def render_viewing(
         grid = load_grid(grid)
     if grid is not None:
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
+    if op_csv is not None:
+        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
     if grf is not None and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
@@ -173,8 +206,18 @@ def render_viewing(
     epof_dps = np.full(nf, np.nan)
     thresholds = (float("nan"), float("nan"))
     op_auto = None
+    epof_method = None
     if grid is not None:
-        res = compute_epof(grid, hp, hfov_deg=hfov, vfov_deg=vfov, hold=True if ranged else hold)
+        res = compute_epof(
+            grid,
+            hp,
+            hfov_deg=hfov,
+            vfov_deg=vfov,
+            hold=True if ranged else hold,
+            rule=rule,
+            method=method,
+        )
+        epof_method = res.meta["method"]
         # Grid rows by video frame number (a grid may start later or lack the last frame).
         rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
         epof_dps = res.epof_dps[rows].astype(float)
@@ -182,6 +225,8 @@ def render_viewing(
         thresholds = tuple(float(v) for v in res.thresholds_dps)
     if grf is None:
         op = np.zeros(nf)
+    elif op_csv is not None:
+        op = op_from_csv
     elif opacity == "auto":
         op = op_auto
     else:
@@ -247,7 +292,9 @@ def render_viewing(
             "n_grains": grain_count(grf),
         },
         "opacity": "off" if grf is None else opacity,
+        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
         "opacity_thresholds_dps": list(thresholds),
+        "epof_method": epof_method,
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
         "x264": {"preset": preset, "crf": crf},

@@ -8,7 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import LAYOUTS, X264_PRESETS
+from simulator.choices import EPOF_METHODS, LAYOUTS, X264_PRESETS
+from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
 
 __all__ = ["register", "run"]
@@ -20,8 +21,10 @@ def _opacity(text: str) -> float | str:
     try:
         v = float(text)
     except ValueError:
+        if text.lower().endswith(".csv"):
+            return text  # an EPOF CSV: its opacity column
         raise argparse.ArgumentTypeError(
-            f"expected auto or a number in [0, 1], e.g. 0.5; got {text!r}"
+            f"expected auto, a number in [0, 1] (e.g. 0.5) or an EPOF CSV; got {text!r}"
         ) from None
     if not (0.0 <= v <= 1.0):
         raise argparse.ArgumentTypeError(
@@ -79,9 +82,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--opacity",
         type=_opacity,
         default="auto",
-        metavar="auto|0..1",
-        help="GRF opacity: auto = from the EPOF (needs --grid), or a constant in [0, 1]",
+        metavar="auto|0..1|EPOF.csv",
+        help="GRF opacity: auto = from the EPOF (needs --grid; rule: the options below), a "
+        "constant in [0, 1], or the opacity column of an EPOF CSV (vimsim epof) of VIDEO",
     )
+    p.add_argument(
+        "--method",
+        choices=EPOF_METHODS,
+        default="auto",
+        help="EPOF method, as vimsim epof (auto: sphere when the grid has a field)",
+    )
+    add_opacity_arguments(p)
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
@@ -170,6 +181,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings_to_stderr("vimsim render"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
+        rule = rule_from_args(args)
 
     # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
@@ -206,6 +218,8 @@ def run(args: argparse.Namespace) -> int:
             note=note,
             start_s=args.start,
             end_s=args.end,
+            rule=rule,
+            method=args.method,
         )
     w, h = s["eye_size"]
     print(
