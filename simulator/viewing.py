@@ -21,12 +21,15 @@ from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
+from simulator.review import ReviewWriter
 from simulator.video import probe
 
-__all__ = ["OUTDIR_FILES", "frame_range", "render_viewing"]
+__all__ = ["OUTDIR_FILES", "REVIEW_FILES", "frame_range", "render_viewing"]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
+#: Written besides with ``review=True`` (before ``summary.json``).
+REVIEW_FILES = ("review.mp4", "sheet.png")
 
 
 def frame_range(
@@ -88,7 +91,7 @@ def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
 
 def _clear_outputs(out) -> None:
     """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
-    for name in OUTDIR_FILES:
+    for name in OUTDIR_FILES + REVIEW_FILES:
         p = out / name
         try:
             p.unlink(missing_ok=True)
@@ -117,6 +120,7 @@ def render_viewing(
     end_s: float | None = None,
     rule: OpacityRule = OpacityRule(),
     method: str = "auto",
+    review: bool = False,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -138,6 +142,9 @@ def render_viewing(
     rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
         the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
     method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
+    review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
+        ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
+        opacity strip) and ``sheet.png`` (contact sheet)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
@@ -239,21 +246,45 @@ def render_viewing(
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
-    result = render_video(
-        ctx,
-        str(video),
-        (str(out / "left.mp4"), str(out / "right.mp4")),
-        np.stack([yaw, pitch, roll], axis=-1),
-        opacity=op,
-        config=config,
-        layout=layout,
-        fps=info.fps,
-        n_frames=nf,
-        preset=preset,
-        crf=crf,
-        progress=progress,
-        start_frame=f0,
-    )
+    rev = None
+    if review:
+        rev = ReviewWriter(
+            out / "review.mp4",
+            out / "sheet.png",
+            times_s=times,
+            yaw_deg=yaw,
+            pitch_deg=pitch,
+            roll_deg=roll,
+            epof_dps=epof_dps,
+            opacity=op,
+            hfov_deg=hfov,
+            vfov_deg=vfov,
+            fps=info.fps,
+            preset=preset,
+        )
+    try:
+        result = render_video(
+            ctx,
+            str(video),
+            (str(out / "left.mp4"), str(out / "right.mp4")),
+            np.stack([yaw, pitch, roll], axis=-1),
+            opacity=op,
+            config=config,
+            layout=layout,
+            fps=info.fps,
+            n_frames=nf,
+            preset=preset,
+            crf=crf,
+            progress=progress,
+            start_frame=f0,
+            on_frame=None if rev is None else rev.add_yuv,
+        )
+    except BaseException:
+        if rev is not None:
+            rev.close(ok=False)
+        raise
+    if rev is not None:
+        rev.close(ok=True)
 
     # epof.csv: one row per video frame.
     write_epof_csv(
@@ -302,6 +333,7 @@ def render_viewing(
         "frames_per_s": result.frames_per_s,
         "renderer": ctx.info.get("GL_RENDERER"),
         "outdir": str(out),
+        "review": list(REVIEW_FILES) if review else None,
     }
     if note:
         summary["note"] = note

@@ -163,6 +163,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help="x264 quality, lower = better (default 18)",
     )
+    p.add_argument(
+        "--review",
+        action="store_true",
+        help="also write OUTDIR/review.mp4 (equirect frame with the viewport's outline beside "
+        "the eye view, EPOF and opacity strip with a cursor) and OUTDIR/sheet.png (contact sheet)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_reader_options(p)
     p.set_defaults(func=run)
@@ -220,6 +226,7 @@ def run(args: argparse.Namespace) -> int:
             end_s=args.end,
             rule=rule,
             method=args.method,
+            review=args.review,
         )
     w, h = s["eye_size"]
     print(

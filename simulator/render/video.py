@@ -111,6 +111,7 @@ def render_video(
     crf: int = 18,
     progress: Progress | None = None,
     start_frame: int = 0,
+    on_frame=None,
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
 
@@ -129,6 +130,10 @@ def render_video(
     start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
         (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
         ``start_frame + j``. Frames before it are decoded (not converted) and skipped.
+    on_frame : None, or ``on_frame(equirect, eye_yuv420p)`` called for every rendered frame,
+        in order, on a worker thread (overlapping rendering): the decoded equirect frame
+        (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
+        its errors are raised here (e.g. :class:`simulator.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
 
     A mono video with grains at infinity gives the same image to both eyes: it is
@@ -179,6 +184,8 @@ def render_video(
                 _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
                 for i, wr in enumerate(writers)
             ]
+            if on_frame is not None:
+                workers.append(_Worker(lambda item: on_frame(*item), name="on-frame"))
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
                 frames = stack.enter_context(
@@ -226,6 +233,11 @@ def render_video(
                     t3 = time.perf_counter()
                     for wk, img in zip(workers, outs):
                         wk.put(img)
+                    if on_frame is not None:
+                        src = (
+                            split_eye(frame, layout, "left", source=video_path) if stereo else frame
+                        )
+                        workers[-1].put((src, outs[0]))
                     t0 = time.perf_counter()
                     timings["upload"] += t2 - t1
                     timings["render"] += t3 - t2
@@ -240,7 +252,9 @@ def render_video(
                         wk.join()
                     except BaseException as e:  # noqa: BLE001
                         errors.append(e)
-                timings["encode_busy"] = sum(wk.busy_s for wk in workers)
+                timings["encode_busy"] = sum(wk.busy_s for wk in workers[: len(writers)])
+                if on_frame is not None:
+                    timings["on_frame_busy"] = workers[-1].busy_s
             if errors:
                 raise errors[0]
             if n == 0:
