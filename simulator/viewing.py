@@ -121,6 +121,7 @@ def render_viewing(
     rule: OpacityRule = OpacityRule(),
     method: str = "auto",
     review: bool = False,
+    eyes: str | None = None,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -142,6 +143,9 @@ def render_viewing(
     rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
         the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
     method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
+    eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
+        ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
+        byte copy) and ``both`` for a stereo one
     review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
@@ -183,6 +187,10 @@ def render_viewing(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
 
+    if eyes is None:
+        eyes = "left" if layout == "mono" else "both"
+    if eyes not in ("left", "right", "both"):
+        raise InputError(f"eyes must be left, right or both; got {eyes!r}")
     info = probe(video)
     info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
     if not info.is_video:
@@ -266,7 +274,10 @@ def render_viewing(
         result = render_video(
             ctx,
             str(video),
-            (str(out / "left.mp4"), str(out / "right.mp4")),
+            (
+                str(out / "left.mp4") if eyes in ("left", "both") else None,
+                str(out / "right.mp4") if eyes in ("right", "both") else None,
+            ),
             np.stack([yaw, pitch, roll], axis=-1),
             opacity=op,
             config=config,
@@ -303,6 +314,7 @@ def render_viewing(
         "headpath": hp.source or str(headpath),
         "grid": None if grid is None else (grid.path or None),
         "layout": layout,
+        "eyes": eyes,
         "fps": info.fps,
         "frames_video": info.n_frames,
         "range_s": [float(times[0]), float(times[-1])],

@@ -164,6 +164,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="x264 quality, lower = better (default 18)",
     )
     p.add_argument(
+        "--eyes",
+        choices=("left", "right", "both"),
+        default=None,
+        help="eye files to write (default: left for a mono video, whose two eyes are the "
+        "same image; both for a stereo one)",
+    )
+    p.add_argument(
         "--review",
         action="store_true",
         help="also write OUTDIR/review.mp4 (equirect frame with the viewport's outline beside "
@@ -227,11 +234,14 @@ def run(args: argparse.Namespace) -> int:
             rule=rule,
             method=args.method,
             review=args.review,
+            eyes=args.eyes,
         )
     w, h = s["eye_size"]
+    files = {"left": ["left.mp4"], "right": ["right.mp4"], "both": ["left.mp4", "right.mp4"]}
+    names = files[s["eyes"]] + (s["review"] or [])
     print(
-        f"vimsim render: {s['frames_written']} frames x 2 eyes {w}x{h} -> {s['outdir']}/left.mp4, "
-        f"right.mp4 ({s['frames_per_s']:.2f} frames/s)",
+        f"vimsim render: {s['frames_written']} frames, eye {w}x{h} -> {s['outdir']}/"
+        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s)",
         file=sys.stderr,
     )
     return 0

@@ -99,7 +99,7 @@ class _Worker:
 def render_video(
     ctx,
     video_path: str,
-    out_paths: tuple[str, str],
+    out_paths: tuple[str | None, str | None],
     angles_deg: NDArray[np.float64],
     *,
     opacity: NDArray[np.float64] | None = None,
@@ -119,7 +119,8 @@ def render_video(
     ----------
     ctx : moderngl.Context from :func:`create_context`
     video_path : equirect video (or image: one frame)
-    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename)
+    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename);
+        None for an eye not wanted (at least one path)
     angles_deg : ndarray, shape (N, 3), float64
         (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
         beyond N hold the last pose
@@ -168,7 +169,11 @@ def render_video(
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
     same = not stereo and (config.grf is None or config.grf.distance_m is None)
-    eyes = ("left",) if same else ("left", "right")
+    wanted = [e for e, p in zip(("left", "right"), out_paths) if p]
+    if not wanted:
+        raise ValueError("render_video needs at least one output path")
+    paths = [p for p in out_paths if p]
+    eyes = (wanted[0],) if same else tuple(wanted)
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
@@ -178,7 +183,7 @@ def render_video(
         with contextlib.ExitStack() as stack:
             writers = [
                 stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
-                for p in out_paths[: len(eyes)]
+                for p in paths[: len(eyes)]
             ]
             workers = [
                 _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
@@ -235,7 +240,9 @@ def render_video(
                         wk.put(img)
                     if on_frame is not None:
                         src = (
-                            split_eye(frame, layout, "left", source=video_path) if stereo else frame
+                            split_eye(frame, layout, eyes[0], source=video_path)
+                            if stereo
+                            else frame
                         )
                         workers[-1].put((src, outs[0]))
                     t0 = time.perf_counter()
@@ -259,11 +266,11 @@ def render_video(
                 raise errors[0]
             if n == 0:
                 raise InputError(f"{video_path}: no frames decoded")
-        if same:
+        if same and len(paths) == 2:
             import shutil
 
-            with atomic_output(out_paths[1]) as tmp:
-                shutil.copyfile(out_paths[0], tmp)
+            with atomic_output(paths[1]) as tmp:
+                shutil.copyfile(paths[0], tmp)
     finally:
         renderer.release()
     timings["total"] = time.perf_counter() - t_start
