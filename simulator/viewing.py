@@ -223,6 +223,13 @@ def render_viewing(
     op_auto = None
     epof_method = None
     if grid is not None:
+        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
+        # and easing have their state at the range's start (cost ~ the range).
+        warm = 0
+        if ranged:
+            warm = int(
+                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
+            )
         res = compute_epof(
             grid,
             hp,
@@ -231,6 +238,7 @@ def render_viewing(
             hold=True if ranged else hold,
             rule=rule,
             method=method,
+            frames=(max(0, f0 - warm), f1) if ranged else None,
         )
         epof_method = res.meta["method"]
         # Grid rows by video frame number (a grid may start later or lack the last frame).

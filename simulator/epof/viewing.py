@@ -84,6 +84,7 @@ def compute_epof(
     rule: OpacityRule = OpacityRule(),
     hold: bool = False,
     method: str = "auto",
+    frames: tuple[int, int] | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -98,7 +99,13 @@ def compute_epof(
     viewport (:func:`simulator.sphere.viewport_epof`; any FOV, roll included; InputError
     naming the command that makes a field if the grid has none); ``"auto"`` (default) =
     sphere when the grid has a field and ``top_k`` is not given, else paper.
+
+    ``frames = (f0, f1)``: only the grid rows of video frames ``f0 <= i < f1`` (a rendered
+    time range; the cost is proportional to it). The head path must cover those times;
+    opacity percentiles of source ``grid`` still come from the whole grid, those of
+    source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
     """
+    frames_sel = frames
     if method not in ("auto", "paper", "sphere"):
         raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
     sphere = method == "sphere" or (
@@ -110,6 +117,14 @@ def compute_epof(
             "field over the viewport: drop --top-k or use --method paper"
         )
     frames, t = _frames(grid)
+    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
+    if frames_sel is not None:
+        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
+        if not keep.any():
+            raise InputError(
+                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
+            )
+        frames, t, rows = frames[keep], t[keep], rows[keep]
     hp.check_covers(
         float(t[-1]),
         hold=hold,
@@ -119,10 +134,11 @@ def compute_epof(
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
     if sphere:
         field, cells = require_field(grid)
+        if frames_sel is not None:
+            field = field[rows]
         h, v = _fov(grid, hfov_deg, vfov_deg)
         e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, hfov_deg=h, vfov_deg=v)
     else:
-        rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
