@@ -192,27 +192,43 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
 
 
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
-    """Plot EPOF (deg/s) and GRF opacity over time into a PNG (atomic)."""
+    """Plot a viewing into a PNG (atomic), three panels sharing the time axis: EPOF
+    (deg/s) with the opacity thresholds labelled at the right edge, clear of the data;
+    GRF opacity; head yaw and pitch (degrees). The figure widens with the duration so
+    that 40 s and longer stay readable."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=110)
-    ax.plot(result.time_s, result.epof_dps, color="tab:blue", lw=1.2, label="EPOF")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("EPOF (deg/s)", color="tab:blue")
+    t = np.asarray(result.time_s, float)
+    dur = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    width = float(np.clip(6 + dur / 6, 9, 24))
+    fig, (ax, ax_op, ax_hd) = plt.subplots(
+        3, 1, figsize=(width, 6.4), dpi=110, sharex=True, height_ratios=(2.2, 1.2, 1.6)
+    )
+    ax.plot(t, result.epof_dps, color="tab:blue", lw=1.0)
+    ax.set_ylabel("EPOF (deg/s)")
     lo, hi = result.thresholds_dps
-    for v, name in ((lo, "lo"), (hi, "hi")):
+    for v, name in ((lo, "opacity 0"), (hi, "opacity 1")):
         if math.isfinite(v):
-            ax.axhline(v, color="tab:blue", ls=":", lw=0.8)
-            ax.annotate(f"{name} {v:.3g}", (result.time_s[0], v), fontsize=7, color="tab:blue")
-    ax2 = ax.twinx()
-    ax2.plot(result.time_s, result.opacity, color="tab:red", lw=1.0, label="opacity")
-    ax2.set_ylim(-0.02, 1.02)
-    ax2.set_ylabel("GRF opacity", color="tab:red")
+            ax.axhline(v, color="0.35", ls=":", lw=0.9)
+            ax.annotate(f"{name}: {v:.3g}", xy=(1.0, v), xycoords=("axes fraction", "data"),
+                        xytext=(4, 0), textcoords="offset points", va="center", fontsize=8,
+                        color="0.25", annotation_clip=False)  # fmt: skip
     ax.set_title(title or "EPOF and GRF opacity")
+    ax_op.plot(t, result.opacity, color="tab:red", lw=1.0)
+    ax_op.set_ylim(-0.03, 1.03)
+    ax_op.set_ylabel("GRF opacity")
+    ax_hd.plot(t, result.yaw_deg, color="tab:green", lw=1.0, label="yaw")
+    ax_hd.plot(t, result.pitch_deg, color="tab:purple", lw=1.0, label="pitch")
+    ax_hd.set_ylabel("head (deg)")
+    ax_hd.legend(loc="upper left", fontsize=8, ncol=2, frameon=False)
+    ax_hd.set_xlabel("time (s)")
+    for a_ in (ax, ax_op, ax_hd):
+        a_.grid(alpha=0.25)
     fig.tight_layout()
+    fig.subplots_adjust(right=0.9)
     with atomic_output(path) as tmp:
         fig.savefig(tmp)
     plt.close(fig)
