@@ -71,12 +71,12 @@ def frustum_outline_xy(
     return parts
 
 
-def _fit(img: NDArray[np.uint8], w: int, h: int) -> NDArray[np.uint8]:
+def _fit(img: NDArray[np.uint8], w: int, h: int, area: bool = False) -> NDArray[np.uint8]:
     import cv2
 
     if img.shape[1] == w and img.shape[0] == h:
         return img
-    return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA)
+    return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA if area else cv2.INTER_LINEAR)
 
 
 class ReviewWriter:
@@ -88,6 +88,8 @@ class ReviewWriter:
     height : height of the equirect panel (its width is twice that; the eye panel is
         square of the same height; both rounded to even numbers)
     n_sheet : eye views on the contact sheet (evenly spaced times)
+    preset, crf : x264 settings of the review video (ultrafast: it must cost little
+        beside the eye videos)
     """
 
     def __init__(
@@ -106,7 +108,7 @@ class ReviewWriter:
         fps: float,
         height: int = 360,
         n_sheet: int = 12,
-        preset: str = "veryfast",
+        preset: str = "ultrafast",
         crf: int = 23,
     ):
         self.t = np.asarray(times_s, float)
@@ -181,7 +183,7 @@ class ReviewWriter:
         frame = np.concatenate([np.concatenate([pano, eye], axis=1), strip], axis=0)
         self._writer.write(frame)
         if j in self.sheet_at and self.sheet_at[j] is None:
-            self.sheet_at[j] = _fit(eye_rgb, 240, 240).copy()
+            self.sheet_at[j] = _fit(eye_rgb, 240, 240, area=True).copy()
         self.n += 1
 
     def add_yuv(self, equirect: NDArray[np.uint8], eye_yuv420p: NDArray[np.uint8]) -> None:

@@ -276,7 +276,6 @@ def render_viewing(
             hfov_deg=hfov,
             vfov_deg=vfov,
             fps=info.fps,
-            preset=preset,
         )
     try:
         result = render_video(
