@@ -133,3 +133,30 @@ def test_render_bad_range_one_line_exit_2(ctx, tmp_path, capsys, rng):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and ("--start" in err or "--end" in err), err
     assert not out.exists() or not list(out.iterdir())
+
+
+def test_render_layout_from_grid_meta(ctx, tmp_path, capsys):
+    """No --layout: a stereo grid's layout (its meta) is used; both eye files by default."""
+    from simulator.cli import main
+    from simulator.gridfile import save_grid
+    from simulator.video import VideoWriter
+    from simulator.windows import WindowGrid
+
+    vid = tmp_path / "tb.mp4"
+    with VideoWriter(vid, 10, (128, 128), preset="ultrafast") as w:
+        for _ in range(4):
+            w.write(np.full((128, 128, 3), 90, np.uint8))
+    g = WindowGrid()
+    z = np.ones((4, len(g.pitch_deg), len(g.yaw_deg)), np.float32)
+    meta = {"fps": 10.0, "n_frames": 4, "flow": {"method": "none"}, "layout": "top-bottom",
+            "eye": "left", "video": {"path": "tb.mp4", "width": 128, "height": 128, "sar": 1.0}}  # fmt: skip
+    save_grid(tmp_path / "g.npz", z, z, g, meta)
+    _path_csv(tmp_path / "p.csv", 0.3)
+    out = tmp_path / "o"
+    argv = ["render", str(vid), str(tmp_path / "p.csv"), "-o", str(out), "--eye-size", "32x32",
+            "--no-progress", "--grid", str(tmp_path / "g.npz")]  # fmt: skip
+    assert main(argv) == 0
+    assert "from the grid's meta" in capsys.readouterr().err
+    s = json.loads((out / "summary.json").read_text())
+    assert s["layout"] == "top-bottom" and s["eyes"] == "both"
+    assert (out / "left.mp4").exists() and (out / "right.mp4").exists()

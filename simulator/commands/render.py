@@ -96,8 +96,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout of VIDEO: top-bottom = left eye on top, side-by-side = left eye on the left (default mono: both eyes see the same frame)",
+        default=None,
+        help="stereo layout of VIDEO: top-bottom = left eye on top, side-by-side = left eye on "
+        "the left, mono: both eyes see the same frame (default: the grid's layout, from its "
+        "meta, else mono)",
     )
     p.add_argument(
         "--seed",
@@ -195,12 +197,16 @@ def run(args: argparse.Namespace) -> int:
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
         rule = rule_from_args(args)
+    meta_layout = grid.meta.get("layout") if grid is not None else None
+    layout = args.layout or (meta_layout if meta_layout in LAYOUTS else None) or "mono"
 
     # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
     note = None
     if args.grf is None and not grf_on:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
+    if args.layout is None and layout != "mono":
+        note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
     grf = None
     if grf_on:
         grf = GrfConfig(
@@ -223,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
             grid=grid,
             config=config,
             opacity=args.opacity,
-            layout=args.layout,
+            layout=layout,
             hold=args.hold_last,
             preset=args.preset,
             crf=args.crf,
