@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
 from simulator.geometry import head_rotation, split_eye
+from simulator.grf import OpacityRule
 from simulator.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
@@ -216,6 +217,8 @@ def render_frames(
     opacity: float | Literal["auto"] = "auto",
     layout: str = "mono",
     hold: bool = False,
+    rule: OpacityRule = OpacityRule(),
+    method: str = "auto",
     ctx=None,
     progress: Progress | None = None,
 ) -> dict:
@@ -223,7 +226,7 @@ def render_frames(
 
     Parameters
     ----------
-    video, headpath, grid, config, opacity, layout, hold : as
+    video, headpath, grid, config, opacity, layout, hold, rule, method : as
         :func:`simulator.viewing.render_viewing` (``vimsim render``)
     at : times in seconds (list, or ``"1,2.5"``); or ``every``: a step in seconds
     ctx : moderngl.Context, or None to create one
@@ -241,7 +244,15 @@ def render_frames(
     versions. Nothing time-varying, so that two runs give the same file.
     """
     plan = plan_viewing(
-        video, headpath, grid=grid, config=config, opacity=opacity, layout=layout, hold=hold
+        video,
+        headpath,
+        grid=grid,
+        config=config,
+        opacity=opacity,
+        layout=layout,
+        hold=hold,
+        rule=rule,
+        method=method,
     )
     info = plan.info
     times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
@@ -344,6 +355,8 @@ def render_frames(
             "grf": grf_settings(config.grf),
             "opacity": "off" if config.grf is None else opacity,
             "opacity_thresholds_dps": list(plan.thresholds_dps),
+            "opacity_rule": rule.describe() if plan.grid is not None else None,
+            "epof_method": plan.epof_method,
         },
         "versions": _versions(ctx),
         "frames": rows,

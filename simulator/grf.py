@@ -34,7 +34,23 @@ from simulator.choices import OPACITY_SOURCES
 from simulator.errors import InputError
 from simulator.gridfile import GridFile
 
-__all__ = ["GrainBuckets", "GrainField", "GrfConfig", "cutout_alpha", "grain_count"]
+__all__ = [
+    "COMFORT_EASE_IN_S",
+    "COMFORT_EASE_OUT_S",
+    "GrainBuckets",
+    "GrainField",
+    "GrfConfig",
+    "OpacityRule",
+    "comfort_rule",
+    "cutout_alpha",
+    "grain_count",
+]
+
+#: Ease-in / ease-out times (seconds for a full 0 -> 1 / 1 -> 0 change) of the comfort
+#: opacity rule, the CLI's default (:func:`comfort_rule`); measured in docs/epof.md
+#: (bench/opacity_flicker.py): grains come in fast and leave slowly.
+COMFORT_EASE_IN_S = 0.4
+COMFORT_EASE_OUT_S = 1.5
 
 
 @dataclass(frozen=True)
@@ -250,12 +266,20 @@ class OpacityRule:
     every frame of the grid file (the paper's "whole video"), ``"viewing"`` = this
     viewing's EPOF. ``smoothing_s`` > 0 applies a causal exponential smoothing with that
     time constant (seconds) to the opacity; 0 (default) = none.
+
+    ``ease_in_s`` / ``ease_out_s`` > 0 then limit how fast the opacity may rise / fall:
+    a full change 0 -> 1 takes at least ``ease_in_s`` seconds, 1 -> 0 at least
+    ``ease_out_s`` (a slew-rate limit, as the ease-in / ease-out times of Unity XR
+    Interaction Toolkit's tunneling vignette); 0 = no limit. All zero (the default) is
+    the paper's rule, unsmoothed; :func:`comfort_rule` is the CLI's default.
     """
 
     low_pct: float = 10.0
     high_pct: float = 90.0
     source: str = "grid"
     smoothing_s: float = 0.0
+    ease_in_s: float = 0.0
+    ease_out_s: float = 0.0
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
@@ -266,6 +290,26 @@ class OpacityRule:
             raise InputError(f"opacity source must be grid or viewing; got {self.source!r}")
         if not (self.smoothing_s >= 0.0 and math.isfinite(self.smoothing_s)):
             raise InputError(f"opacity smoothing must be >= 0 seconds; got {self.smoothing_s}")
+        for name, v in (("ease-in", self.ease_in_s), ("ease-out", self.ease_out_s)):
+            if not (v >= 0.0 and math.isfinite(v)):
+                raise InputError(f"opacity {name} time must be >= 0 seconds; got {v}")
+
+    @property
+    def is_paper(self) -> bool:
+        """True for the paper's rule: no smoothing, no easing."""
+        return self.smoothing_s == 0 and self.ease_in_s == 0 and self.ease_out_s == 0
+
+    def describe(self) -> dict:
+        """The rule's settings, for summary.json and CSV headers."""
+        return {
+            "low_pct": self.low_pct,
+            "high_pct": self.high_pct,
+            "source": self.source,
+            "smoothing_s": self.smoothing_s,
+            "ease_in_s": self.ease_in_s,
+            "ease_out_s": self.ease_out_s,
+            "rule": "paper" if self.is_paper else "eased",
+        }
 
     def fit(self, grid: GridFile | None, epof_dps) -> tuple[float, float]:
         """``(lo, hi)`` thresholds in deg/s from the grid's flow or this viewing's EPOF."""
@@ -284,7 +328,7 @@ class OpacityRule:
     def __call__(self, epof_dps, thresholds_dps: tuple[float, float], *, fps: float | None = None):
         """Opacity in [0, 1] of each EPOF value (deg/s), shape of ``epof_dps``.
 
-        ``fps`` (frames per second of the samples) is needed only when smoothing.
+        ``fps`` (frames per second of the samples) is needed only when smoothing or easing.
         """
         lo, hi = thresholds_dps
         e = np.asarray(epof_dps, np.float64)
@@ -302,4 +346,33 @@ class OpacityRule:
                 acc = acc + a * (x - acc)
                 sm.flat[i] = acc
             op = sm
+        if (self.ease_in_s > 0 or self.ease_out_s > 0) and op.size > 1:
+            if not fps:
+                raise InputError("opacity easing needs the frame rate")
+            op = ease(op, fps, self.ease_in_s, self.ease_out_s)
         return op
+
+
+def ease(op, fps: float, ease_in_s: float, ease_out_s: float) -> NDArray[np.float64]:
+    """Slew-rate limit of a per-frame opacity series (causal): per frame it rises by at
+    most ``1 / (fps * ease_in_s)`` and falls by at most ``1 / (fps * ease_out_s)``
+    (0 = unlimited). Starts at the first value; shape kept."""
+    x = np.asarray(op, np.float64)
+    flat = x.ravel()
+    up = math.inf if ease_in_s <= 0 else 1.0 / (fps * ease_in_s)
+    down = math.inf if ease_out_s <= 0 else 1.0 / (fps * ease_out_s)
+    out = np.empty_like(flat)
+    acc = float(flat[0]) if flat.size else 0.0
+    for i, v in enumerate(flat.tolist()):
+        d = v - acc
+        acc = acc + (min(d, up) if d > 0 else max(d, -down))
+        out[i] = acc
+    return out.reshape(x.shape)
+
+
+def comfort_rule(**overrides) -> OpacityRule:
+    """The CLI's default opacity rule: the paper's percentiles with ease-in
+    :data:`COMFORT_EASE_IN_S` and ease-out :data:`COMFORT_EASE_OUT_S` (no smoothing);
+    ``overrides`` replace fields. ``OpacityRule()`` is the paper's unsmoothed rule."""
+    kw = {"ease_in_s": COMFORT_EASE_IN_S, "ease_out_s": COMFORT_EASE_OUT_S, **overrides}
+    return OpacityRule(**kw)

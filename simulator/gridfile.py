@@ -82,10 +82,16 @@ class GridFile:
         """Presentation time of each frame, seconds from the video start (``t / fps``)."""
         return np.arange(self.n_frames) / self.fps
 
-    def check_video(self, info, *, source: str | None = None) -> None:
+    def check_video(
+        self, info, *, source: str | None = None, frames: tuple[int, int] | None = None
+    ) -> None:
         """Raise InputError unless this grid was made from the video described by ``info``
         (a :class:`simulator.video.MediaInfo`): same stored size and frame rate, and a
-        frame count within one frame (container headers and decoders may differ by one)."""
+        frame count within one frame (container headers and decoders may differ by one).
+
+        ``frames = (f0, f1)``: only video frames ``f0 <= i < f1`` are needed (a rendered
+        time range), so a grid made with ``preprocess --start/--end`` covering them is
+        accepted; default: the grid must cover the whole video."""
         v = self.meta["video"]
         src = source or self.path
         if (int(v["width"]), int(v["height"])) != (info.width, info.height):
@@ -109,6 +115,15 @@ class GridFile:
                 f"run vimsim preprocess on it"
             )
         start, end = int(self.meta.get("start_frame", 0)), int(self.meta.get("end_frame", n_video))
+        if frames is not None:
+            f0, f1 = int(frames[0]), int(frames[1])
+            # The last row of a grid may be missing (flow needs a next frame): one frame of slack.
+            if start > f0 or start + self.n_frames < min(f1, n_video) - 1:
+                raise InputError(
+                    f"{src}: grid covers frames {start}..{start + self.n_frames} of {info.path}; "
+                    f"the range needs frames {f0}..{f1}: preprocess that range (or the whole video)"
+                )
+            return
         if start != 0 or self.n_frames < n_video - 1:
             raise InputError(
                 f"{src}: grid covers frames {start}..{end} of {info.path} only (made with --start/--end); "

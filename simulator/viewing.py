@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from dataclasses import dataclass
@@ -10,10 +11,10 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.epof.viewing import EpofResult, compute_epof, write_epof_csv
+from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
-from simulator.grf import grain_count
+from simulator.grf import OpacityRule, grain_count
 from simulator.gridfile import GridFile, load_grid
 from simulator.headpath import HeadPath
 from simulator.progress import Progress
@@ -21,17 +22,85 @@ from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
+from simulator.review import ReviewWriter
 from simulator.video import MediaInfo, probe
 
-__all__ = ["OUTDIR_FILES", "ViewingPlan", "grf_settings", "plan_viewing", "render_viewing"]
+__all__ = [
+    "OUTDIR_FILES",
+    "REVIEW_FILES",
+    "ViewingPlan",
+    "frame_range",
+    "grf_settings",
+    "plan_viewing",
+    "render_viewing",
+]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
+#: Written besides with ``review=True`` (before ``summary.json``).
+REVIEW_FILES = ("review.mp4", "sheet.png")
+
+
+def frame_range(
+    n_frames: int,
+    fps: float,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    *,
+    video: str = "",
+) -> tuple[int, int]:
+    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
+
+    None = the video's start / end. InputError (naming ``video``) for a range outside the
+    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
+    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
+    """
+    dur = n_frames / fps
+    src = f"{video}: " if video else ""
+    s = 0.0 if start_s is None else float(start_s)
+    e = dur if end_s is None else float(end_s)
+    if not (np.isfinite(s) and np.isfinite(e)):
+        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if e <= s:
+        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
+    if s < 0 or s >= dur:
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
+    if e > dur + 1e-6:
+        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
+    eps = 1e-6
+    f0 = int(np.ceil(s * fps - eps))
+    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
+    if f1 <= f0:
+        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
+    return f0, f1
+
+
+def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
+    has a row for each of them and no frame beyond the video)."""
+    fr = np.asarray(res.frame, np.int64)
+    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
+        raise InputError(
+            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
+            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
+        )
+    pos = {int(f): i for i, f in enumerate(fr)}
+    missing = [int(f) for f in frames if int(f) not in pos]
+    if missing:
+        raise InputError(
+            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
+            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
+            f"({len(missing)} missing, first {missing[0]})"
+        )
+    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
+    if np.any((op < 0) | (op > 1)):
+        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
+    return op
 
 
 def _clear_outputs(out) -> None:
     """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
-    for name in OUTDIR_FILES:
+    for name in OUTDIR_FILES + REVIEW_FILES:
         p = out / name
         try:
             p.unlink(missing_ok=True)
@@ -47,21 +116,32 @@ class ViewingPlan:
 
     info : the video's :class:`simulator.video.MediaInfo`
     headpath : the head path; grid : the grid file or None
-    times_s : ndarray, shape (N,), time of video frame ``i`` = ``i / fps`` (seconds)
-    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of frame ``i``, degrees
+    frames : ndarray, shape (N,), the video frame numbers of the plan (``f0 .. f1 - 1``)
+    times_s : ndarray, shape (N,), time of each frame ``i / fps`` (seconds)
+    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of each frame, degrees
     epof_dps : ndarray, shape (N,), EPOF (deg/s; NaN without a grid)
-    opacity : ndarray, shape (N,), the GRF opacity rendered at frame ``i`` (0 without GRF)
+    opacity : ndarray, shape (N,), the GRF opacity rendered at each frame (0 without GRF)
     thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
+    epof_method : ``paper`` or ``sphere`` (None without a grid)
+    opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
     """
 
     info: MediaInfo
     headpath: HeadPath
     grid: GridFile | None
+    frames: np.ndarray
     times_s: np.ndarray
     angles_deg: np.ndarray
     epof_dps: np.ndarray
     opacity: np.ndarray
     thresholds_dps: tuple[float, float]
+    epof_method: str | None = None
+    opacity_label: object = "auto"
+
+    @property
+    def ranged(self) -> bool:
+        """True when the plan covers only part of the video."""
+        return (int(self.frames[0]), int(self.frames[-1]) + 1) != (0, self.info.n_frames)
 
 
 def grf_settings(grf) -> dict | None:
@@ -85,23 +165,30 @@ def plan_viewing(
     *,
     grid=None,
     config: RenderConfig = RenderConfig(),
-    opacity: float | Literal["auto"] = "auto",
+    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
     layout: str = "mono",
     hold: bool = False,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    rule: OpacityRule = OpacityRule(),
+    method: str = "auto",
 ) -> ViewingPlan:
     """Check a viewing's inputs and work out what every frame shows (no GL, no output).
 
     What :func:`render_viewing` renders and ``vimsim frames`` renders at chosen moments:
     the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
-    (``"auto"``: from the EPOF of ``grid``; else the constant). Raises InputError for a
-    bad video, head path, grid or opacity.
+    (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
+    EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
+    it to a time range (:func:`frame_range`). Raises InputError for a bad video, head
+    path, grid, range or opacity.
     """
     grf = config.grf
-    if isinstance(opacity, str):
-        if opacity != "auto":
-            raise InputError(
-                f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}"
-            )
+    op_csv = None
+    if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
+        op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
+        opacity = str(opacity)
+    elif isinstance(opacity, str):
+        pass
     elif not (0.0 <= float(opacity) <= 1.0):
         raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
 
@@ -112,15 +199,19 @@ def plan_viewing(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    duration = (info.n_frames - 1) / info.fps  # time of the last frame
-    hp.check_covers(duration, hold=hold, video=str(video))
-    nf = info.n_frames
-    times = np.arange(nf) / info.fps
+    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
+    ranged = (f0, f1) != (0, info.n_frames)
+    nf = f1 - f0
+    frames = np.arange(f0, f1)
+    times = frames / info.fps
+    hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
 
     if grid is not None and not isinstance(grid, GridFile):
         grid = load_grid(grid)
     if grid is not None:
-        grid.check_video(info, source=grid.path)
+        grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
+    if op_csv is not None:
+        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
     if grf is not None and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
@@ -131,23 +222,42 @@ def plan_viewing(
     epof_dps = np.full(nf, np.nan)
     thresholds = (float("nan"), float("nan"))
     op_auto = None
+    epof_method = None
     if grid is not None:
-        res = compute_epof(grid, hp, frustum=config.frustum, hold=hold)
-        n = min(len(res.epof_dps), nf)
-        epof_dps[:n] = res.epof_dps[:n]
-        epof_dps[n:] = res.epof_dps[-1]
-        op_auto = np.empty(nf)
-        op_auto[:n] = res.opacity[:n]
-        op_auto[n:] = res.opacity[-1]
+        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
+        # and easing have their state at the range's start (cost ~ the range).
+        warm = 0
+        if ranged:
+            warm = int(
+                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
+            )
+        res = compute_epof(
+            grid,
+            hp,
+            frustum=config.frustum,
+            hold=True if ranged else hold,
+            rule=rule,
+            method=method,
+            frames=(max(0, f0 - warm), f1) if ranged else None,
+        )
+        epof_method = res.meta["method"]
+        # Grid rows by video frame number (a grid may start later or lack the last frame).
+        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+        epof_dps = res.epof_dps[rows].astype(float)
+        op_auto = res.opacity[rows].astype(float)
         thresholds = tuple(float(v) for v in res.thresholds_dps)
     if grf is None:
         op = np.zeros(nf)
+    elif op_csv is not None:
+        op = op_from_csv
     elif opacity == "auto":
         op = op_auto
     else:
         op = np.full(nf, float(opacity))
     angles = np.stack([yaw, pitch, roll], axis=-1)
-    return ViewingPlan(info, hp, grid, times, angles, epof_dps, op, thresholds)
+    return ViewingPlan(
+        info, hp, grid, frames, times, angles, epof_dps, op, thresholds, epof_method, opacity
+    )
 
 
 def render_viewing(
@@ -157,7 +267,7 @@ def render_viewing(
     *,
     grid=None,
     config: RenderConfig = RenderConfig(),
-    opacity: float | Literal["auto"] = "auto",
+    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
     layout: str = "mono",
     hold: bool = False,
     preset: str = "veryfast",
@@ -165,6 +275,12 @@ def render_viewing(
     progress: Progress | None = None,
     note: str | None = None,
     ctx=None,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    rule: OpacityRule = OpacityRule(),
+    method: str = "auto",
+    review: bool = False,
+    eyes: str | None = None,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -180,14 +296,27 @@ def render_viewing(
     grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
     config : eye size, exact FOVs (degrees) and GRF (``config.grf=None``: no overlay)
-    opacity : ``"auto"`` (from the EPOF, needs ``grid``) or a constant in [0, 1]; ignored
-        without ``config.grf``
+    opacity : ``"auto"`` (from the EPOF, needs ``grid``), a constant in [0, 1], or the path
+        of an EPOF CSV (its ``opacity`` column; it must have a row for every rendered
+        frame, numbered as the video's frames); ignored without ``config.grf``
+    rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
+        the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
+    method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
+    eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
+        ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
+        byte copy) and ``both`` for a stereo one
+    review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
+        ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
+        opacity strip) and ``sheet.png`` (contact sheet)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
     note : one line for the user, printed on stderr once the inputs are checked and kept
         in ``summary.json``
     ctx : moderngl.Context, or None to create one (:func:`create_context`)
+    start_s, end_s : render only video frames with ``start_s <= i / fps < end_s``
+        (seconds of video time; None = the video's start / end). Head path and grid stay
+        in video time; a grid made of part of the video is accepted if it covers the range.
 
     The inputs (video, head path, grid, options) and the GL context are checked before
     OUTDIR is touched (GL size limits only once rendering starts). Then the previous run's
@@ -208,14 +337,30 @@ def render_viewing(
         raise InputError(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
+    if eyes is None:
+        eyes = "left" if layout == "mono" else "both"
+    if eyes not in ("left", "right", "both"):
+        raise InputError(f"eyes must be left, right or both; got {eyes!r}")
     plan = plan_viewing(
-        video, headpath, grid=grid, config=config, opacity=opacity, layout=layout, hold=hold
+        video,
+        headpath,
+        grid=grid,
+        config=config,
+        opacity=opacity,
+        layout=layout,
+        hold=hold,
+        start_s=start_s,
+        end_s=end_s,
+        rule=rule,
+        method=method,
     )
-    info, hp, grid = plan.info, plan.headpath, plan.grid
-    nf = info.n_frames
-    times = plan.times_s
+    info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label
+    frames, times = plan.frames, plan.times_s
+    f0, f1 = int(frames[0]), int(frames[-1]) + 1
+    nf = f1 - f0
     yaw, pitch, roll = plan.angles_deg.T
     epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
+    epof_method = plan.epof_method
 
     if ctx is None:
         ctx = create_context()
@@ -224,25 +369,52 @@ def render_viewing(
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
-    result = render_video(
-        ctx,
-        str(video),
-        (str(out / "left.mp4"), str(out / "right.mp4")),
-        np.stack([yaw, pitch, roll], axis=-1),
-        opacity=op,
-        config=config,
-        layout=layout,
-        fps=info.fps,
-        n_frames=nf,
-        preset=preset,
-        crf=crf,
-        progress=progress,
-    )
+    rev = None
+    if review:
+        rev = ReviewWriter(
+            out / "review.mp4",
+            out / "sheet.png",
+            times_s=times,
+            yaw_deg=yaw,
+            pitch_deg=pitch,
+            roll_deg=roll,
+            epof_dps=epof_dps,
+            opacity=op,
+            hfov_deg=hfov,
+            vfov_deg=vfov,
+            fps=info.fps,
+        )
+    try:
+        result = render_video(
+            ctx,
+            str(video),
+            (
+                str(out / "left.mp4") if eyes in ("left", "both") else None,
+                str(out / "right.mp4") if eyes in ("right", "both") else None,
+            ),
+            np.stack([yaw, pitch, roll], axis=-1),
+            opacity=op,
+            config=config,
+            layout=layout,
+            fps=info.fps,
+            n_frames=nf,
+            preset=preset,
+            crf=crf,
+            progress=progress,
+            start_frame=f0,
+            on_frame=None if rev is None else rev.add_yuv,
+        )
+    except BaseException:
+        if rev is not None:
+            rev.close(ok=False)
+        raise
+    if rev is not None:
+        rev.close(ok=True)
 
     # epof.csv: one row per video frame.
     write_epof_csv(
         out / "epof.csv",
-        EpofResult(np.arange(nf), times, yaw, pitch, roll, epof_dps, op, thresholds),
+        EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
     )
 
     def pct(a):
@@ -256,8 +428,11 @@ def render_viewing(
         "headpath": hp.source or str(headpath),
         "grid": None if grid is None else (grid.path or None),
         "layout": layout,
+        "eyes": eyes,
         "fps": info.fps,
-        "frames_video": nf,
+        "frames_video": info.n_frames,
+        "range_s": [float(times[0]), float(times[-1])],
+        "frames_range": [int(f0), int(f1)],
         "frames_written": result.n_frames,
         "eye_size": [w, h],
         "hfov_deg": hfov,
@@ -271,7 +446,9 @@ def render_viewing(
         },
         "grf": grf_settings(grf),
         "opacity": "off" if grf is None else opacity,
+        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
         "opacity_thresholds_dps": list(thresholds),
+        "epof_method": epof_method,
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
         "x264": {"preset": preset, "crf": crf},
@@ -279,6 +456,7 @@ def render_viewing(
         "frames_per_s": result.frames_per_s,
         "renderer": ctx.info.get("GL_RENDERER"),
         "outdir": str(out),
+        "review": list(REVIEW_FILES) if review else None,
     }
     if note:
         summary["note"] = note

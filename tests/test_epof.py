@@ -232,7 +232,8 @@ def test_cli_epof_writes_csv_and_plot(tmp_path, capsys):
         "--opacity-source",
         "viewing",
     ]
-    assert main(args + ["--low-pct", "0", "--high-pct", "100"]) == 0
+    # the paper's rule: opacity is the clamp itself (the default comfort rule eases it)
+    assert main(args + ["--low-pct", "0", "--high-pct", "100", "--opacity-rule", "paper"]) == 0
     r2 = read_epof_csv(out2)
     assert r2.opacity.min() == pytest.approx(0.0) and r2.opacity.max() == pytest.approx(1.0)
 

@@ -410,6 +410,8 @@ def test_cli_render_mono_default_grf_off(ctx, tmp_path, capsys):
             "--eye-size",
             "32x32",
             "--no-progress",
+            "--eyes",
+            "both",
         ]
     )
     assert rc == 0
@@ -644,7 +646,9 @@ def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
     monkeypatch.setattr(os, "replace", rec)
     cfg = R.RenderConfig(eye_size=(32, 32), grf=GrfConfig(seed=1))
     s = render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
-    assert sorted(renamed) == sorted(OUTDIR_FILES) and renamed[-1] == "summary.json"
+    # a mono video: one eye file by default (right.mp4 would be the same image)
+    assert sorted(renamed) == sorted(set(OUTDIR_FILES) - {"right.mp4"})
+    assert renamed[-1] == "summary.json"
     from simulator.fileio import json_text
 
     assert json.loads((tmp_path / "o" / "summary.json").read_text()) == json.loads(json_text(s))
@@ -681,7 +685,7 @@ def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_a
     if fail_at == "render":
         assert left == ["notes.txt"]
     else:  # the new MP4s are complete, but without summary.json the run is not
-        assert left == ["left.mp4", "notes.txt", "right.mp4"]
+        assert left == ["left.mp4", "notes.txt"]  # mono: one eye file by default
 
 
 def test_mono_right_copy_is_atomic(ctx, tmp_path, monkeypatch):

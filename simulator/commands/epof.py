@@ -3,15 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
-from simulator.choices import EPOF_METHODS, OPACITY_SOURCES
-from simulator.commands._types import (
-    add_fov_arguments,
-    frustum_from_args,
-    percentile,
-    positive_int,
-    seconds,
-)
+from simulator.choices import EPOF_METHODS
+from simulator.commands._opacity import add_opacity_arguments, rule_from_args
+from simulator.commands._types import add_fov_arguments, frustum_from_args, positive_int
 
 __all__ = ["register", "run"]
 
@@ -58,33 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="hold the first/last pose where the head path does not cover the video",
     )
-    p.add_argument(
-        "--low-pct",
-        type=percentile,
-        default=10.0,
-        metavar="P",
-        help="opacity 0 at this percentile (10)",
-    )
-    p.add_argument(
-        "--high-pct",
-        type=percentile,
-        default=90.0,
-        metavar="P",
-        help="opacity 1 at this percentile (90)",
-    )
-    p.add_argument(
-        "--opacity-source",
-        choices=OPACITY_SOURCES,
-        default="grid",
-        help="percentiles of every window of every frame (grid, the paper) or of this viewing's EPOF",
-    )
-    p.add_argument(
-        "--smooth",
-        type=seconds,
-        default=0.0,
-        metavar="S",
-        help="causal exponential smoothing of the opacity, time constant S seconds (default 0 = off)",
-    )
+    add_opacity_arguments(p)
     add_reader_options(p)
     p.set_defaults(func=run)
 
@@ -112,15 +82,14 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import warnings_to_stderr
     from simulator.commands.headpath import load_headpath_args
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
-    from simulator.grf import OpacityRule
     from simulator.gridfile import load_grid
 
     for out in (args.output, args.plot):
         if out:
             _check_output_file(out)
     frustum = frustum_from_args(args, (None, None))  # None: the grid's window FOV
-    rule = OpacityRule(args.low_pct, args.high_pct, args.opacity_source, args.smooth)
     with warnings_to_stderr("vimsim epof"):
+        rule = rule_from_args(args)
         grid = load_grid(args.grid)
     hp = load_headpath_args(args, args.headpath, "vimsim epof")
     res = compute_epof(
@@ -132,13 +101,20 @@ def run(args: argparse.Namespace) -> int:
         hold=args.hold_last,
         method=args.method,
     )
+    if args.method == "auto" and args.top_k is not None and grid.field_dps is not None:
+        print(
+            f"vimsim epof: note: --top-k uses paper-mode EPOF (window overlaps), not the grid's "
+            f"sphere field; method {res.meta['method']} recorded in {args.output}",
+            file=sys.stderr,
+        )
     write_epof_csv(args.output, res)  # the CSV first: a plot is never left without it
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
     lo, hi = res.thresholds_dps
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "
-        f"opacity 0 at {lo:.3g}, 1 at {hi:.3g} deg/s"
+        f"opacity 0 at {lo:.3g}, 1 at {hi:.3g} deg/s ({res.meta['method']} EPOF, "
+        f"{'paper' if rule.is_paper else 'eased'} opacity rule)"
     )
     return 0
 

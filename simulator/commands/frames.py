@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands.render import view_from_args
     from simulator.frames import render_frames
 
-    hp, grid, config, note = view_from_args(args, "frames")
+    hp, grid, config, note, layout, rule = view_from_args(args, "frames")
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,
@@ -63,8 +63,10 @@ def run(args: argparse.Namespace) -> int:
             grid=grid,
             config=config,
             opacity=args.opacity,
-            layout=args.layout,
+            layout=layout,
             hold=args.hold_last,
+            rule=rule,
+            method=args.method,
             progress=bar,
         )
     if note:

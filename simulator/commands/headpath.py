@@ -167,6 +167,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     c.add_argument("input", metavar="IN")
     c.add_argument("-o", "--output", required=True, metavar="PATH.csv")
+    c.add_argument(
+        "--columns",
+        metavar="MAP",
+        help="read any delimited log through a column map: time=COL,yaw=COL,pitch=COL[,roll=COL]; "
+        "a leading - flips a sign (pitch=-deg_pitch); e.g. a Unity log: "
+        "time=t,yaw=rot_y,pitch=-rot_x,roll=-rot_z",
+    )
+    c.add_argument(
+        "--angles", choices=("deg", "rad"), default="deg", help="--columns: angle unit (deg)"
+    )
+    c.add_argument(
+        "--time-scale",
+        type=positive_float,
+        default=1.0,
+        metavar="F",
+        help="--columns: seconds per time unit (0.001 for milliseconds; default 1)",
+    )
+    c.add_argument(
+        "--time-from-first",
+        action="store_true",
+        help="--columns: count time from the first row (for clock timestamps)",
+    )
     add_reader_options(c)
     c.set_defaults(func=run, headpath_command="convert")
 
@@ -227,7 +249,18 @@ def run(args: argparse.Namespace) -> int:
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
-        hp = load_headpath(args.input, args.format, video=args.video, user=args.user)
+        if args.headpath_command == "convert" and args.columns:
+            from simulator.readers import load_columns
+
+            hp = load_columns(
+                args.input,
+                args.columns,
+                angles=args.angles,
+                time_scale=args.time_scale,
+                time_from_first=args.time_from_first,
+            )
+        else:
+            hp = load_headpath(args.input, args.format, video=args.video, user=args.user)
         if args.headpath_command == "convert":
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.start_s:.3f}..{hp.end_s:.3f} s")

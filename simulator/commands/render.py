@@ -8,7 +8,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import LAYOUTS, X264_PRESETS
+from simulator.choices import EPOF_METHODS, LAYOUTS, X264_PRESETS
+from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, frustum_from_args, nonneg_int, size_wxh
 
 __all__ = ["add_view_options", "register", "run", "view_from_args"]
@@ -20,8 +21,10 @@ def _opacity(text: str) -> float | str:
     try:
         v = float(text)
     except ValueError:
+        if text.lower().endswith(".csv"):
+            return text  # an EPOF CSV: its opacity column
         raise argparse.ArgumentTypeError(
-            f"expected auto or a number in [0, 1], e.g. 0.5; got {text!r}"
+            f"expected auto, a number in [0, 1] (e.g. 0.5) or an EPOF CSV; got {text!r}"
         ) from None
     if not (0.0 <= v <= 1.0):
         raise argparse.ArgumentTypeError(
@@ -55,14 +58,24 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
         "--opacity",
         type=_opacity,
         default="auto",
-        metavar="auto|0..1",
-        help="GRF opacity: auto = from the EPOF (needs --grid), or a constant in [0, 1]",
+        metavar="auto|0..1|EPOF.csv",
+        help="GRF opacity: auto = from the EPOF (needs --grid; rule: the options below), a "
+        "constant in [0, 1], or the opacity column of an EPOF CSV (vimsim epof) of VIDEO",
     )
+    p.add_argument(
+        "--method",
+        choices=EPOF_METHODS,
+        default="auto",
+        help="EPOF method, as vimsim epof (auto: sphere when the grid has a field)",
+    )
+    add_opacity_arguments(p)
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout of VIDEO: top-bottom = left eye on top, side-by-side = left eye on the left (default mono: both eyes see the same frame)",
+        default=None,
+        help="stereo layout of VIDEO: top-bottom = left eye on top, side-by-side = left eye on "
+        "the left, mono: both eyes see the same frame (default: the grid's layout, from its "
+        "meta, else mono)",
     )
     p.add_argument(
         "--seed",
@@ -107,7 +120,9 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
 
 
 def view_from_args(args: argparse.Namespace, command: str = "render"):
-    """``(headpath, grid, config, note)`` from :func:`add_view_options`' options."""
+    """``(headpath, grid, config, note, layout, rule)`` from :func:`add_view_options`'
+    options: the one frustum, the GRF, the stereo layout (the grid's when not given) and
+    the opacity rule."""
     from simulator.commands._progress import warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
@@ -118,12 +133,17 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     with warnings_to_stderr(f"vimsim {command}"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
+        rule = rule_from_args(args)
+    meta_layout = grid.meta.get("layout") if grid is not None else None
+    layout = args.layout or (meta_layout if meta_layout in LAYOUTS else None) or "mono"
 
     # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
     note = None
     if args.grf is None and not grf_on:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
+    if args.layout is None and layout != "mono":
+        note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
     grf = None
     if grf_on:
         grf = GrfConfig(
@@ -135,7 +155,7 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
             distance_m=args.grain_distance,
         )
     config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf)
-    return hp, grid, config, note
+    return hp, grid, config, note, layout, rule
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -167,6 +187,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_view_options(p)
     p.add_argument(
+        "--start",
+        type=float,
+        default=None,
+        metavar="S",
+        help="render only from S seconds of video time (head path and grid stay in video time)",
+    )
+    p.add_argument(
+        "--end",
+        type=float,
+        default=None,
+        metavar="S",
+        help="render only frames before S seconds of video time (default: the video's end)",
+    )
+    p.add_argument(
         "--preset", choices=X264_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
     )
     p.add_argument(
@@ -175,6 +209,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default=18,
         metavar="N",
         help="x264 quality, lower = better (default 18)",
+    )
+    p.add_argument(
+        "--eyes",
+        choices=("left", "right", "both"),
+        default=None,
+        help="eye files to write (default: left for a mono video, whose two eyes are the "
+        "same image; both for a stereo one)",
+    )
+    p.add_argument(
+        "--review",
+        action="store_true",
+        help="also write OUTDIR/review.mp4 (equirect frame with the viewport's outline beside "
+        "the eye view, EPOF and opacity strip with a cursor) and OUTDIR/sheet.png (contact sheet)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_reader_options(p)
@@ -186,7 +233,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.viewing import render_viewing
 
-    hp, grid, config, note = view_from_args(args)
+    hp, grid, config, note, layout, rule = view_from_args(args)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
@@ -198,17 +245,25 @@ def run(args: argparse.Namespace) -> int:
             grid=grid,
             config=config,
             opacity=args.opacity,
-            layout=args.layout,
+            layout=layout,
             hold=args.hold_last,
             preset=args.preset,
             crf=args.crf,
             progress=bar,
             note=note,
+            start_s=args.start,
+            end_s=args.end,
+            rule=rule,
+            method=args.method,
+            review=args.review,
+            eyes=args.eyes,
         )
     w, h = s["eye_size"]
+    files = {"left": ["left.mp4"], "right": ["right.mp4"], "both": ["left.mp4", "right.mp4"]}
+    names = files[s["eyes"]] + (s["review"] or [])
     print(
-        f"vimsim render: {s['frames_written']} frames x 2 eyes {w}x{h} -> {s['outdir']}/left.mp4, "
-        f"right.mp4 ({s['frames_per_s']:.2f} frames/s)",
+        f"vimsim render: {s['frames_written']} frames, eye {w}x{h} -> {s['outdir']}/"
+        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s)",
         file=sys.stderr,
     )
     return 0

@@ -86,6 +86,7 @@ def compute_epof(
     hold: bool = False,
     method: str = "auto",
     frustum: Frustum | None = None,
+    frames: tuple[int, int] | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -106,11 +107,17 @@ def compute_epof(
     integrates over exactly that frustum; paper mode's overlap table is tabulated for
     centred views and uses the frustum's total FOVs (``hfov_deg``, ``vfov_deg``).
     Default: the symmetric view of ``hfov_deg x vfov_deg`` (default the grid's FOV).
+
+    ``frames = (f0, f1)``: only the grid rows of video frames ``f0 <= i < f1`` (a rendered
+    time range; the cost is proportional to it). The head path must cover those times;
+    opacity percentiles of source ``grid`` still come from the whole grid, those of
+    source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
             raise InputError(f"EPOF frustum must be a Frustum; got {type(frustum).__name__}")
         hfov_deg, vfov_deg = frustum.hfov_deg, frustum.vfov_deg
+    frames_sel = frames
     if method not in ("auto", "paper", "sphere"):
         raise InputError(f"unknown EPOF method {method!r}; expected auto, paper or sphere")
     sphere = method == "sphere" or (
@@ -122,6 +129,14 @@ def compute_epof(
             "field over the viewport: drop --top-k or use --method paper"
         )
     frames, t = _frames(grid)
+    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
+    if frames_sel is not None:
+        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
+        if not keep.any():
+            raise InputError(
+                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
+            )
+        frames, t, rows = frames[keep], t[keep], rows[keep]
     hp.check_covers(
         float(t[-1]),
         hold=hold,
@@ -131,11 +146,12 @@ def compute_epof(
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
     if sphere:
         field, cells = require_field(grid)
+        if frames_sel is not None:
+            field = field[rows]
         h, v = _fov(grid, hfov_deg, vfov_deg)
         fr = frustum or Frustum.symmetric(h, v)
         e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)
     else:
-        rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
@@ -192,27 +208,43 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
 
 
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
-    """Plot EPOF (deg/s) and GRF opacity over time into a PNG (atomic)."""
+    """Plot a viewing into a PNG (atomic), three panels sharing the time axis: EPOF
+    (deg/s) with the opacity thresholds labelled at the right edge, clear of the data;
+    GRF opacity; head yaw and pitch (degrees). The figure widens with the duration so
+    that 40 s and longer stay readable."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(9, 3.6), dpi=110)
-    ax.plot(result.time_s, result.epof_dps, color="tab:blue", lw=1.2, label="EPOF")
-    ax.set_xlabel("time (s)")
-    ax.set_ylabel("EPOF (deg/s)", color="tab:blue")
+    t = np.asarray(result.time_s, float)
+    dur = float(t[-1] - t[0]) if t.size > 1 else 1.0
+    width = float(np.clip(6 + dur / 6, 9, 24))
+    fig, (ax, ax_op, ax_hd) = plt.subplots(
+        3, 1, figsize=(width, 6.4), dpi=110, sharex=True, height_ratios=(2.2, 1.2, 1.6)
+    )
+    ax.plot(t, result.epof_dps, color="tab:blue", lw=1.0)
+    ax.set_ylabel("EPOF (deg/s)")
     lo, hi = result.thresholds_dps
-    for v, name in ((lo, "lo"), (hi, "hi")):
+    for v, name in ((lo, "opacity 0"), (hi, "opacity 1")):
         if math.isfinite(v):
-            ax.axhline(v, color="tab:blue", ls=":", lw=0.8)
-            ax.annotate(f"{name} {v:.3g}", (result.time_s[0], v), fontsize=7, color="tab:blue")
-    ax2 = ax.twinx()
-    ax2.plot(result.time_s, result.opacity, color="tab:red", lw=1.0, label="opacity")
-    ax2.set_ylim(-0.02, 1.02)
-    ax2.set_ylabel("GRF opacity", color="tab:red")
+            ax.axhline(v, color="0.35", ls=":", lw=0.9)
+            ax.annotate(f"{name}: {v:.3g}", xy=(1.0, v), xycoords=("axes fraction", "data"),
+                        xytext=(4, 0), textcoords="offset points", va="center", fontsize=8,
+                        color="0.25", annotation_clip=False)  # fmt: skip
     ax.set_title(title or "EPOF and GRF opacity")
+    ax_op.plot(t, result.opacity, color="tab:red", lw=1.0)
+    ax_op.set_ylim(-0.03, 1.03)
+    ax_op.set_ylabel("GRF opacity")
+    ax_hd.plot(t, result.yaw_deg, color="tab:green", lw=1.0, label="yaw")
+    ax_hd.plot(t, result.pitch_deg, color="tab:purple", lw=1.0, label="pitch")
+    ax_hd.set_ylabel("head (deg)")
+    ax_hd.legend(loc="upper left", fontsize=8, ncol=2, frameon=False)
+    ax_hd.set_xlabel("time (s)")
+    for a_ in (ax, ax_op, ax_hd):
+        a_.grid(alpha=0.25)
     fig.tight_layout()
+    fig.subplots_adjust(right=0.9)
     with atomic_output(path) as tmp:
         fig.savefig(tmp)
     plt.close(fig)

@@ -16,12 +16,20 @@ from simulator.fileio import check_input_file
 from simulator.headpath import CANONICAL_COLUMNS, HeadPath
 from simulator.readers.avtrack360 import _read_avtrack360
 from simulator.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat
+from simulator.readers.columns import load_columns, parse_column_map
 from simulator.readers.common import _first_line, _warn_if_coarse
 from simulator.readers.corbillon import _read_corbillon, _read_corbillon_euler
 from simulator.readers.salient360 import _read_salient360_dyn, _read_salient360_static
 from simulator.readers.vidstr360 import _read_360vidstr
 
-__all__ = ["FORMATS", "detect_format", "load_headpath", "load_keyframes"]
+__all__ = [
+    "FORMATS",
+    "detect_format",
+    "load_columns",
+    "load_headpath",
+    "load_keyframes",
+    "parse_column_map",
+]
 
 
 def detect_format(path: str | os.PathLike) -> str:

@@ -101,7 +101,7 @@ class _Worker:
 def render_video(
     ctx,
     video_path: str,
-    out_paths: tuple[str, str],
+    out_paths: tuple[str | None, str | None],
     angles_deg: NDArray[np.float64],
     *,
     opacity: NDArray[np.float64] | None = None,
@@ -112,6 +112,8 @@ def render_video(
     preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
+    start_frame: int = 0,
+    on_frame=None,
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
 
@@ -119,7 +121,8 @@ def render_video(
     ----------
     ctx : moderngl.Context from :func:`create_context`
     video_path : equirect video (or image: one frame)
-    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename)
+    out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename);
+        None for an eye not wanted (at least one path)
     angles_deg : ndarray, shape (N, 3), float64
         (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
         beyond N hold the last pose
@@ -127,6 +130,13 @@ def render_video(
     layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
         ``side-by-side`` (left eye left)
     fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
+    start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
+        (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
+        ``start_frame + j``. Frames before it are decoded (not converted) and skipped.
+    on_frame : None, or ``on_frame(equirect, eye_yuv420p)`` called for every rendered frame,
+        in order, on a worker thread (overlapping rendering): the decoded equirect frame
+        (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
+        its errors are raised here (e.g. :class:`simulator.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
 
     A mono video with grains at infinity gives the same image to both eyes: it is
@@ -142,7 +152,12 @@ def render_video(
     """
     info = probe(video_path)
     fps = float(fps or info.fps)
-    total = int(n_frames or info.n_frames)
+    start_frame = int(start_frame)
+    if not (0 <= start_frame < info.n_frames):
+        raise InputError(
+            f"{video_path}: start frame {start_frame} outside the video's {info.n_frames} frames"
+        )
+    total = int(n_frames or info.n_frames - start_frame)
     ang = np.asarray(angles_deg, float).reshape(-1, 3)
     if ang.shape[0] < 1:
         raise InputError(f"{video_path}: no head orientations to render")
@@ -152,7 +167,11 @@ def render_video(
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
     same = not stereo and (config.grf is None or config.grf.distance_m is None)
-    eyes = ("left",) if same else ("left", "right")
+    wanted = [e for e, p in zip(("left", "right"), out_paths) if p]
+    if not wanted:
+        raise ValueError("render_video needs at least one output path")
+    paths = [p for p in out_paths if p]
+    eyes = (wanted[0],) if same else tuple(wanted)
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
@@ -162,18 +181,28 @@ def render_video(
         with contextlib.ExitStack() as stack:
             writers = [
                 stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
-                for p in out_paths[: len(eyes)]
+                for p in paths[: len(eyes)]
             ]
             workers = [
                 _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
                 for i, wr in enumerate(writers)
             ]
+            if on_frame is not None:
+                workers.append(_Worker(lambda item: on_frame(*item), name="on-frame"))
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
                 frames = stack.enter_context(
                     contextlib.closing(
                         prefetch(
-                            (np.array(f) for f in iter_frames(video_path, layout="mono")),
+                            (
+                                np.array(f)
+                                for f in iter_frames(
+                                    video_path,
+                                    layout="mono",
+                                    start=start_frame,
+                                    end=start_frame + total,
+                                )
+                            ),
                             depth=3,
                         )
                     )
@@ -207,6 +236,13 @@ def render_video(
                     t3 = time.perf_counter()
                     for wk, img in zip(workers, outs):
                         wk.put(img)
+                    if on_frame is not None:
+                        src = (
+                            split_eye(frame, layout, eyes[0], source=video_path)
+                            if stereo
+                            else frame
+                        )
+                        workers[-1].put((src, outs[0]))
                     t0 = time.perf_counter()
                     timings["upload"] += t2 - t1
                     timings["render"] += t3 - t2
@@ -221,14 +257,16 @@ def render_video(
                         wk.join()
                     except BaseException as e:  # noqa: BLE001
                         errors.append(e)
-                timings["encode_busy"] = sum(wk.busy_s for wk in workers)
+                timings["encode_busy"] = sum(wk.busy_s for wk in workers[: len(writers)])
+                if on_frame is not None:
+                    timings["on_frame_busy"] = workers[-1].busy_s
             if errors:
                 raise errors[0]
             if n == 0:
                 raise InputError(f"{video_path}: no frames decoded")
-        if same:
-            with atomic_output(out_paths[1]) as tmp:
-                shutil.copyfile(out_paths[0], tmp)
+        if same and len(paths) == 2:
+            with atomic_output(paths[1]) as tmp:
+                shutil.copyfile(paths[0], tmp)
     finally:
         renderer.release()
     timings["total"] = time.perf_counter() - t_start

@@ -1,0 +1,93 @@
+"""The GRF opacity options shared by ``vimsim epof`` and ``vimsim render`` (argparse only)."""
+
+from __future__ import annotations
+
+import argparse
+
+from simulator.choices import OPACITY_SOURCES
+from simulator.commands._types import percentile, seconds
+
+__all__ = ["add_opacity_arguments", "rule_from_args"]
+
+
+def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
+    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule``."""
+    g = p.add_argument_group("GRF opacity rule (EPOF -> opacity)")
+    g.add_argument(
+        "--low-pct",
+        type=percentile,
+        default=10.0,
+        metavar="P",
+        help="opacity 0 at this percentile (10)",
+    )
+    g.add_argument(
+        "--high-pct",
+        type=percentile,
+        default=90.0,
+        metavar="P",
+        help="opacity 1 at this percentile (90)",
+    )
+    g.add_argument(
+        "--opacity-source",
+        choices=OPACITY_SOURCES,
+        default="grid",
+        help="percentiles of every window of every frame (grid, the paper) or of this viewing's EPOF",
+    )
+    g.add_argument(
+        "--opacity-rule",
+        choices=("comfort", "paper"),
+        default="comfort",
+        help="comfort (default): eased, see --ease-in/--ease-out; paper: the paper's rule, "
+        "opacity follows the EPOF frame by frame (no smoothing, no easing)",
+    )
+    g.add_argument(
+        "--smooth",
+        type=seconds,
+        default=None,
+        metavar="S",
+        help="causal exponential smoothing of the opacity, time constant S seconds (default 0 = off)",
+    )
+    g.add_argument(
+        "--ease-in",
+        type=seconds,
+        default=None,
+        metavar="S",
+        help="grains come in: a full 0 -> 1 opacity change takes at least S seconds "
+        "(default 0.4 with the comfort rule; 0 = no limit)",
+    )
+    g.add_argument(
+        "--ease-out",
+        type=seconds,
+        default=None,
+        metavar="S",
+        help="grains leave: a full 1 -> 0 change takes at least S seconds "
+        "(default 1.5 with the comfort rule; 0 = no limit)",
+    )
+
+
+def rule_from_args(args: argparse.Namespace):
+    """The :class:`simulator.grf.OpacityRule` the options ask for (InputError if
+    ``--opacity-rule paper`` is combined with smoothing or easing)."""
+    from simulator.errors import InputError
+    from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
+
+    given = [
+        f"--{n.replace('_', '-')}"
+        for n in ("smooth", "ease_in", "ease_out")
+        if getattr(args, n) is not None
+    ]
+    if args.opacity_rule == "paper":
+        if given:
+            raise InputError(
+                f"--opacity-rule paper is the unsmoothed rule; drop {', '.join(given)} "
+                "or use --opacity-rule comfort"
+            )
+        return OpacityRule(args.low_pct, args.high_pct, args.opacity_source)
+    return OpacityRule(
+        args.low_pct,
+        args.high_pct,
+        args.opacity_source,
+        args.smooth or 0.0,
+        COMFORT_EASE_IN_S if args.ease_in is None else args.ease_in,
+        COMFORT_EASE_OUT_S if args.ease_out is None else args.ease_out,
+    )
