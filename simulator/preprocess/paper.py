@@ -7,6 +7,8 @@ scalars:
 
 ``pof_px``  (window pixels / frame)
     The paper's measure: the mean flow magnitude ``|f(p)|`` over the window's pixels.
+    Both sums read the flow on every second pixel when the backend computes it at 1/4
+    resolution (DIS ultrafast and fast, :func:`reduce_stride`), on every pixel otherwise.
 ``pof_dps`` (deg/s of visual angle)
     ``sum_p Omega(p) * angle(ray(p), ray(p + f(p))) * fps / sum_p Omega(p)``: the
     solid-angle-weighted (``Omega``) mean angle between the ray of a pixel centre and the
