@@ -17,10 +17,12 @@ from numpy.typing import NDArray
 
 from simulator.errors import InputError
 from simulator.geometry import (
+    _PAD,
     _check_size,
     check_fov,
-    equirect_remap_coords,
+    dir_to_lonlat,
     head_rotation,
+    lonlat_to_equirect_xy,
     pad_equirect,
     perspective_rays,
 )
@@ -180,21 +182,38 @@ class WindowExtractor:
 
 @functools.lru_cache(maxsize=4)
 def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
+    """Fixed-point remap maps of all windows, tiled ``(P*h, Y*w)``.
+
+    Windows have no roll, so a window at yaw ``psi`` samples the equirect exactly where the
+    window at yaw 0 and the same pitch does, shifted by ``psi`` in longitude: the
+    trigonometry runs once per pitch row (P windows, float64), every yaw column is then a
+    shift of the column coordinate, wrapped (float64 for the wrap, float32 maps), instead
+    of one rotation and ``atan2``/``asin`` per pixel of every window.
+    """
     W, H = equirect_size
     dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
-    pitch, yaw = grid.centres_deg()
-    R = head_rotation(yaw.ravel(), pitch.ravel(), 0.0).as_matrix()  # (N, 3, 3)
-    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
-    mx, my = equirect_remap_coords(world, W, H)
     (P, Y), (w, h) = grid.shape, grid.size
-    # Tile the windows as a (P*h, Y*w) image: row block = pitch, column block = yaw.
-    mx = mx.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
-    my = my.reshape(P, Y, h, w).transpose(0, 2, 1, 3).reshape(P * h, Y * w)
-    if max(mx.shape) >= 32767:
+    if max(P * h, Y * w) >= 32767:
         raise InputError(
             f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows"
         )
-    m1, m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
+    R = head_rotation(np.zeros(P), grid.pitch_deg, 0.0).as_matrix()  # (P, 3, 3)
+    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (P, h, w, 3)
+    lon, lat = dir_to_lonlat(world)
+    x0, y0 = lonlat_to_equirect_xy(lon, lat, W, H)
+    x0 -= 0.5  # array-index convention (unpadded), as equirect_remap_coords
+    my0 = (y0 - 0.5 + _PAD).astype(np.float32)
+    shift = np.asarray(grid.yaw_deg, np.float64) / 360.0 * W  # px per yaw column
+    mx = np.empty((P, h, Y, w), np.float32)
+    for k, s in enumerate(shift):
+        # Same wrap as lon in (-pi, pi]: continuous x in (0, W], index x - 0.5 in (-0.5, W - 0.5].
+        x = x0 + s
+        x -= W * np.floor((x + 0.5) / W)
+        x[x <= -0.5] += W
+        mx[:, :, k, :] = x + _PAD
+    my = np.broadcast_to(my0[:, :, None, :], (P, h, Y, w))
+    my = np.ascontiguousarray(my).reshape(P * h, Y * w)
+    m1, m2 = cv2.convertMaps(mx.reshape(P * h, Y * w), my, cv2.CV_16SC2)
     m1.setflags(write=False)
     m2.setflags(write=False)
     return m1, m2

@@ -158,6 +158,7 @@ def test_meta_complete(tmp_path, videos):
     assert (m["video"]["width"], m["video"]["height"], m["video"]["sar"]) == (1024, 512, 1.0)
     assert m["video"]["content_hash"].startswith("sha256:")
     assert (m["start_frame"], m["end_frame"]) == (0, 4)
+    assert m["reduce_stride"] == 2  # DIS fast: flow read where it is computed
     assert list(g.yaw_deg) == list(SMALL.yaw_deg) and list(g.pitch_deg) == list(SMALL.pitch_deg)
 
 
@@ -511,3 +512,29 @@ def test_torch_model_checked_at_the_window_size(tmp_path, capsys, videos):
     assert len(err.splitlines()) == 1, err
     assert "32x32 px windows" in err and "at least 128 px" in err
     assert not bad.exists()
+
+
+def test_reducer_stride_reads_upsampled_flow_unchanged():
+    """DIS ultrafast/fast compute flow at 1/4 resolution and upsample it bilinearly: the
+    stride-2 reduction of such a field agrees with the full one (analytic rotation flow,
+    coarse field upsampled as DIS does)."""
+    import cv2
+
+    from simulator.flow import DISFlow, FarnebackFlow
+    from simulator.preprocess import reduce_stride
+
+    w = h = 64
+    rng = np.random.default_rng(3)
+    coarse = rng.normal(0, 2.0, (h // 4, w // 4, 2)).astype(np.float32) + np.float32([3, -1])
+    flow = cv2.resize(coarse, (w, h), interpolation=cv2.INTER_LINEAR)[None]
+    full = WindowFlowReducer((w, h), 107.0, 107.0)(flow, FPS)
+    half = WindowFlowReducer((w, h), 107.0, 107.0, stride=2)(flow, FPS)
+    assert np.allclose(half[0], full[0], rtol=5e-3) and np.allclose(half[1], full[1], rtol=5e-3)
+    # ... and a field with pixel-scale detail is not: the stride is only for such backends.
+    fine = np.zeros((1, h, w, 2), np.float32)
+    fine[0, 1::2, 1::2, 0] = 5.0  # detail at the pixel scale, on the sampled pixels only
+    a = WindowFlowReducer((w, h), 107.0, 107.0)(fine, FPS)[0]
+    b = WindowFlowReducer((w, h), 107.0, 107.0, stride=2)(fine, FPS)[0]
+    assert not np.allclose(a, b, rtol=5e-3)
+    assert reduce_stride(DISFlow("ultrafast")) == reduce_stride(DISFlow("fast")) == 2
+    assert reduce_stride(DISFlow("medium")) == reduce_stride(FarnebackFlow()) == 1

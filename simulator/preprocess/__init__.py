@@ -8,7 +8,12 @@ from __future__ import annotations
 
 from simulator.cells import window_pof
 from simulator.preprocess.common import PreprocessInterrupted
-from simulator.preprocess.paper import WindowFlowReducer, checkpoint_path, preprocess_video
+from simulator.preprocess.paper import (
+    WindowFlowReducer,
+    checkpoint_path,
+    preprocess_video,
+    reduce_stride,
+)
 from simulator.preprocess.sphere import (
     FieldEstimator,
     SphereConfig,
@@ -29,5 +34,6 @@ __all__ = [
     "field_meta",
     "preprocess_sphere",
     "preprocess_video",
+    "reduce_stride",
     "window_pof",
 ]

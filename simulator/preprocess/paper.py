@@ -1,12 +1,14 @@
 """Paper-mode preprocessing (sections 3.2-3.4): a video's sliding-window POF matrix.
 
 For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.windows.WindowGrid`
-is extracted from both frames (gray, bicubic, :class:`~simulator.geometry.WindowExtractor`),
+is extracted from both frames (gray, bilinear, :class:`~simulator.windows.WindowExtractor`),
 the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
 scalars:
 
 ``pof_px``  (window pixels / frame)
     The paper's measure: the mean flow magnitude ``|f(p)|`` over the window's pixels.
+    Both sums read the flow on every second pixel when the backend computes it at 1/4
+    resolution (DIS ultrafast and fast, :func:`reduce_stride`), on every pixel otherwise.
 ``pof_dps`` (deg/s of visual angle)
     ``sum_p Omega(p) * angle(ray(p), ray(p + f(p))) * fps / sum_p Omega(p)``: the
     solid-angle-weighted (``Omega``) mean angle between the ray of a pixel centre and the
@@ -48,7 +50,7 @@ from numpy.typing import NDArray
 
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
-from simulator.flow import FlowBackend, RayAngles, make_backend
+from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.geometry import perspective_rays
 from simulator.gridfile import content_hash, save_grid
 from simulator.preprocess.common import (
@@ -61,12 +63,17 @@ from simulator.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
 from simulator.windows import WindowExtractor, WindowGrid
 
-__all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video"]
+__all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video", "reduce_stride"]
 
 _CKPT_FORMAT = "vimsim-preprocess-checkpoint"
 
 
 _CKPT_VERSION = 1
+
+#: Window sampling. Bilinear, not bicubic: 0.6x the extraction CPU and closer to the
+#: analytic rotation truth (bench/preprocess_accuracy.py, DIS ultrafast, median error
+#: yaw 15 deg/s 3.53 -> 3.17 %, oblique 15 deg/s 3.64 -> 3.16 %; docs/preprocess_speed.md).
+_INTERP = "linear"
 
 
 class WindowFlowReducer:
@@ -76,6 +83,12 @@ class WindowFlowReducer:
     ----------
     size : (w, h), window pixels
     hfov_deg, vfov_deg : float, degrees, the windows' exact FOVs
+    stride : int >= 1, keyword-only
+        Read the flow on every ``stride``-th pixel only (rows and columns ``stride // 2,
+        stride // 2 + stride, ...``, :class:`simulator.flow.RayAngles`): both sums run
+        over those pixels (solid-angle weights renormalised over them). For backends that
+        compute flow at a lower resolution and upsample it (DIS ultrafast and fast work at
+        1/4 resolution, :func:`reduce_stride`), stride 2 reads the same field 4x faster.
 
     Call with ``flow`` ``(N, h, w, 2)`` float32 (window px / frame) and ``fps``; returns
     ``(dps, px)``, each ``(N,)`` float64: deg/s and px/frame.
@@ -85,12 +98,16 @@ class WindowFlowReducer:
     threads: results are bit-reproducible.
     """
 
-    def __init__(self, size: tuple[int, int], hfov_deg: float, vfov_deg: float):
+    def __init__(self, size: tuple[int, int], hfov_deg: float, vfov_deg: float, *, stride: int = 1):
         w, h = int(size[0]), int(size[1])
         _, sa = perspective_rays((w, h), hfov_deg, vfov_deg)
         self.size = (w, h)
-        self._rays = RayAngles((w, h), hfov_deg, vfov_deg)
-        self._wt32 = (sa.astype(np.float64) / sa.astype(np.float64).sum()).astype(np.float32)
+        self._rays = RayAngles((w, h), hfov_deg, vfov_deg, stride=stride)
+        self.stride = self._rays.stride
+        sel = self._rays.sel
+        sa = sa[sel, sel].astype(np.float64)
+        self._npx = float(sa.size)
+        self._wt32 = (sa / sa.sum()).astype(np.float32)
 
     def _one(self, f: NDArray[np.float32]) -> tuple[float, float]:
         """``(sum of weighted angles (rad), sum of |f| (px))`` of one window's flow."""
@@ -118,12 +135,21 @@ class WindowFlowReducer:
         dps = np.empty(n)
         px = np.empty(n)
         k = math.degrees(1.0) * float(fps)
-        npx = float(self.size[0] * self.size[1])
+        npx = self._npx
         for i in range(n):
             a, m = self._one(flow[i])
             dps[i] = a * k
             px[i] = m / npx
         return dps, px
+
+
+def reduce_stride(backend: FlowBackend) -> int:
+    """The stride at which paper mode reads a backend's flow: 2 for DIS ``ultrafast`` and
+    ``fast`` (finest scale 2: flow computed at 1/4 resolution, then upsampled bilinearly;
+    the same rule as sphere mode), 1 for every other backend."""
+    if isinstance(backend, DISFlow) and backend.preset in ("ultrafast", "fast"):
+        return 2
+    return 1
 
 
 def checkpoint_path(output: str | os.PathLike) -> Path:
@@ -246,6 +272,7 @@ def preprocess_video(
     out = check_output_dir(output)
     backend = flow if isinstance(flow, FlowBackend) else make_backend(flow, size=grid.size)
     ckpt = checkpoint_path(out)
+    stride = reduce_stride(backend)
     identity = {
         "video": {
             "width": info.width,
@@ -258,6 +285,8 @@ def preprocess_video(
         "grid": grid.to_dict(),
         "grid_shape": list(grid.shape),
         "flow": backend.describe(),
+        "reduce_stride": stride,
+        "window_interp": _INTERP,
         "layout": layout,
         "eye": eye,
         "start_frame": start_f,
@@ -276,7 +305,7 @@ def preprocess_video(
         warnings.warn(f"no checkpoint {ckpt}; starting from the first frame", stacklevel=2)
 
     extractor = WindowExtractor(grid, (eye_w, eye_h))
-    reducer = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg)
+    reducer = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg, stride=stride)
     P, Y = grid.shape
     n_win = P * Y
     w, h = grid.size
@@ -308,7 +337,9 @@ def preprocess_video(
             video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
         )
         # Decoding and window extraction of frame t+1 overlap the flow of frame t.
-        windows = prefetch((extractor(f).reshape(n_win, h, w) for f in frames), depth=2)
+        windows = prefetch(
+            (extractor(f, interp=_INTERP).reshape(n_win, h, w) for f in frames), depth=2
+        )
         for win in windows:
             if prev_win is None:
                 prev_win = win
@@ -380,6 +411,8 @@ def preprocess_video(
             "pof_px": "window px/frame (mean magnitude)",
         },
     )
+    meta["reduce_stride"] = stride
+    meta["window_interp"] = _INTERP
     if n_rows != total:
         warnings.warn(f"{src}: expected {total} frames, decoded {n_rows}", stacklevel=2)
     save_grid(out, np.stack(dps_rows), np.stack(px_rows), grid, meta)
