@@ -13,8 +13,9 @@ from simulator.epof.viewing import EpofResult, compute_epof, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
 from simulator.grf import grain_count
-from simulator.gridfile import GridFile, load_grid
+from simulator.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.headpath import HeadPath
+from simulator.mitigation import cell_opacity, visible_flow
 from simulator.progress import Progress
 from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
@@ -27,6 +28,10 @@ __all__ = ["OUTDIR_FILES", "render_viewing"]
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
 
+#: Columns ``epof.csv`` of a render has after the EPOF columns: what reaches the eye
+#: (:func:`simulator.mitigation.visible_flow`).
+VISIBLE_COLUMNS = ("visible_flow_dps", "visible_ratio", "blocked_share")
+
 
 def _clear_outputs(out) -> None:
     """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
@@ -38,6 +43,19 @@ def _clear_outputs(out) -> None:
             raise InputError(
                 f"{p}: cannot remove the previous run's output ({e.strerror})"
             ) from None
+
+
+def _mean(a) -> float | None:
+    a = np.asarray(a, float)
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if a.size else None
+
+
+def _ratio(num, den) -> float | None:
+    """sum(visible) / sum(EPOF) over frames: the share of the viewing's flow let through."""
+    n, d = np.asarray(num, float), np.asarray(den, float)
+    ok = np.isfinite(n) & np.isfinite(d)
+    return float(n[ok].sum() / d[ok].sum()) if ok.any() and d[ok].sum() > 0 else None
 
 
 def render_viewing(
@@ -69,9 +87,11 @@ def render_viewing(
     outdir : output folder (created)
     grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
-    config : eye size, exact FOVs (degrees) and GRF (``config.grf=None``: no overlay)
+    config : eye size, exact FOVs (degrees), GRF (``config.grf=None``: no grains) and the
+        mitigation (``config.mitigation``: grf, vignette, grf+vignette, local-grf, none;
+        local-grf needs a grid with a sphere-mode field)
     opacity : ``"auto"`` (from the EPOF, needs ``grid``) or a constant in [0, 1]; ignored
-        without ``config.grf``
+        when nothing is drawn and by local-grf (each cell's own flow drives it)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
@@ -93,7 +113,9 @@ def render_viewing(
     t0 = time.perf_counter()
     w, h = config.eye_size
     hfov, vfov = config.hfov_deg, config.vfov_deg
-    grf = config.grf
+    grf = config.grains
+    mit = config.mitigation
+    drawn = grf is not None or mit.vignette
     if isinstance(opacity, str):
         if opacity != "auto":
             raise InputError(
@@ -122,10 +144,18 @@ def render_viewing(
         grid = load_grid(grid)
     if grid is not None:
         grid.check_video(info, source=grid.path)
-    if grf is not None and opacity == "auto" and grid is None:
+    if mit.local and grf is not None and grid is None:
+        raise InputError(
+            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
+            f"with `{MAKE_FIELD_HINT}`"
+        )
+    if drawn and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
         )
+    field_dps = cells = None
+    if grid is not None and (getattr(grid, "field_dps", None) is not None or mit.local):
+        field_dps, cells = require_field(grid)  # local-grf on a paper-mode grid: the hint
 
     # Per-frame head angles and opacity (EPOF rows when a grid is given).
     yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
@@ -141,12 +171,28 @@ def render_viewing(
         op_auto[:n] = res.opacity[:n]
         op_auto[n:] = res.opacity[-1]
         thresholds = tuple(float(v) for v in res.thresholds_dps)
-    if grf is None:
+    if not drawn:
         op = np.zeros(nf)
     elif opacity == "auto":
         op = op_auto
     else:
         op = np.full(nf, float(opacity))
+
+    cell_op = None
+    if mit.local and grf is not None:
+        cell_op = cell_opacity(field_dps, thresholds)
+    angles = np.stack([yaw, pitch, roll], axis=-1)
+    vis = visible_flow(
+        mit,
+        config.frustum,
+        angles,
+        op,
+        epof_dps,
+        grf=grf,
+        field_dps=field_dps,
+        cell_deg=None if cells is None else cells.cell_deg,
+        cell_op=cell_op,
+    )
 
     if ctx is None:
         ctx = create_context()
@@ -159,8 +205,9 @@ def render_viewing(
         ctx,
         str(video),
         (str(out / "left.mp4"), str(out / "right.mp4")),
-        np.stack([yaw, pitch, roll], axis=-1),
+        angles,
         opacity=op,
+        cell_opacity=cell_op,
         config=config,
         layout=layout,
         fps=info.fps,
@@ -174,6 +221,7 @@ def render_viewing(
     write_epof_csv(
         out / "epof.csv",
         EpofResult(np.arange(nf), times, yaw, pitch, roll, epof_dps, op, thresholds),
+        extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
     )
 
     def pct(a):
@@ -211,10 +259,32 @@ def render_viewing(
             "distance_m": grf.distance_m,
             "n_grains": grain_count(grf),
         },
-        "opacity": "off" if grf is None else opacity,
+        "mitigation": {
+            "kind": mit.kind,
+            "vignette": {
+                "aperture_min_deg": mit.aperture_min_deg,
+                "feather_deg": mit.feather_deg,
+                "color_rgb": [round(c * 255) for c in mit.color],
+            }
+            if mit.vignette
+            else None,
+            "grain_opacity": "per-cell flow (sphere-mode field)" if cell_op is not None else None,
+        },
+        "opacity": "off" if not drawn else opacity,
         "opacity_thresholds_dps": list(thresholds),
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
+        "visible_flow": {
+            "what": "viewport flow weighted by 1 - alpha of what is drawn over each direction",
+            "flow_per_direction": "sphere-mode field"
+            if field_dps is not None
+            else "uniform (EPOF)",
+            "visible_flow_dps_mean": _mean(vis.visible_dps),
+            "visible_ratio_mean": _mean(vis.ratio),
+            "visible_ratio_flow_weighted": _ratio(vis.visible_dps, epof_dps),
+            "blocked_share_mean": _mean(vis.blocked),
+            "visible_flow_dps_percentiles": pct(vis.visible_dps),
+        },
         "x264": {"preset": preset, "crf": crf},
         "timings_s": timings,
         "frames_per_s": result.frames_per_s,

@@ -8,8 +8,15 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import LAYOUTS, X264_PRESETS
-from simulator.commands._types import add_fov_arguments, frustum_from_args, nonneg_int, size_wxh
+from simulator.choices import LAYOUTS, MITIGATIONS, X264_PRESETS
+from simulator.commands._types import (
+    add_fov_arguments,
+    frustum_from_args,
+    nonneg_float,
+    nonneg_int,
+    positive_float,
+    size_wxh,
+)
 
 __all__ = ["register", "run"]
 
@@ -74,6 +81,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--grf",
         choices=("on", "off"),
         help="GRF overlay (default: on with --grid or a numeric --opacity, off otherwise)",
+    )
+    p.add_argument(
+        "--mitigation",
+        choices=MITIGATIONS,
+        help="what is drawn over the video: grf (the paper's grains; the default, see --grf), "
+        "vignette (head-fixed tunneling: the aperture shrinks with the opacity), grf+vignette "
+        "(both, same opacity), local-grf (grains only where the flow is high: each "
+        "direction's own flow from a sphere-mode --grid), none",
+    )
+    p.add_argument(
+        "--aperture-min",
+        type=positive_float,
+        default=60.0,
+        metavar="DEG",
+        help="vignette aperture diameter at opacity 1, degrees of visual field, in (0, FOV) "
+        "(default 60); at opacity 0 the aperture is the full view",
+    )
+    p.add_argument(
+        "--feather",
+        type=nonneg_float,
+        default=10.0,
+        metavar="DEG",
+        help="width of the vignette's soft edge, degrees, linear in angle (default 10; 0 = hard)",
+    )
+    p.add_argument(
+        "--vignette-color",
+        default="0,0,0",
+        metavar="R,G,B",
+        help="vignette colour, R,G,B 0..255 or #RRGGBB (default black)",
     )
     p.add_argument(
         "--opacity",
@@ -148,19 +184,29 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
+    from simulator.mitigation import Mitigation, parse_color
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
     from simulator.viewing import render_viewing
 
     frustum = frustum_from_args(args, (107.0, 107.0))
+    kind = args.mitigation or "grf"
+    mitigation = Mitigation(
+        kind,
+        aperture_min_deg=args.aperture_min,
+        feather_deg=args.feather,
+        color=parse_color(args.vignette_color),
+    )
     with warnings_to_stderr("vimsim render"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
 
     # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
+    if args.mitigation is not None:  # an explicit mitigation draws what it names
+        grf_on = args.grf != "off" and mitigation.grains
     note = None
-    if args.grf is None and not grf_on:
+    if args.mitigation is None and args.grf is None and not grf_on:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
     grf = None
     if grf_on:
@@ -172,7 +218,7 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             distance_m=args.grain_distance,
         )
-    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf)
+    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf, mitigation=mitigation)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
