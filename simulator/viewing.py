@@ -193,6 +193,8 @@ def render_viewing(
         cell_deg=None if cells is None else cells.cell_deg,
         cell_op=cell_op,
     )
+    per_direction = field_dps is not None
+    del field_dps  # the render needs only cell_op (local-grf); long videos hold less
 
     if ctx is None:
         ctx = create_context()
@@ -276,9 +278,7 @@ def render_viewing(
         "opacity_percentiles": pct(op),
         "visible_flow": {
             "what": "viewport flow weighted by 1 - alpha of what is drawn over each direction",
-            "flow_per_direction": "sphere-mode field"
-            if field_dps is not None
-            else "uniform (EPOF)",
+            "flow_per_direction": "sphere-mode field" if per_direction else "uniform (EPOF)",
             "visible_flow_dps_mean": _mean(vis.visible_dps),
             "visible_ratio_mean": _mean(vis.ratio),
             "visible_ratio_flow_weighted": _ratio(vis.visible_dps, epof_dps),

@@ -387,3 +387,11 @@ def test_cli_local_grf_on_a_paper_grid_says_how_to_make_a_field(ctx, tmp_path, c
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1 and "--method sphere" in err[0], err
     assert not out.exists()
+    # other mitigations run on it, the flow taken as uniform over the view (the EPOF)
+    rc = main(["render", str(vid), str(_path_csv(tmp_path / "p.csv", 0.2)), "-o", str(out),
+               "--grid", str(grid), "--eye-size", "64x64", "--mitigation", "vignette",
+               "--no-progress"])  # fmt: skip
+    s = json.loads((out / "summary.json").read_text())
+    assert rc == 0 and s["visible_flow"]["flow_per_direction"] == "uniform (EPOF)"
+    blocked = s["visible_flow"]["blocked_share_mean"]
+    assert s["visible_flow"]["visible_ratio_mean"] == pytest.approx(1.0 - blocked)
