@@ -20,6 +20,7 @@ __all__ = [
     "HEADPATH_FORMATS",
     "INTERPS",
     "LAYOUTS",
+    "MITIGATIONS",
     "OPACITY_SOURCES",
     "PREPROCESS_METHODS",
     "SCENES",
@@ -59,6 +60,10 @@ DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
 
 #: Flow backends as ``--flow`` spells them.
 FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
+
+#: What is drawn over the video (:mod:`simulator.mitigation`): the paper's grains, a
+#: tunneling vignette, both, grains only where the flow is high, or nothing.
+MITIGATIONS: tuple[str, ...] = ("grf", "vignette", "grf+vignette", "local-grf", "none")
 
 #: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
 OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")

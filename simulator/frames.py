@@ -4,7 +4,7 @@ For visual regression tests (:mod:`simulator.compare`, :mod:`simulator.testing`)
 same inputs give byte-identical PNGs on the same machine. The frame shown at video time
 ``t`` (seconds) is frame ``floor(t * fps)`` (the one on screen during
 ``[i / fps, (i + 1) / fps)``); it is rendered with the head pose and GRF opacity that
-``vimsim render`` uses for that frame (:func:`simulator.viewing.plan_viewing`), by the
+``vimsim render`` uses for that frame (:func:`simulator.plan.plan_viewing`), by the
 same GL eye renderer, read back as RGB (``render`` converts the same pass to yuv420p
 for x264). Only the needed frames are decoded: the decoder seeks to the key frame
 before each one.
@@ -28,11 +28,11 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
 from simulator.geometry import head_rotation, split_eye
 from simulator.grf import OpacityRule
+from simulator.plan import grf_settings, plan_viewing
 from simulator.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
 from simulator.video import iter_frames, probe
-from simulator.viewing import grf_settings, plan_viewing
 
 __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_frames"]
 
@@ -243,6 +243,11 @@ def render_frames(
     number and its time, pose in degrees, EPOF deg/s, opacity), renderer settings and
     versions. Nothing time-varying, so that two runs give the same file.
     """
+    if config.mitigation.local and config.grains is not None:
+        raise InputError(
+            "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
+            "grf, vignette, grf+vignette or none"
+        )
     plan = plan_viewing(
         video,
         headpath,
@@ -352,7 +357,8 @@ def render_frames(
             "eye_size": [w, h],
             "hfov_deg": config.hfov_deg,
             "vfov_deg": config.vfov_deg,
-            "grf": grf_settings(config.grf),
+            "grf": grf_settings(config.grains),
+            "mitigation": config.mitigation.kind,
             "opacity": "off" if config.grf is None else opacity,
             "opacity_thresholds_dps": list(plan.thresholds_dps),
             "opacity_rule": rule.describe() if plan.grid is not None else None,

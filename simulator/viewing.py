@@ -5,97 +5,47 @@ from __future__ import annotations
 import os
 import time
 import warnings
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
-from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv, write_epof_csv
+from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
-from simulator.grf import OpacityRule, grain_count
-from simulator.gridfile import GridFile, load_grid
-from simulator.headpath import HeadPath
+from simulator.grf import OpacityRule
+from simulator.gridfile import require_field
+from simulator.mitigation import cell_opacity, visible_flow
+from simulator.plan import grf_settings, plan_viewing
 from simulator.progress import Progress
-from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
 from simulator.review import ReviewWriter
-from simulator.video import MediaInfo, probe
 
-__all__ = [
-    "OUTDIR_FILES",
-    "REVIEW_FILES",
-    "ViewingPlan",
-    "frame_range",
-    "grf_settings",
-    "plan_viewing",
-    "render_viewing",
-]
+__all__ = ["OUTDIR_FILES", "REVIEW_FILES", "VISIBLE_COLUMNS", "render_viewing"]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
 #: Written besides with ``review=True`` (before ``summary.json``).
 REVIEW_FILES = ("review.mp4", "sheet.png")
 
-
-def frame_range(
-    n_frames: int,
-    fps: float,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    *,
-    video: str = "",
-) -> tuple[int, int]:
-    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
-
-    None = the video's start / end. InputError (naming ``video``) for a range outside the
-    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
-    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
-    """
-    dur = n_frames / fps
-    src = f"{video}: " if video else ""
-    s = 0.0 if start_s is None else float(start_s)
-    e = dur if end_s is None else float(end_s)
-    if not (np.isfinite(s) and np.isfinite(e)):
-        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
-    if e <= s:
-        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
-    if s < 0 or s >= dur:
-        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
-    if e > dur + 1e-6:
-        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
-    eps = 1e-6
-    f0 = int(np.ceil(s * fps - eps))
-    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
-    if f1 <= f0:
-        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
-    return f0, f1
+#: Columns ``epof.csv`` of a render has after the EPOF columns: what reaches the eye
+#: (:func:`simulator.mitigation.visible_flow`).
+VISIBLE_COLUMNS = ("visible_flow_dps", "visible_ratio", "blocked_share")
 
 
-def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
-    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
-    has a row for each of them and no frame beyond the video)."""
-    fr = np.asarray(res.frame, np.int64)
-    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
-        raise InputError(
-            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
-            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
-        )
-    pos = {int(f): i for i, f in enumerate(fr)}
-    missing = [int(f) for f in frames if int(f) not in pos]
-    if missing:
-        raise InputError(
-            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
-            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
-            f"({len(missing)} missing, first {missing[0]})"
-        )
-    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
-    if np.any((op < 0) | (op > 1)):
-        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
-    return op
+def _mean(a) -> float | None:
+    a = np.asarray(a, float)
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if a.size else None
+
+
+def _ratio(num, den) -> float | None:
+    """sum(visible) / sum(EPOF) over frames: the share of the viewing's flow let through."""
+    n, d = np.asarray(num, float), np.asarray(den, float)
+    ok = np.isfinite(n) & np.isfinite(d)
+    return float(n[ok].sum() / d[ok].sum()) if ok.any() and d[ok].sum() > 0 else None
 
 
 def _clear_outputs(out) -> None:
@@ -108,156 +58,6 @@ def _clear_outputs(out) -> None:
             raise InputError(
                 f"{p}: cannot remove the previous run's output ({e.strerror})"
             ) from None
-
-
-@dataclass(frozen=True)
-class ViewingPlan:
-    """One viewing's inputs, checked, and its per-frame poses and GRF opacity.
-
-    info : the video's :class:`simulator.video.MediaInfo`
-    headpath : the head path; grid : the grid file or None
-    frames : ndarray, shape (N,), the video frame numbers of the plan (``f0 .. f1 - 1``)
-    times_s : ndarray, shape (N,), time of each frame ``i / fps`` (seconds)
-    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of each frame, degrees
-    epof_dps : ndarray, shape (N,), EPOF (deg/s; NaN without a grid)
-    opacity : ndarray, shape (N,), the GRF opacity rendered at each frame (0 without GRF)
-    thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
-    epof_method : ``paper`` or ``sphere`` (None without a grid)
-    opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
-    """
-
-    info: MediaInfo
-    headpath: HeadPath
-    grid: GridFile | None
-    frames: np.ndarray
-    times_s: np.ndarray
-    angles_deg: np.ndarray
-    epof_dps: np.ndarray
-    opacity: np.ndarray
-    thresholds_dps: tuple[float, float]
-    epof_method: str | None = None
-    opacity_label: object = "auto"
-
-    @property
-    def ranged(self) -> bool:
-        """True when the plan covers only part of the video."""
-        return (int(self.frames[0]), int(self.frames[-1]) + 1) != (0, self.info.n_frames)
-
-
-def grf_settings(grf) -> dict | None:
-    """The GRF parameters as written in ``summary.json`` / ``frames.json`` (None: no GRF)."""
-    if grf is None:
-        return None
-    return {
-        "grain_deg": grf.grain_deg,
-        "density": grf.density,
-        "inner_deg": grf.inner_deg,
-        "outer_deg": grf.outer_deg,
-        "seed": grf.seed,
-        "distance_m": grf.distance_m,
-        "n_grains": grain_count(grf),
-    }
-
-
-def plan_viewing(
-    video,
-    headpath,
-    *,
-    grid=None,
-    config: RenderConfig = RenderConfig(),
-    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
-    layout: str = "mono",
-    hold: bool = False,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    rule: OpacityRule = OpacityRule(),
-    method: str = "auto",
-) -> ViewingPlan:
-    """Check a viewing's inputs and work out what every frame shows (no GL, no output).
-
-    What :func:`render_viewing` renders and ``vimsim frames`` renders at chosen moments:
-    the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
-    (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
-    EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
-    it to a time range (:func:`frame_range`). Raises InputError for a bad video, head
-    path, grid, range or opacity.
-    """
-    grf = config.grf
-    op_csv = None
-    if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
-        op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
-        opacity = str(opacity)
-    elif isinstance(opacity, str):
-        pass
-    elif not (0.0 <= float(opacity) <= 1.0):
-        raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
-
-    info = probe(video)
-    info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
-    if not info.is_video:
-        raise InputError(
-            f"{video}: a still image; render needs a video (vimsim viewport renders images)"
-        )
-    hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
-    ranged = (f0, f1) != (0, info.n_frames)
-    nf = f1 - f0
-    frames = np.arange(f0, f1)
-    times = frames / info.fps
-    hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
-
-    if grid is not None and not isinstance(grid, GridFile):
-        grid = load_grid(grid)
-    if grid is not None:
-        grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
-    if op_csv is not None:
-        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
-    if grf is not None and opacity == "auto" and grid is None:
-        raise InputError(
-            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
-        )
-
-    # Per-frame head angles and opacity (EPOF rows when a grid is given).
-    yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
-    epof_dps = np.full(nf, np.nan)
-    thresholds = (float("nan"), float("nan"))
-    op_auto = None
-    epof_method = None
-    if grid is not None:
-        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
-        # and easing have their state at the range's start (cost ~ the range).
-        warm = 0
-        if ranged:
-            warm = int(
-                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
-            )
-        res = compute_epof(
-            grid,
-            hp,
-            frustum=config.frustum,
-            hold=True if ranged else hold,
-            rule=rule,
-            method=method,
-            frames=(max(0, f0 - warm), f1) if ranged else None,
-        )
-        epof_method = res.meta["method"]
-        # Grid rows by video frame number (a grid may start later or lack the last frame).
-        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
-        epof_dps = res.epof_dps[rows].astype(float)
-        op_auto = res.opacity[rows].astype(float)
-        thresholds = tuple(float(v) for v in res.thresholds_dps)
-    if grf is None:
-        op = np.zeros(nf)
-    elif op_csv is not None:
-        op = op_from_csv
-    elif opacity == "auto":
-        op = op_auto
-    else:
-        op = np.full(nf, float(opacity))
-    angles = np.stack([yaw, pitch, roll], axis=-1)
-    return ViewingPlan(
-        info, hp, grid, frames, times, angles, epof_dps, op, thresholds, epof_method, opacity
-    )
 
 
 def render_viewing(
@@ -295,10 +95,13 @@ def render_viewing(
     outdir : output folder (created)
     grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
-    config : eye size, exact FOVs (degrees) and GRF (``config.grf=None``: no overlay)
+    config : eye size, the frustum, GRF (``config.grf=None``: no grains) and the
+        mitigation (``config.mitigation``: grf, vignette, grf+vignette, local-grf, none;
+        local-grf needs a grid with a sphere-mode field)
     opacity : ``"auto"`` (from the EPOF, needs ``grid``), a constant in [0, 1], or the path
         of an EPOF CSV (its ``opacity`` column; it must have a row for every rendered
-        frame, numbered as the video's frames); ignored without ``config.grf``
+        frame, numbered as the video's frames); ignored when nothing is drawn and by
+        local-grf (each cell's own flow drives it)
     rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
         the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
     method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
@@ -332,7 +135,9 @@ def render_viewing(
     t0 = time.perf_counter()
     w, h = config.eye_size
     hfov, vfov = config.hfov_deg, config.vfov_deg
-    grf = config.grf
+    grf = config.grains
+    mit = config.mitigation
+    drawn = grf is not None or mit.vignette
     if w % 2 or h % 2:
         raise InputError(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
@@ -361,6 +166,31 @@ def render_viewing(
     yaw, pitch, roll = plan.angles_deg.T
     epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
     epof_method = plan.epof_method
+
+    # What reaches the eye: the flow of each direction (the sphere-mode field, rows of the
+    # plan's frames) weighted by what is drawn over it.
+    field_dps = cells = None
+    if grid is not None and (getattr(grid, "field_dps", None) is not None or mit.local):
+        field_dps, cells = require_field(grid)  # local-grf on a paper-mode grid: the hint
+        start = int(grid.meta.get("start_frame", 0) or 0)
+        field_dps = field_dps[np.clip(frames - start, 0, len(field_dps) - 1)]
+    cell_op = None
+    if mit.local and grf is not None:
+        cell_op = cell_opacity(field_dps, thresholds)
+    angles = plan.angles_deg
+    vis = visible_flow(
+        mit,
+        config.frustum,
+        angles,
+        op,
+        epof_dps,
+        grf=grf,
+        field_dps=field_dps,
+        cell_deg=None if cells is None else cells.cell_deg,
+        cell_op=cell_op,
+    )
+    per_direction = field_dps is not None
+    del field_dps  # the render needs only cell_op (local-grf); long videos hold less
 
     if ctx is None:
         ctx = create_context()
@@ -392,8 +222,9 @@ def render_viewing(
                 str(out / "left.mp4") if eyes in ("left", "both") else None,
                 str(out / "right.mp4") if eyes in ("right", "both") else None,
             ),
-            np.stack([yaw, pitch, roll], axis=-1),
+            angles,
             opacity=op,
+            cell_opacity=cell_op,
             config=config,
             layout=layout,
             fps=info.fps,
@@ -415,6 +246,7 @@ def render_viewing(
     write_epof_csv(
         out / "epof.csv",
         EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
+        extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
     )
 
     def pct(a):
@@ -445,12 +277,32 @@ def render_viewing(
             "up": config.frustum.up_deg,
         },
         "grf": grf_settings(grf),
-        "opacity": "off" if grf is None else opacity,
+        "mitigation": {
+            "kind": mit.kind,
+            "vignette": {
+                "aperture_min_deg": mit.aperture_min_deg,
+                "feather_deg": mit.feather_deg,
+                "color_rgb": [round(c * 255) for c in mit.color],
+            }
+            if mit.vignette
+            else None,
+            "grain_opacity": "per-cell flow (sphere-mode field)" if cell_op is not None else None,
+        },
+        "opacity": "off" if not drawn else opacity,
         "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
         "opacity_thresholds_dps": list(thresholds),
         "epof_method": epof_method,
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
+        "visible_flow": {
+            "what": "viewport flow weighted by 1 - alpha of what is drawn over each direction",
+            "flow_per_direction": "sphere-mode field" if per_direction else "uniform (EPOF)",
+            "visible_flow_dps_mean": _mean(vis.visible_dps),
+            "visible_ratio_mean": _mean(vis.ratio),
+            "visible_ratio_flow_weighted": _ratio(vis.visible_dps, epof_dps),
+            "blocked_share_mean": _mean(vis.blocked),
+            "visible_flow_dps_percentiles": pct(vis.visible_dps),
+        },
         "x264": {"preset": preset, "crf": crf},
         "timings_s": timings,
         "frames_per_s": result.frames_per_s,

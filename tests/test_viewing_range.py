@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from simulator.errors import InputError
-from simulator.viewing import frame_range
+from simulator.plan import frame_range
 
 
 @pytest.fixture(scope="module")

@@ -8,9 +8,16 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import EPOF_METHODS, LAYOUTS, X264_PRESETS
+from simulator.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
-from simulator.commands._types import add_fov_arguments, frustum_from_args, nonneg_int, size_wxh
+from simulator.commands._types import (
+    add_fov_arguments,
+    frustum_from_args,
+    nonneg_float,
+    nonneg_int,
+    positive_float,
+    size_wxh,
+)
 
 __all__ = ["add_view_options", "register", "run", "view_from_args"]
 
@@ -53,6 +60,35 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
         "--grf",
         choices=("on", "off"),
         help="GRF overlay (default: on with --grid or a numeric --opacity, off otherwise)",
+    )
+    p.add_argument(
+        "--mitigation",
+        choices=MITIGATIONS,
+        help="what is drawn over the video: grf (the paper's grains; the default, see --grf), "
+        "vignette (head-fixed tunneling: the aperture shrinks with the opacity), grf+vignette "
+        "(both, same opacity), local-grf (grains only where the flow is high: each "
+        "direction's own flow from a sphere-mode --grid), none",
+    )
+    p.add_argument(
+        "--aperture-min",
+        type=positive_float,
+        default=60.0,
+        metavar="DEG",
+        help="vignette aperture diameter at opacity 1, degrees of visual field, in (0, FOV) "
+        "(default 60); at opacity 0 the aperture is the full view",
+    )
+    p.add_argument(
+        "--feather",
+        type=nonneg_float,
+        default=10.0,
+        metavar="DEG",
+        help="width of the vignette's soft edge, degrees, linear in angle (default 10; 0 = hard)",
+    )
+    p.add_argument(
+        "--vignette-color",
+        default="0,0,0",
+        metavar="R,G,B",
+        help="vignette colour, R,G,B 0..255 or #RRGGBB (default black)",
     )
     p.add_argument(
         "--opacity",
@@ -126,10 +162,17 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     from simulator.commands._progress import warnings_to_stderr
     from simulator.grf import GrfConfig
     from simulator.gridfile import load_grid
+    from simulator.mitigation import Mitigation, parse_color
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
 
     frustum = frustum_from_args(args, (107.0, 107.0))
+    mitigation = Mitigation(
+        args.mitigation or "grf",
+        aperture_min_deg=args.aperture_min,
+        feather_deg=args.feather,
+        color=parse_color(args.vignette_color),
+    )
     with warnings_to_stderr(f"vimsim {command}"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
@@ -139,8 +182,10 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
 
     # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
     grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
+    if args.mitigation is not None:  # an explicit mitigation draws what it names
+        grf_on = args.grf != "off" and mitigation.grains
     note = None
-    if args.grf is None and not grf_on:
+    if args.mitigation is None and args.grf is None and not grf_on:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
     if args.layout is None and layout != "mono":
         note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
@@ -154,7 +199,7 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
             seed=args.seed,
             distance_m=args.grain_distance,
         )
-    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf)
+    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf, mitigation=mitigation)
     return hp, grid, config, note, layout, rule
 
 

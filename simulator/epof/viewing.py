@@ -172,11 +172,14 @@ def compute_epof(
     return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
 
 
-def write_epof_csv(path: str | os.PathLike, result: EpofResult) -> None:
-    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically."""
+def write_epof_csv(path: str | os.PathLike, result: EpofResult, extra: dict | None = None) -> None:
+    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically,
+    then the ``extra`` columns (name -> array of one value per row), if any, in order."""
+    extra = extra or {}
     buf = io.StringIO()
-    buf.write(",".join(EPOF_COLUMNS) + "\n")
+    buf.write(",".join((*EPOF_COLUMNS, *extra)) + "\n")
     cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
+    cols += [np.round(np.asarray(v, float), 9) + 0.0 for v in extra.values()]
     for i, fr in enumerate(result.frame):
         buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + "\n")
     with atomic_output(path) as tmp:
@@ -184,13 +187,15 @@ def write_epof_csv(path: str | os.PathLike, result: EpofResult) -> None:
 
 
 def read_epof_csv(path: str | os.PathLike) -> EpofResult:
-    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed)."""
+    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed);
+    extra columns after the EPOF columns (e.g. ``vimsim render``'s visible flow) are
+    ignored."""
     p = check_input_file(path, "EPOF")
     lines = [
         ln for ln in p.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()
     ]
     cols = [c.strip() for c in lines[0].split(",")]
-    if cols != list(EPOF_COLUMNS):
+    if cols[: len(EPOF_COLUMNS)] != list(EPOF_COLUMNS):
         raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
     if len(lines) < 2:
         raise InputError(f"{p}: EPOF file has a header but no rows")
@@ -198,8 +203,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
     except ValueError:
         raise InputError(f"{p}: non-numeric value in an EPOF row") from None
-    if data.ndim != 2 or data.shape[1] != len(EPOF_COLUMNS):
-        raise InputError(f"{p}: every row needs {len(EPOF_COLUMNS)} fields")
+    if data.ndim != 2 or data.shape[1] != len(cols):
+        raise InputError(f"{p}: every row needs {len(cols)} fields")
+    data = data[:, : len(EPOF_COLUMNS)]
     if not np.all(np.isfinite(data)):
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
     arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}

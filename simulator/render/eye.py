@@ -49,6 +49,7 @@ from simulator.choices import Eye
 from simulator.errors import InputError
 from simulator.geometry import check_fov, head_rotation
 from simulator.grf import GrainField, GrfConfig
+from simulator.mitigation import Mitigation
 from simulator.render.gl import _check_gl, _gl_limit, _program
 
 __all__ = ["EyeRenderer", "RenderConfig", "render_view"]
@@ -61,7 +62,10 @@ class RenderConfig:
     eye_size : (width, height), pixels (default 1440x1440, the paper's HMD per eye)
     hfov_deg, vfov_deg : exact horizontal / vertical FOV, degrees (default 107 x 107), for
         a symmetric view; ignored when ``frustum`` is given
-    grf : GRF parameters, or None for no overlay
+    grf : GRF parameters, or None for no grains
+    mitigation : :class:`simulator.mitigation.Mitigation`: what is drawn (default ``grf``:
+        the paper's grains); grains are drawn when it has grains and ``grf`` is set, the
+        vignette when it has one
     frustum : :class:`simulator.cells.Frustum` of the **left** eye (the right eye mirrors
         left and right), e.g. a headset's asymmetric per-eye frustum
         (``Frustum.from_headset``); default the symmetric ``hfov_deg x vfov_deg`` view.
@@ -73,8 +77,13 @@ class RenderConfig:
     vfov_deg: float = 107.0
     grf: GrfConfig | None = field(default_factory=GrfConfig)
     frustum: Frustum | None = None
+    mitigation: Mitigation = field(default_factory=Mitigation)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.mitigation, Mitigation):
+            raise InputError(
+                f"render mitigation must be a Mitigation; got {type(self.mitigation).__name__}"
+            )
         try:
             w, h = (int(v) for v in self.eye_size)
         except (TypeError, ValueError):
@@ -93,6 +102,12 @@ class RenderConfig:
         object.__setattr__(self, "frustum", fr)
         object.__setattr__(self, "hfov_deg", fr.hfov_deg)
         object.__setattr__(self, "vfov_deg", fr.vfov_deg)
+        self.mitigation.check_view(fr)
+
+    @property
+    def grains(self) -> GrfConfig | None:
+        """The grain parameters when grains are drawn, else None."""
+        return self.grf if self.mitigation.grains else None
 
     def image_plane(self, eye: str = "left") -> tuple[tuple[float, float], tuple[float, float]]:
         """``((half_width, half_height), (centre_x, centre_y))`` of the eye's image on the
@@ -206,7 +221,8 @@ class EyeRenderer:
             )
         self._max_tex = _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE")
         self._moderngl = moderngl
-        grf = config.grf
+        grf = config.grains
+        mit = config.mitigation
         self.grain_mask = None
         grain_lod = False
         if grf is not None:
@@ -217,7 +233,10 @@ class EyeRenderer:
             "GRF": int(grf is not None),
             "GRAIN_LOD": int(grain_lod),
             "GRAIN_PARALLAX": int(grf is not None and grf.distance_m is not None),
+            "LOCAL_GRF": int(grf is not None and mit.local),
+            "VIGNETTE": int(mit.vignette),
         }
+        self._cell_tex = None  # local-grf: per-cell grain opacity, uploaded per frame
         # Keyed by MIPMAP; the general variant (cubic or trilinear per pixel) is built now,
         # the cubic-only one on the first frame that needs no mipmaps.
         self._progs: dict[bool, tuple] = {}
@@ -236,7 +255,7 @@ class EyeRenderer:
         pv = self._progs.get(mipmap)
         if pv is not None:
             return pv
-        cfg, grf = self.config, self.config.grf
+        cfg, grf = self.config, self.config.grains
         prog = _program(
             self.ctx, "fullscreen.vert", "eye.frag", {**self._defines, "MIPMAP": int(mipmap)}
         )
@@ -251,7 +270,10 @@ class EyeRenderer:
                 "u_cutout": (math.radians(grf.inner_deg), math.radians(grf.outer_deg)),
                 "u_eye_offset": (0.0, 0.0, 0.0),
                 "u_opacity": 0.0,
+                "u_cell_opacity": 2,
             }
+        if cfg.mitigation.vignette:
+            values |= {"u_vignette_color": cfg.mitigation.color}
         for name, value in values.items():
             if name in prog:
                 prog[name].value = value
@@ -285,7 +307,26 @@ class EyeRenderer:
         if mips:
             tex.build_mipmaps()
 
-    def _draw(self, rotation, eye, source, opacity, eye_offset) -> None:
+    def _upload_cell_opacity(self, cell_opacity) -> None:
+        """local-grf: the frame's per-cell grain opacity ``(n_lat, n_lon)`` (row 0 north,
+        column 0 at lon -180 deg), sampled nearest along each ray."""
+        a = np.ascontiguousarray(np.clip(np.asarray(cell_opacity, np.float32), 0.0, 1.0))
+        if a.ndim != 2:
+            raise ValueError(f"cell opacity must be (n_lat, n_lon); got {a.shape}")
+        h, w = a.shape
+        tex = self._cell_tex
+        if tex is None or tex.size != (w, h):
+            if tex is not None:
+                tex.release()
+            mgl = self._moderngl
+            tex = self.ctx.texture((w, h), 1, dtype="f4")
+            tex.filter = (mgl.NEAREST, mgl.NEAREST)
+            tex.repeat_x = True
+            tex.repeat_y = False
+            self._cell_tex = tex
+        tex.write(a.tobytes())
+
+    def _draw(self, rotation, eye, source, opacity, eye_offset, cell_opacity=None) -> None:
         tex = self._tex.get(source or eye)
         if tex is None:
             raise RuntimeError(f"no frame uploaded for eye {source or eye!r}")
@@ -293,10 +334,21 @@ class EyeRenderer:
         R = np.asarray(rotation, np.float32).reshape(3, 3)
         prog["u_head"].write(R.T.tobytes())  # GLSL mat3 is column-major
         prog["u_tan_offset"].value = self.config.image_plane(eye)[1]
-        if self.config.grf is not None:
-            prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
+        mit = self.config.mitigation
+        if self.config.grains is not None:
+            if "u_opacity" in prog:  # local-grf: unused (each cell's own opacity)
+                prog["u_opacity"].value = float(np.clip(opacity, 0.0, 1.0))
             if "u_eye_offset" in prog:
                 prog["u_eye_offset"].value = tuple(float(v) for v in eye_offset)
+            if mit.local:
+                if cell_opacity is None and self._cell_tex is None:
+                    raise ValueError("local-grf needs cell_opacity (n_lat, n_lon) per frame")
+                if cell_opacity is not None:
+                    self._upload_cell_opacity(cell_opacity)
+                self._cell_tex.use(2)
+        if mit.vignette:
+            r = mit.aperture_radius_rad(float(np.clip(opacity, 0.0, 1.0)), self.config.frustum)
+            prog["u_vignette"].value = (r, math.radians(mit.feather_deg))
         tex.use(0)
         if self.grain_mask is not None:
             self.grain_mask.use(1)
@@ -326,6 +378,7 @@ class EyeRenderer:
         opacity: float = 0.0,
         eye_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
         pix_fmt: Literal["rgb24", "yuv420p"] = "rgb24",
+        cell_opacity: NDArray | None = None,
     ) -> NDArray[np.uint8]:
         """Render one eye and read it back.
 
@@ -336,13 +389,15 @@ class EyeRenderer:
         eye : which readback buffer to use ("left" / "right"); the result stays valid
             until the next render of the same eye
         source : texture to sample (default ``eye``; mono: "left" for both eyes)
-        opacity : GRF opacity (0..1) for this frame
+        opacity : GRF opacity (0..1) for this frame (grains and vignette)
         eye_offset : eye position in the world frame in units of the grain distance
             (parallax of finite-distance grains; zeros = grains at infinity)
         pix_fmt : ``"rgb24"``, or ``"yuv420p"`` (even eye sizes): converted on the GL
             side (Y from ``eye.frag``, U and V from ``shaders/chroma420.frag``; BT.601
             limited range, 2 x 2 chroma means, as swscale's rgb24 -> yuv420p) into the
             planar layout of ``av.VideoFrame.from_ndarray(..., format="yuv420p")``
+        cell_opacity : local-grf only: this frame's per-cell grain opacity ``(n_lat,
+            n_lon)`` (:func:`simulator.mitigation.cell_opacity`); None keeps the last one
 
         Returns
         -------
@@ -352,7 +407,7 @@ class EyeRenderer:
         """
         if pix_fmt not in ("rgb24", "yuv420p"):
             raise ValueError(f"pix_fmt must be 'rgb24' or 'yuv420p'; got {pix_fmt!r}")
-        self._draw(rotation, eye, source, opacity, eye_offset)
+        self._draw(rotation, eye, source, opacity, eye_offset, cell_opacity)
         slot = 0 if eye == "left" else 1
         # eye.frag draws image row 0 into GL row 0 (the one flip), so the readback, bottom
         # GL row first, comes out top row first.
@@ -375,7 +430,7 @@ class EyeRenderer:
     def eye_offset(self, rotation: NDArray, eye: Eye) -> tuple[float, float, float]:
         """World-frame eye offset / grain distance for stereo grain parallax (zeros when the
         GRF has no finite distance). Left eye at -ipd/2 on the head's +x axis."""
-        grf = self.config.grf
+        grf = self.config.grains
         if grf is None or grf.distance_m is None:
             return (0.0, 0.0, 0.0)
         sign = -1.0 if eye == "left" else 1.0
@@ -387,6 +442,8 @@ class EyeRenderer:
             t.release()
         if self.grain_mask is not None:
             self.grain_mask.release()
+        if self._cell_tex is not None:
+            self._cell_tex.release()
         self._outer_fbo.use()
         self.fbo.release()
         self._color.release()
@@ -412,16 +469,18 @@ def render_view(
     *,
     config: RenderConfig = RenderConfig(eye_size=(256, 256), grf=None),
     opacity: float = 1.0,
+    cell_opacity: NDArray | None = None,
 ) -> NDArray[np.uint8]:
     """One eye's view of an equirect image ``(h, w, 3)`` uint8 (a copy).
 
     Orientation in degrees (yaw + right, pitch + up, roll + right ear down; applied yaw,
-    pitch, roll). ``opacity`` is the GRF opacity when ``config.grf`` is set.
+    pitch, roll). ``opacity`` is the GRF (and vignette) opacity; ``cell_opacity`` the
+    per-cell grain opacity of local-grf (``(n_lat, n_lon)``).
     """
     r = EyeRenderer(ctx, config)
     try:
         r.upload(img)
         R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()
-        return np.array(r.render(R, opacity=opacity))
+        return np.array(r.render(R, opacity=opacity, cell_opacity=cell_opacity))
     finally:
         r.release()

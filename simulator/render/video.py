@@ -105,6 +105,7 @@ def render_video(
     angles_deg: NDArray[np.float64],
     *,
     opacity: NDArray[np.float64] | None = None,
+    cell_opacity: NDArray[np.float32] | None = None,
     config: RenderConfig = RenderConfig(),
     layout: str = "mono",
     fps: float | None = None,
@@ -126,7 +127,9 @@ def render_video(
     angles_deg : ndarray, shape (N, 3), float64
         (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
         beyond N hold the last pose
-    opacity : ndarray, shape (N,), GRF opacity 0..1 per frame (ignored without ``config.grf``)
+    opacity : ndarray, shape (N,), GRF / vignette opacity 0..1 per frame
+    cell_opacity : ndarray, shape (N, n_lat, n_lon), local-grf's per-cell grain opacity
+        per frame (:func:`simulator.mitigation.cell_opacity`); frames beyond N hold the last
     layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
         ``side-by-side`` (left eye left)
     fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
@@ -166,7 +169,9 @@ def render_video(
     stereo = layout != "mono"
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
-    same = not stereo and (config.grf is None or config.grf.distance_m is None)
+    same = not stereo and (config.grains is None or config.grains.distance_m is None)
+    if config.mitigation.local and config.grains is not None and cell_opacity is None:
+        raise InputError("local-grf needs the per-cell opacity of a sphere-mode field")
     wanted = [e for e, p in zip(("left", "right"), out_paths) if p]
     if not wanted:
         raise ValueError("render_video needs at least one output path")
@@ -222,6 +227,9 @@ def render_video(
                         renderer.upload(frame, "left")
                     t2 = time.perf_counter()
                     o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
+                    co = None
+                    if cell_opacity is not None and config.mitigation.local:
+                        co = cell_opacity[min(n, len(cell_opacity) - 1)]
                     outs = []
                     for eye in eyes:
                         img = renderer.render(
@@ -231,6 +239,7 @@ def render_video(
                             opacity=o,
                             eye_offset=renderer.eye_offset(rots[i], eye),
                             pix_fmt="yuv420p",
+                            cell_opacity=co,
                         )
                         outs.append(img.copy())  # the buffer is reused
                     t3 = time.perf_counter()

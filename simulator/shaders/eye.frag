@@ -27,6 +27,10 @@
 //                  video; 0: level 0, bilinear (what that rule gives there anyway).
 //   GRAIN_PARALLAX grains at a finite distance (eye offset); 0: at infinity, the ray
 //                  from the eye is the view ray and the video's lon/lat are reused.
+//   LOCAL_GRF      local-grf (simulator/mitigation.py): the grain alpha follows the flow
+//                  of the ray's field cell (u_cell_opacity, nearest) instead of u_opacity.
+//   VIGNETTE       the head-fixed tunneling vignette: alpha linear in eccentricity,
+//                  clamp((ecc - radius) / feather + 1/2, 0, 1), in u_vignette_color.
 
 uniform sampler2D u_equirect;      // the eye's equirect frame, mipmapped, RGB8, s repeats
 uniform mat3 u_head;               // head -> world rotation (geometry.head_rotation)
@@ -92,6 +96,13 @@ uniform vec2 u_cutout;             // inner, outer cutout radius, radians
 #if GRAIN_PARALLAX
 uniform vec3 u_eye_offset;         // eye position in the world frame / grain distance
 #endif
+#if LOCAL_GRF
+uniform sampler2D u_cell_opacity;  // per-cell grain opacity, lon/lat cells (row 0 north), nearest
+#endif
+#endif
+#if VIGNETTE
+uniform vec2 u_vignette;           // aperture radius (alpha 1/2), feather width, radians
+uniform vec3 u_vignette_color;     // RGB 0..1
 #endif
 
 void main() {
@@ -131,7 +142,11 @@ void main() {
 #if GRF
     float ecc = atan(length(d_head.xy), d_head.z);
     float cut = clamp((ecc - u_cutout.x) / (u_cutout.y - u_cutout.x), 0.0, 1.0);
+#if LOCAL_GRF
+    float k = cut * texture(u_cell_opacity, st).r;
+#else
     float k = cut * u_opacity;
+#endif
     if (k > 0.0) {
         // Ray from the eye (offset o, in grain-distance units) to the grain sphere |p| = 1.
 #if GRAIN_PARALLAX
@@ -151,6 +166,12 @@ void main() {
 #endif
         color *= 1.0 - k * cov;                             // black grains, "over"
     }
+#endif
+#if VIGNETTE
+    float vecc = atan(length(d_head.xy), d_head.z);
+    float va = u_vignette.y > 0.0 ? clamp((vecc - u_vignette.x) / u_vignette.y + 0.5, 0.0, 1.0)
+                                  : float(vecc >= u_vignette.x);
+    color = mix(color, u_vignette_color, va);               // head-fixed, over everything
 #endif
     frag_color = vec4(color, 1.0);
     frag_luma = (16.0 + 219.0 * dot(clamp(color, 0.0, 1.0), vec3(0.299, 0.587, 0.114))) / 255.0;

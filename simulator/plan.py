@@ -1,0 +1,243 @@
+"""What every frame of a viewing shows: its checked inputs, poses, EPOF and opacity (no GL, no files).
+
+:func:`plan_viewing` is the planning half of the one-viewing job, shared by ``vimsim render``
+(:func:`simulator.viewing.render_viewing`) and ``vimsim frames``: the video probed, the head
+path sampled at each frame's time ``i / fps`` (seconds; angles in degrees, yaw + right,
+pitch + up, roll + right ear down), the EPOF over ``config.frustum`` and the opacity that
+drives the mitigation.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv
+from simulator.errors import InputError
+from simulator.grf import OpacityRule, grain_count
+from simulator.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
+from simulator.headpath import HeadPath
+from simulator.readers import load_headpath
+from simulator.render.eye import RenderConfig
+from simulator.video import MediaInfo, probe
+
+__all__ = ["ViewingPlan", "frame_range", "grf_settings", "plan_viewing"]
+
+
+def frame_range(
+    n_frames: int,
+    fps: float,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    *,
+    video: str = "",
+) -> tuple[int, int]:
+    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
+
+    None = the video's start / end. InputError (naming ``video``) for a range outside the
+    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
+    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
+    """
+    dur = n_frames / fps
+    src = f"{video}: " if video else ""
+    s = 0.0 if start_s is None else float(start_s)
+    e = dur if end_s is None else float(end_s)
+    if not (np.isfinite(s) and np.isfinite(e)):
+        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if e <= s:
+        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
+    if s < 0 or s >= dur:
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
+    if e > dur + 1e-6:
+        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
+    eps = 1e-6
+    f0 = int(np.ceil(s * fps - eps))
+    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
+    if f1 <= f0:
+        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
+    return f0, f1
+
+
+def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
+    has a row for each of them and no frame beyond the video)."""
+    fr = np.asarray(res.frame, np.int64)
+    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
+        raise InputError(
+            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
+            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
+        )
+    pos = {int(f): i for i, f in enumerate(fr)}
+    missing = [int(f) for f in frames if int(f) not in pos]
+    if missing:
+        raise InputError(
+            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
+            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
+            f"({len(missing)} missing, first {missing[0]})"
+        )
+    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
+    if np.any((op < 0) | (op > 1)):
+        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
+    return op
+
+
+@dataclass(frozen=True)
+class ViewingPlan:
+    """One viewing's inputs, checked, and its per-frame poses and GRF opacity.
+
+    info : the video's :class:`simulator.video.MediaInfo`
+    headpath : the head path; grid : the grid file or None
+    frames : ndarray, shape (N,), the video frame numbers of the plan (``f0 .. f1 - 1``)
+    times_s : ndarray, shape (N,), time of each frame ``i / fps`` (seconds)
+    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of each frame, degrees
+    epof_dps : ndarray, shape (N,), EPOF (deg/s; NaN without a grid)
+    opacity : ndarray, shape (N,), the GRF opacity rendered at each frame (0 without GRF)
+    thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
+    epof_method : ``paper`` or ``sphere`` (None without a grid)
+    opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
+    """
+
+    info: MediaInfo
+    headpath: HeadPath
+    grid: GridFile | None
+    frames: np.ndarray
+    times_s: np.ndarray
+    angles_deg: np.ndarray
+    epof_dps: np.ndarray
+    opacity: np.ndarray
+    thresholds_dps: tuple[float, float]
+    epof_method: str | None = None
+    opacity_label: object = "auto"
+
+    @property
+    def ranged(self) -> bool:
+        """True when the plan covers only part of the video."""
+        return (int(self.frames[0]), int(self.frames[-1]) + 1) != (0, self.info.n_frames)
+
+
+def grf_settings(grf) -> dict | None:
+    """The GRF parameters as written in ``summary.json`` / ``frames.json`` (None: no GRF)."""
+    if grf is None:
+        return None
+    return {
+        "grain_deg": grf.grain_deg,
+        "density": grf.density,
+        "inner_deg": grf.inner_deg,
+        "outer_deg": grf.outer_deg,
+        "seed": grf.seed,
+        "distance_m": grf.distance_m,
+        "n_grains": grain_count(grf),
+    }
+
+
+def plan_viewing(
+    video,
+    headpath,
+    *,
+    grid=None,
+    config: RenderConfig = RenderConfig(),
+    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
+    layout: str = "mono",
+    hold: bool = False,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    rule: OpacityRule = OpacityRule(),
+    method: str = "auto",
+) -> ViewingPlan:
+    """Check a viewing's inputs and work out what every frame shows (no GL, no output).
+
+    What :func:`render_viewing` renders and ``vimsim frames`` renders at chosen moments:
+    the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
+    (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
+    EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
+    it to a time range (:func:`frame_range`). Raises InputError for a bad video, head
+    path, grid, range or opacity.
+    """
+    grf = config.grains
+    mit = config.mitigation
+    drawn = grf is not None or mit.vignette
+    op_csv = None
+    if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
+        op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
+        opacity = str(opacity)
+    elif isinstance(opacity, str):
+        pass
+    elif not (0.0 <= float(opacity) <= 1.0):
+        raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
+
+    info = probe(video)
+    info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
+    if not info.is_video:
+        raise InputError(
+            f"{video}: a still image; render needs a video (vimsim viewport renders images)"
+        )
+    hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
+    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
+    ranged = (f0, f1) != (0, info.n_frames)
+    nf = f1 - f0
+    frames = np.arange(f0, f1)
+    times = frames / info.fps
+    hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
+
+    if grid is not None and not isinstance(grid, GridFile):
+        grid = load_grid(grid)
+    if grid is not None:
+        grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
+    if op_csv is not None:
+        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
+    if mit.local and grf is not None and grid is None:
+        raise InputError(
+            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
+            f"with `{MAKE_FIELD_HINT}`"
+        )
+    if mit.local and grf is not None:
+        require_field(grid)  # local-grf on a paper-mode grid: one line with the hint
+    if drawn and opacity == "auto" and grid is None:
+        raise InputError(
+            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
+        )
+
+    # Per-frame head angles and opacity (EPOF rows when a grid is given).
+    yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
+    epof_dps = np.full(nf, np.nan)
+    thresholds = (float("nan"), float("nan"))
+    op_auto = None
+    epof_method = None
+    if grid is not None:
+        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
+        # and easing have their state at the range's start (cost ~ the range).
+        warm = 0
+        if ranged:
+            warm = int(
+                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
+            )
+        res = compute_epof(
+            grid,
+            hp,
+            frustum=config.frustum,
+            hold=True if ranged else hold,
+            rule=rule,
+            method=method,
+            frames=(max(0, f0 - warm), f1) if ranged else None,
+        )
+        epof_method = res.meta["method"]
+        # Grid rows by video frame number (a grid may start later or lack the last frame).
+        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+        epof_dps = res.epof_dps[rows].astype(float)
+        op_auto = res.opacity[rows].astype(float)
+        thresholds = tuple(float(v) for v in res.thresholds_dps)
+    if not drawn:
+        op = np.zeros(nf)
+    elif op_csv is not None:
+        op = op_from_csv
+    elif opacity == "auto":
+        op = op_auto
+    else:
+        op = np.full(nf, float(opacity))
+    angles = np.stack([yaw, pitch, roll], axis=-1)
+    return ViewingPlan(
+        info, hp, grid, frames, times, angles, epof_dps, op, thresholds, epof_method, opacity
+    )
