@@ -723,10 +723,18 @@ namespace Vimsim
         readonly double[] nw = new double[12], hk = new double[4], phik = new double[4], hRow = new double[4], nySl = new double[4];
         int[] cand = new int[16], inner = new int[16], tmp = new int[16];
         readonly int[] arc = new int[4];
-        int[] mark;
-        int stamp;
+        int[] runRowS = new int[64], runJ0S = new int[64], runJ1S = new int[64];
+        double[] runSaS = new double[64];
 
-        sealed class Bin { public int count; public int[] rowBase; public int[] cols; public double[] w; public double wsum; }
+        /// <summary>One bin's weights: interior runs (row, columns [j0, j1), each weighing the
+        /// row's cell area: coverage 1) and the boundary cells with their own weights.</summary>
+        sealed class Bin
+        {
+            public int count, runs;
+            public int[] rowBase, cols, runRow, runJ0, runJ1;
+            public double[] w, runSa;
+            public double wsum;
+        }
         Bin spare; // the last evicted bin: its arrays are reused
 
         public SphereModel(double cellDeg, double stepDeg, double hfov, double vfov, int cacheBins)
@@ -756,7 +764,6 @@ namespace Vimsim
                 rowHalfE[i] = 0.5 * c * Math.Max(rowCl[i], edge);
             }
             halfN = 0.5 * c;
-            mark = new int[NLon];
             colSin = new double[NLon]; colCos = new double[NLon];
             for (int j = 0; j < NLon; j++)
             {
@@ -797,9 +804,25 @@ namespace Vimsim
                 order.Enqueue(key);
             }
             double s = 0;
+            int nLon = NLon;
+            int[] rr = b.runRow, r0 = b.runJ0, r1 = b.runJ1;
+            double[] rs = b.runSa;
+            for (int q = 0, nq = b.runs; q < nq; q++)
+            {   // columns j0 + shift .. j1 + shift, wrapping at nLon: one or two contiguous pieces
+                int o = off + rr[q], a = r0[q] + shift, e = r1[q] + shift;
+                if (a >= nLon) { a -= nLon; e -= nLon; }
+                double t = 0;
+                if (e <= nLon) for (int j = a; j < e; j++) t += field[o + j];
+                else
+                {
+                    int j = a;
+                    for (; j < nLon; j++) t += field[o + j];
+                    for (j = 0; j < e - nLon; j++) t += field[o + j];
+                }
+                s += t * rs[q];
+            }
             int[] rb = b.rowBase, cols = b.cols;
             double[] w = b.w;
-            int nLon = NLon;
             for (int q = 0, nq = b.count; q < nq; q++)
             {
                 int col = cols[q] + shift;
@@ -833,11 +856,11 @@ namespace Vimsim
             int i1 = Math.Min(NLat, (int)Math.Floor((Math.PI / 2 - axisLat + radius) / c) + 1);
             int cap = (i1 - i0) * NLon;
             if (scratchW.Length < cap) { scratchW = new double[cap]; scratchR = new int[cap]; scratchC = new int[cap]; }
-            int cnt = 0;
+            int cnt = 0, nRun = 0;
             double wmax = 0, minBoundary = double.PositiveInfinity;
             // Locals: Mono does not hoist field loads out of loops.
             double[] sw = scratchW, cs = colSin, cc = colCos;
-            int[] sr = scratchR, sc = scratchC, mk = mark;
+            int[] sr = scratchR, sc = scratchC;
             double hn = halfN;
             int nLon = NLon;
             double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2], nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
@@ -859,19 +882,32 @@ namespace Vimsim
                 if (nc == 0) continue;
                 for (int k = 0; k < 4 && ni > 0; k++)
                     ni = Intersect(ref inner, ni, cl * hk[k], phik[k], hRow[k] - nySl[k], -1);
-                int stp = ++stamp;
                 for (int q = 0; q < ni; q++)
-                    for (int j = inner[2 * q], je = inner[2 * q + 1]; j < je; j++) mk[j] = stp;
+                {   // interior runs: coverage exactly 1, weight = the row's cell area
+                    if (nRun == runRowS.Length) GrowRuns();
+                    runRowS[nRun] = rowBase; runJ0S[nRun] = inner[2 * q]; runJ1S[nRun] = inner[2 * q + 1];
+                    runSaS[nRun] = sa;
+                    nRun++;
+                    if (sa > wmax) wmax = sa;
+                }
                 double h0 = hRow[0], h1 = hRow[1], h2 = hRow[2], h3 = hRow[3];
                 double s0 = nySl[0], s1 = nySl[1], s2 = nySl[2], s3 = nySl[3];
+                int iq = 0;
                 for (int q = 0; q < nc; q++)
-                    for (int j = cand[2 * q], je = cand[2 * q + 1]; j < je; j++)
-                    {
-                        double w;
-                        if (mk[j] == stp) w = sa; // every plane: d >= hw, coverage exactly 1
-                        else
-                        {   // per plane clip(0.5 + 0.5 d / hw, 0, 1), hw = |n . east_half| + |n . north_half|
-                            // + 1e-9 (simulator.sphere); H >= hw settles most planes in 4 flops
+                {
+                    int cur = cand[2 * q], ce = cand[2 * q + 1];
+                    while (cur < ce)
+                    {   // the next boundary piece: candidate columns outside the interior runs
+                        while (iq < ni && inner[2 * iq + 1] <= cur) iq++;
+                        int pe = ce;
+                        if (iq < ni && inner[2 * iq] < ce)
+                        {
+                            if (inner[2 * iq] <= cur) { cur = inner[2 * iq + 1]; continue; }
+                            pe = inner[2 * iq];
+                        }
+                        for (int j = cur; j < pe; j++)
+                        {   // per plane clip(0.5 + 0.5 d / hw, 0, 1), hw = |n . east_half| +
+                            // |n . north_half| + 1e-9 (simulator.sphere); H >= hw settles most planes
                             double so = cs[j], co = cc[j], cov = 1.0, u, d0, hw;
                             u = nx0 * so + nz0 * co; d0 = cl * u + s0; // n . centre
                             if (d0 < h0)
@@ -905,15 +941,17 @@ namespace Vimsim
                                 if (d0 <= -hw) continue;
                                 if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
                             }
-                            w = cov * sa;
+                            double w = cov * sa;
                             if (w < minBoundary) minBoundary = w;
+                            sw[cnt] = w;
+                            sr[cnt] = rowBase;
+                            sc[cnt] = j;
+                            cnt++;
+                            if (w > wmax) wmax = w;
                         }
-                        sw[cnt] = w;
-                        sr[cnt] = rowBase;
-                        sc[cnt] = j;
-                        cnt++;
-                        if (w > wmax) wmax = w;
+                        cur = pe;
                     }
+                }
             }
             // simulator.sphere keeps w > max(w) 1e-7: only boundary cells can be that small.
             double thr = wmax * 1e-7;
@@ -922,9 +960,9 @@ namespace Vimsim
             {
                 keep = 0;
                 for (int q = 0; q < cnt; q++)
-                    if (scratchW[q] > thr)
+                    if (sw[q] > thr)
                     {
-                        scratchW[keep] = scratchW[q]; scratchR[keep] = scratchR[q]; scratchC[keep] = scratchC[q];
+                        sw[keep] = sw[q]; sr[keep] = sr[q]; sc[keep] = sc[q];
                         keep++;
                     }
             }
@@ -932,17 +970,34 @@ namespace Vimsim
             spare = null;
             if (bin.w == null || bin.w.Length < keep)
             {
-                int size = keep + keep / 4;
+                int size = keep + keep / 4 + 8;
                 bin.w = new double[size]; bin.rowBase = new int[size]; bin.cols = new int[size];
             }
-            Array.Copy(scratchW, bin.w, keep);
-            Array.Copy(scratchR, bin.rowBase, keep);
-            Array.Copy(scratchC, bin.cols, keep);
+            if (bin.runSa == null || bin.runSa.Length < nRun)
+            {
+                int size = nRun + nRun / 4 + 8;
+                bin.runSa = new double[size]; bin.runRow = new int[size]; bin.runJ0 = new int[size]; bin.runJ1 = new int[size];
+            }
+            Array.Copy(sw, bin.w, keep);
+            Array.Copy(sr, bin.rowBase, keep);
+            Array.Copy(sc, bin.cols, keep);
+            Array.Copy(runSaS, bin.runSa, nRun);
+            Array.Copy(runRowS, bin.runRow, nRun);
+            Array.Copy(runJ0S, bin.runJ0, nRun);
+            Array.Copy(runJ1S, bin.runJ1, nRun);
             double wsum = 0;
-            for (int q = 0; q < keep; q++) wsum += scratchW[q];
+            for (int q = 0; q < nRun; q++) wsum += runSaS[q] * (runJ1S[q] - runJ0S[q]);
+            for (int q = 0; q < keep; q++) wsum += sw[q];
             bin.count = keep;
+            bin.runs = nRun;
             bin.wsum = wsum;
             return bin;
+        }
+
+        void GrowRuns()
+        {
+            int n = 2 * runRowS.Length;
+            Array.Resize(ref runRowS, n); Array.Resize(ref runJ0S, n); Array.Resize(ref runJ1S, n); Array.Resize(ref runSaS, n);
         }
 
         /// <summary>acos(x), x in [-1, 1], within 6.8e-5 rad (Abramowitz and Stegun 4.4.45).</summary>
