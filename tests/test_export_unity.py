@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from simulator.cli import main
-from simulator.epof import read_epof_csv
+from simulator.epof import read_epof_csv, viewport_overlaps
 from simulator.export import DATA_FILE, VERSION, export_unity, frame_at, read_export
 from simulator.export.unity import CS_FILES
 from simulator.geometry import grid_preset, head_rotation
@@ -187,7 +187,9 @@ def test_paper_mode_agrees_with_vimsim_epof(tmp_path, harness, capsys):
     assert "paper mode, float32 1000x11x24" in capsys.readouterr().out
     qf = _write_queries(tmp_path / "q.bin", qt, y, p, r)
     _mono(harness, "query", tmp_path / "x32", qf, tmp_path / "r32.bin",
-          tmp_path / "x16", qf, tmp_path / "r16.bin")  # fmt: skip
+          tmp_path / "x16", qf, tmp_path / "r16.bin", ";", "table", tmp_path / "x32", tmp_path / "t")  # fmt: skip
+    table = viewport_overlaps(grid_preset("default"), 107.0, 107.0).table
+    np.testing.assert_array_equal(np.fromfile(tmp_path / "t", "<f4").reshape(table.shape), table)
     worst = _check_agreement(ref, *_read_results(tmp_path / "r32.bin"))
     e16, _, f16 = _read_results(tmp_path / "r16.bin")
     np.testing.assert_array_equal(f16, ref.frame)

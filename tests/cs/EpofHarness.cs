@@ -1,4 +1,5 @@
 // Test and bench harness for the exported C# runtime (compiled with VimsimEpof.cs by mcs).
+// Several commands separated by ";" run in one process.
 //   query BIN QUERIES OUT [BIN QUERIES OUT ...]
 //                            QUERIES: int32 n, n x (float64 t, float32 yaw, pitch, roll);
 //                            OUT: n x (float32 epof, float32 opacity, int32 frame)
@@ -16,7 +17,19 @@ using Vimsim;
 
 static class EpofHarness
 {
-    static int Main(string[] a)
+    static int Main(string[] args)
+    {   // commands separated by ";" run in one process (the paper-mode table is built once)
+        var cmd = new System.Collections.Generic.List<string>();
+        int rc = 0;
+        foreach (string x in args)
+        {
+            if (x == ";") { rc = Run(cmd.ToArray()); cmd.Clear(); if (rc != 0) return rc; }
+            else cmd.Add(x);
+        }
+        return cmd.Count > 0 ? Run(cmd.ToArray()) : rc;
+    }
+
+    static int Run(string[] a)
     {
         switch (a[0])
         {
