@@ -10,12 +10,20 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: demo test setup sysdeps lint bench clean
 
-# Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser.
+# Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser;
+# Mono's C# compiler for the Unity export (simulator/export/unity/*.cs).
 sysdeps:
 	@if ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
 		echo "installing Debian packages libegl1 libgl1-mesa-dri (headless EGL, llvmpipe)"; \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends libegl1 libgl1-mesa-dri; \
+	fi
+	@# Mono C# compiler and runtime: the Unity export's C# runtime is compiled and checked
+	@# against the Python EPOF in make test (tests/test_export_unity.py).
+	@if ! dpkg -s mono-mcs mono-runtime >/dev/null 2>&1; then \
+		echo "installing Debian packages mono-mcs mono-runtime (C# compiler for the Unity export check)"; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends mono-mcs mono-runtime; \
 	fi
 
 $(STAMP): pyproject.toml

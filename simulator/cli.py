@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "synth": "synth",
     "demo": "demo",
     "analyze": "analyze",
+    "export": "export",
 }
 
 

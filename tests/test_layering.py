@@ -43,9 +43,12 @@ def _simulator_imports(tree: ast.AST):
     for n in ast.walk(tree):
         if isinstance(n, ast.ImportFrom) and n.module and n.module.startswith("simulator"):
             parts = n.module.split(".")
-            if len(parts) == 1:  # from simulator import x
+            if len(parts) == 1:  # from simulator import x: a module, or the root's __version__
                 for a in n.names:
-                    yield n, a.name
+                    if (PKG / a.name).is_dir() or (PKG / f"{a.name}.py").is_file():
+                        yield n, a.name
+                    else:
+                        yield n, "errors"  # the root package imports errors only
             else:
                 yield n, parts[1]
         elif isinstance(n, ast.Import):

@@ -387,10 +387,14 @@ def test_cli_render_outputs(ctx, tmp_path):
     right = read_frame(out / "right.mp4").astype(float).mean(axis=(0, 1))
     assert left[0] > left[2] + 40 and right[2] > right[0] + 40  # each eye its own half
     rows = (out / "epof.csv").read_text().splitlines()
-    assert rows[0] == (
-        "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity,"
-        "visible_flow_dps,visible_ratio,blocked_share"
-    ) and len(rows) == 5
+    assert (
+        rows[0]
+        == (
+            "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity,"
+            "visible_flow_dps,visible_ratio,blocked_share"
+        )
+        and len(rows) == 5
+    )
     s = json.loads((out / "summary.json").read_text())
     assert s["frames_written"] == 4 and s["grf"]["density"] == 0.5 and s["opacity"] == 0.7
     assert not list(out.glob(".*tmp*"))

@@ -161,8 +161,10 @@ class ViewportOverlaps:
                 b = np.clip(((lat + 90.0) / lat_step_deg).astype(np.int64), 0, n_lat - 1)
                 s = start[:, b, :].transpose(0, 2, 1)  # (P, R, N)
                 L = length[:, b, :].transpose(0, 2, 1)
-                lo = np.ceil((s - lon) / du)
-                hi = np.floor((s + L - lon) / du)
+                # 1e-9 step of slack: a ray exactly on a run edge (diagonal rays at pitch
+                # +-90 land on whole degrees) counts as inside whatever the rounding noise.
+                lo = np.ceil((s - lon) / du - 1e-9)
+                hi = np.floor((s + L - lon) / du + 1e-9)
                 cnt = np.clip(hi - lo + 1, 0, n).astype(np.int64)
                 cnt[L <= 0] = 0
                 j0 = lo.astype(np.int64) % n

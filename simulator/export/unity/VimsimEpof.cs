@@ -1,0 +1,1225 @@
+// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 1).
+// Written by `vimsim export GRID.npz -o DIR --format unity`; docs/unity.md in vimsim.
+// Plain C# (C# 6, .NET Framework 4.x / .NET Standard 2.0 profile): no UnityEngine here.
+//
+//   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin
+//   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s
+//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1
+//
+// Conventions, exactly as `vimsim epof`: angles in degrees; yaw + turns right (toward +lon),
+// pitch + looks up, roll + tilts the head right ear down, applied yaw, then pitch, then roll
+// (intrinsic); yaw = pitch = roll = 0 looks at the centre of the equirect frame. A time is
+// seconds from the video start; it shows video frame floor(time * fps + 1e-6) (clamped to the
+// frames of the export), the frame whose row `vimsim epof` writes for that frame's time.
+// Numbers: the same computation as vimsim (paper mode: simulator.epof.ViewportOverlaps, its
+// overlap table built here at load; sphere mode: simulator.sphere.ViewportQuery). Not thread
+// safe (sphere mode caches weights): use one instance per thread.
+using System;
+using System.Collections.Generic;
+using System.Globalization;
+using System.IO;
+using System.Text;
+
+namespace Vimsim
+{
+    /// <summary>A vimsim export could not be loaded: FilePath names the file, Problem says why.</summary>
+    public class VimsimLoadException : IOException
+    {
+        public string FilePath { get; private set; }
+        public string Problem { get; private set; }
+
+        public VimsimLoadException(string path, string problem)
+            : base(path + ": " + problem)
+        {
+            FilePath = path;
+            Problem = problem;
+        }
+    }
+
+    /// <summary>EPOF (deg/s) and GRF opacity of a viewport at a video time, from a vimsim export.</summary>
+    public sealed class VimsimEpof
+    {
+        /// <summary>The binary format version this runtime reads.</summary>
+        public const int FormatVersion = 1;
+        /// <summary>File name of the data inside an export folder.</summary>
+        public const string DataFileName = "vimsim_epof.bin";
+        /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
+        public const double FrameEps = 1e-6;
+        static readonly byte[] Magic = Encoding.ASCII.GetBytes("VIMSIMEP");
+        const int PrefixBytes = 16;
+
+        /// <summary>"paper" (overlap-weighted window POFs) or "sphere" (exact, from the field).</summary>
+        public string Mode { get; private set; }
+        public double Fps { get; private set; }
+        /// <summary>Video frame number of the first row (0 unless the grid covers part of the video).</summary>
+        public int StartFrame { get; private set; }
+        public int FrameCount { get; private set; }
+        /// <summary>Viewport FOV in degrees (exact, horizontal and vertical).</summary>
+        public double HfovDeg { get; private set; }
+        public double VfovDeg { get; private set; }
+        /// <summary>Opacity 0 at or below this EPOF (deg/s), 1 at or above OpacityHighDps.</summary>
+        public double OpacityLowDps { get; private set; }
+        public double OpacityHighDps { get; private set; }
+        /// <summary>Time constant (s) of the opacity easing; 0 = none (see CreateEasing).</summary>
+        public double SmoothingS { get; private set; }
+        /// <summary>Content hash of the source video ("sha256:...", as in the grid file).</summary>
+        public string SourceVideoHash { get; private set; }
+        /// <summary>The JSON header, verbatim.</summary>
+        public string HeaderJson { get; private set; }
+        public string SourcePath { get; private set; }
+
+        float[] data;     // FrameCount x rowLength, deg/s
+        int rowLength;
+        PaperModel paper;
+        SphereModel sphere;
+        double[] scratch;
+        static readonly Dictionary<string, PaperModel> PaperCache = new Dictionary<string, PaperModel>();
+
+        VimsimEpof() { }
+
+        /// <summary>Load DIR/vimsim_epof.bin (or the .bin file itself). Throws VimsimLoadException.</summary>
+        public static VimsimEpof Load(string dirOrFile)
+        {
+            return Load(dirOrFile, 0.0, 0.0);
+        }
+
+        /// <summary>Load with another viewport FOV (degrees, 0 = the exported one).</summary>
+        public static VimsimEpof Load(string dirOrFile, double hfovDeg, double vfovDeg)
+        {
+            if (dirOrFile == null) throw new ArgumentNullException("dirOrFile");
+            string path = Directory.Exists(dirOrFile) ? System.IO.Path.Combine(dirOrFile, DataFileName) : dirOrFile;
+            byte[] bytes;
+            try
+            {
+                bytes = File.ReadAllBytes(path);
+            }
+            catch (FileNotFoundException) { throw new VimsimLoadException(path, "file not found (expected the " + DataFileName + " written by vimsim export)"); }
+            catch (DirectoryNotFoundException) { throw new VimsimLoadException(path, "file not found (its folder does not exist)"); }
+            catch (UnauthorizedAccessException) { throw new VimsimLoadException(path, "file is not readable (permission denied)"); }
+            catch (IOException ex) { throw new VimsimLoadException(path, "cannot read the file (" + ex.Message + ")"); }
+            return FromBytes(bytes, path, hfovDeg, vfovDeg);
+        }
+
+        /// <summary>Parse an export from memory (e.g. a Unity TextAsset's bytes); source names it in errors.</summary>
+        public static VimsimEpof FromBytes(byte[] bytes, string source)
+        {
+            return FromBytes(bytes, source, 0.0, 0.0);
+        }
+
+        public static VimsimEpof FromBytes(byte[] bytes, string source, double hfovDeg, double vfovDeg)
+        {
+            if (bytes == null) throw new ArgumentNullException("bytes");
+            source = source ?? "vimsim export";
+            var e = new VimsimEpof();
+            e.SourcePath = source;
+            e.Parse(bytes, hfovDeg, vfovDeg);
+            return e;
+        }
+
+        void Parse(byte[] b, double hfovOverride, double vfovOverride)
+        {
+            string src = SourcePath;
+            if (b.Length < PrefixBytes)
+                throw new VimsimLoadException(src, "truncated: " + b.Length + " bytes, shorter than the 16-byte prefix; not a complete vimsim export");
+            for (int i = 0; i < Magic.Length; i++)
+                if (b[i] != Magic[i])
+                    throw new VimsimLoadException(src, "not a vimsim export (no VIMSIMEP signature); make one with vimsim export GRID.npz -o DIR");
+            int version = (int)ReadU32(b, 8);
+            if (version != FormatVersion)
+                throw new VimsimLoadException(src, "header of format version " + version + "; this VimsimEpof.cs reads version " + FormatVersion + ": use the VimsimEpof.cs exported with the data");
+            long hlen = ReadU32(b, 12);
+            if (PrefixBytes + hlen > b.Length)
+                throw new VimsimLoadException(src, "truncated: the header needs " + (PrefixBytes + hlen) + " bytes, the file has " + b.Length);
+            string json = Encoding.UTF8.GetString(b, PrefixBytes, (int)hlen);
+            HeaderJson = json;
+            Dictionary<string, object> h;
+            try
+            {
+                h = MiniJson.Parse(json) as Dictionary<string, object>;
+            }
+            catch (FormatException ex) { throw new VimsimLoadException(src, "header is not valid JSON (" + ex.Message + ")"); }
+            if (h == null) throw new VimsimLoadException(src, "header is not a JSON object");
+            var hd = new Header(h, src);
+            if (hd.Str("format") != "vimsim-epof")
+                throw new VimsimLoadException(src, "header format is '" + hd.Str("format") + "', not vimsim-epof");
+            if ((int)hd.Num("version") != FormatVersion)
+                throw new VimsimLoadException(src, "header of format version " + hd.Num("version") + "; this VimsimEpof.cs reads version " + FormatVersion);
+            Mode = hd.Str("mode");
+            Fps = hd.Num("fps");
+            StartFrame = (int)hd.Num("start_frame");
+            FrameCount = (int)hd.Num("n_frames");
+            if (!(Fps > 0) || FrameCount < 1)
+                throw new VimsimLoadException(src, "header has fps " + Fps + " and " + FrameCount + " frames; expected fps > 0 and >= 1 frame");
+            var vp = hd.Obj("viewport");
+            HfovDeg = hfovOverride > 0 ? hfovOverride : vp.Num("hfov_deg");
+            VfovDeg = vfovOverride > 0 ? vfovOverride : (hfovOverride > 0 ? hfovOverride : vp.Num("vfov_deg"));
+            if (!(HfovDeg > 0 && HfovDeg < 180 && VfovDeg > 0 && VfovDeg < 180))
+                throw new ArgumentOutOfRangeException("hfovDeg", "viewport FOV must be degrees in (0, 180); got " + HfovDeg + " x " + VfovDeg);
+            var op = hd.Obj("opacity");
+            OpacityLowDps = op.Num("low_dps");
+            OpacityHighDps = op.Num("high_dps");
+            SmoothingS = op.Num("smoothing_s");
+            var video = hd.Obj("video");
+            SourceVideoHash = video.Has("content_hash") ? video.Str("content_hash") : "";
+
+            var d = hd.Obj("data");
+            string dtype = d.Str("dtype");
+            int itemSize = dtype == "float16" ? 2 : dtype == "float32" ? 4 : 0;
+            if (itemSize == 0) throw new VimsimLoadException(src, "data dtype '" + dtype + "'; expected float16 or float32");
+            var shape = d.IntArray("shape");
+            if (shape.Length != 3 || shape[0] != FrameCount)
+                throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "]; expected [n_frames, rows, columns]");
+            long offset = (long)d.Num("offset");
+            long count = (long)shape[0] * shape[1] * shape[2];
+            long need = offset + count * itemSize;
+            if (offset < PrefixBytes + hlen || need > b.Length)
+                throw new VimsimLoadException(src, "truncated: the data needs " + need + " bytes, the file has " + b.Length);
+            if (need != b.Length)
+                throw new VimsimLoadException(src, "file has " + (b.Length - need) + " bytes after the data; not a vimsim export as written");
+            rowLength = shape[1] * shape[2];
+            data = new float[count];
+            if (!BitConverter.IsLittleEndian) throw new PlatformNotSupportedException("VimsimEpof reads little-endian data on little-endian machines only");
+            if (itemSize == 4)
+                Buffer.BlockCopy(b, (int)offset, data, 0, (int)(count * 4));
+            else
+                for (long i = 0; i < count; i++)
+                    data[i] = HalfToFloat((ushort)(b[offset + 2 * i] | (b[offset + 2 * i + 1] << 8)));
+
+            if (Mode == "paper")
+            {
+                var g = hd.Obj("grid");
+                var t = hd.Obj("overlap_table");
+                double[] yawDeg = g.DoubleArray("yaw_deg"), pitchDeg = g.DoubleArray("pitch_deg");
+                double[] num = { g.Num("yaw_step_deg"), g.Num("yaw_start_deg"), g.Num("hfov_deg"), g.Num("vfov_deg"),
+                    HfovDeg, VfovDeg, t.Num("pitch_step_deg"), t.Num("roll_step_deg"), t.Num("yaw_step_deg"),
+                    t.Num("rays"), t.Num("lat_step_deg"), t.Num("lon_step_deg") };
+                var key = new StringBuilder();
+                foreach (double x in yawDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+                key.Append('|');
+                foreach (double x in pitchDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+                key.Append('|');
+                foreach (double x in num) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+                lock (PaperCache)
+                {   // the table depends on the grid and FOV only: built once per process for all videos
+                    if (!PaperCache.TryGetValue(key.ToString(), out paper))
+                    {
+                        paper = new PaperModel(yawDeg, pitchDeg, num[0], num[1], num[2], num[3], num[4], num[5],
+                            num[6], num[7], num[8], (int)num[9], num[10], num[11]);
+                        if (PaperCache.Count >= 4) PaperCache.Clear();
+                        PaperCache[key.ToString()] = paper;
+                    }
+                }
+                scratch = new double[paper.P * paper.Y];
+                if (shape[1] != paper.P || shape[2] != paper.Y)
+                    throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match the grid's " + paper.P + " x " + paper.Y + " windows");
+            }
+            else if (Mode == "sphere")
+            {
+                var f = hd.Obj("field");
+                sphere = new SphereModel(f.Num("cell_deg"), f.Num("query_step_deg"), HfovDeg, VfovDeg, (int)f.Num("cache_bins"));
+                if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
+                    throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")");
+            }
+            else throw new VimsimLoadException(src, "mode '" + Mode + "'; expected paper or sphere");
+        }
+
+        static uint ReadU32(byte[] b, int o)
+        {
+            return (uint)(b[o] | (b[o + 1] << 8) | (b[o + 2] << 16) | (b[o + 3] << 24));
+        }
+
+        static float[] halfTable;
+
+        /// <summary>IEEE 754 binary16 -> float (exact).</summary>
+        public static float HalfToFloat(ushort h)
+        {
+            if (halfTable == null)
+            {
+                var t = new float[65536];
+                for (int i = 0; i < 65536; i++) t[i] = HalfToFloatSlow((ushort)i);
+                halfTable = t;
+            }
+            return halfTable[h];
+        }
+
+        static float HalfToFloatSlow(ushort h)
+        {
+            int sign = (h >> 15) & 1, exp = (h >> 10) & 0x1f, man = h & 0x3ff;
+            float v;
+            if (exp == 0) v = man * (1.0f / 16777216.0f); // subnormal: man * 2^-24
+            else if (exp == 31) v = man == 0 ? float.PositiveInfinity : float.NaN;
+            else v = (float)((1024 + man) * Math.Pow(2.0, exp - 25));
+            return sign == 1 ? -v : v;
+        }
+
+        // ------------------------------------------------------------------ queries
+        /// <summary>Video frame shown at a time (s from the video start), clamped to the exported frames.</summary>
+        public int FrameAt(double timeS)
+        {
+            if (double.IsNaN(timeS) || double.IsInfinity(timeS))
+                throw new ArgumentOutOfRangeException("timeS", "time must be finite seconds; got " + timeS);
+            double f = Math.Floor(timeS * Fps + FrameEps);
+            if (f < StartFrame) return StartFrame;
+            if (f > StartFrame + FrameCount - 1) return StartFrame + FrameCount - 1;
+            return (int)f;
+        }
+
+        /// <summary>EPOF in deg/s of the viewport (degrees) at a video time (s), as vimsim epof.</summary>
+        public float Epof(double timeS, float yawDeg, float pitchDeg, float rollDeg)
+        {
+            return (float)EpofAtFrame(FrameAt(timeS), yawDeg, pitchDeg, rollDeg);
+        }
+
+        /// <summary>EPOF in deg/s at a video frame number (StartFrame .. StartFrame + FrameCount - 1).</summary>
+        public double EpofAtFrame(int frame, double yawDeg, double pitchDeg, double rollDeg)
+        {
+            int row = frame - StartFrame;
+            if (row < 0 || row >= FrameCount)
+                throw new ArgumentOutOfRangeException("frame", "frame " + frame + " outside " + StartFrame + ".." + (StartFrame + FrameCount - 1));
+            if (double.IsNaN(yawDeg + pitchDeg + rollDeg) || double.IsInfinity(yawDeg + pitchDeg + rollDeg))
+                throw new ArgumentOutOfRangeException("yawDeg", "orientation must be finite degrees");
+            int off = row * rowLength;
+            return paper != null ? paper.Query(data, off, yawDeg, pitchDeg, rollDeg, scratch)
+                                 : sphere.Query(data, off, yawDeg, pitchDeg, rollDeg);
+        }
+
+        /// <summary>GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to OpacityHighDps, clamped.</summary>
+        public float Opacity(float epofDps)
+        {
+            double lo = OpacityLowDps, hi = OpacityHighDps, e = epofDps;
+            if (hi > lo) return (float)Math.Min(1.0, Math.Max(0.0, (e - lo) / (hi - lo)));
+            return e > lo ? 1f : 0f; // constant flow: a step at the threshold
+        }
+
+        /// <summary>A stateful opacity easing with the exported time constant (SmoothingS; 0 = passthrough).</summary>
+        public OpacityEasing CreateEasing()
+        {
+            return new OpacityEasing(SmoothingS, Fps);
+        }
+
+        /// <summary>Number of cached sphere-mode weight bins (0 in paper mode).</summary>
+        public int CachedBins { get { return sphere == null ? 0 : sphere.CachedBins; } }
+
+        /// <summary>Paper mode: the overlap table (n_pitch, n_roll, n_u + 1, P, Y), for checks.</summary>
+        public float[] OverlapTable { get { return paper == null ? null : paper.Table; } }
+
+        // --------------------------------------------------------- Unity conversion
+        /// <summary>
+        /// vimsim yaw/pitch/roll (degrees) of a Unity rotation given as Transform.eulerAngles (x, y, z).
+        /// Unity applies z, then x, then y about fixed axes (= y, x, z intrinsic, vimsim's order),
+        /// +x rotation looks down and +z rotation tilts the head left ear down; Unity's world has the
+        /// same axes (+x right, +y up, +z forward). So yaw = y + yawOffsetDeg, pitch = -x, roll = -z,
+        /// each wrapped to (-180, 180]. yawOffsetDeg = vimsim yaw of Unity's +z (the video's
+        /// placement; docs/unity.md). Example: eulerAngles (350, 30, 5), offset 0 -> yaw 30, pitch 10, roll -5.
+        /// </summary>
+        public static void FromUnityEuler(float xDeg, float yDeg, float zDeg, float yawOffsetDeg,
+                                          out float yawDeg, out float pitchDeg, out float rollDeg)
+        {
+            yawDeg = (float)Wrap180((double)yDeg + yawOffsetDeg);
+            pitchDeg = (float)-Wrap180(xDeg);
+            rollDeg = (float)-Wrap180(zDeg);
+        }
+
+        /// <summary>An angle in degrees wrapped to (-180, 180].</summary>
+        public static double Wrap180(double a)
+        {
+            double r = PyMod(a + 180.0, 360.0) - 180.0; // [-180, 180)
+            return r == -180.0 ? 180.0 : r;
+        }
+
+        /// <summary>Floating modulo with the sign of the divisor (numpy's np.mod / Python's %).</summary>
+        internal static double PyMod(double a, double b)
+        {
+            double m = a % b; // C fmod
+            if (m != 0.0 && ((b < 0) != (m < 0))) m += b;
+            return m;
+        }
+
+        /// <summary>
+        /// R = Ry(yaw) Rx(-pitch) Rz(-roll) (head -> world), row-major 3x3, radians in; computed
+        /// as scipy's Rotation.from_euler("YXZ", [yaw, -pitch, -roll]).as_matrix() does
+        /// (elementary quaternions, Hamilton products, quaternion -> matrix), so that the same
+        /// inputs give the same bits where the tables need them.
+        /// </summary>
+        internal static double[] HeadRotation(double yaw, double pitch, double roll)
+        {
+            double[] q = Compose(Compose(Elementary(1, yaw), Elementary(0, -pitch)), Elementary(2, -roll));
+            double x = q[0], y = q[1], z = q[2], w = q[3];
+            double x2 = x * x, y2 = y * y, z2 = z * z, w2 = w * w;
+            double xy = x * y, zw = z * w, xz = x * z, yw = y * w, yz = y * z, xw = x * w;
+            return new double[] {
+                x2 - y2 - z2 + w2, 2 * (xy - zw), 2 * (xz + yw),
+                2 * (xy + zw), -x2 + y2 - z2 + w2, 2 * (yz - xw),
+                2 * (xz - yw), 2 * (yz + xw), -x2 - y2 + z2 + w2 };
+        }
+
+        static double[] Elementary(int axis, double angle)
+        {
+            var q = new double[] { 0.0, 0.0, 0.0, Math.Cos(angle / 2) };
+            q[axis] = Math.Sin(angle / 2);
+            return q;
+        }
+
+        static double[] Compose(double[] p, double[] q)
+        {
+            double cx = p[1] * q[2] - p[2] * q[1], cy = p[2] * q[0] - p[0] * q[2], cz = p[0] * q[1] - p[1] * q[0];
+            return new double[] {
+                p[3] * q[0] + q[3] * p[0] + cx,
+                p[3] * q[1] + q[3] * p[1] + cy,
+                p[3] * q[2] + q[3] * p[2] + cz,
+                p[3] * q[3] - (p[0] * q[0] + p[1] * q[1] + p[2] * q[2]) };
+        }
+
+        /// <summary>Degrees to radians as Python's math.radians and numpy's deg2rad: x * (pi / 180).</summary>
+        internal static double Rad(double deg) { return deg * (Math.PI / 180.0); }
+
+        /// <summary>Round half to even (Python's round, numpy's rint).</summary>
+        internal static long RoundEven(double x)
+        {
+            return (long)Math.Round(x, MidpointRounding.ToEven);
+        }
+    }
+
+    /// <summary>
+    /// Causal exponential easing of the GRF opacity, as `vimsim epof --smooth S`: per video frame
+    /// v += a (x - v) with a = 1 - exp(-1 / (fps S)), starting at the first value. Step() advances
+    /// one video frame; Update() advances any time step (render frames). S = 0: passthrough.
+    /// </summary>
+    public sealed class OpacityEasing
+    {
+        readonly double tau, aFrame;
+        double value;
+        bool started;
+
+        public OpacityEasing(double timeConstantS, double fps)
+        {
+            if (!(timeConstantS >= 0) || double.IsInfinity(timeConstantS))
+                throw new ArgumentOutOfRangeException("timeConstantS", "time constant must be seconds >= 0");
+            if (!(fps > 0)) throw new ArgumentOutOfRangeException("fps", "fps must be > 0");
+            tau = timeConstantS;
+            aFrame = tau > 0 ? 1.0 - Math.Exp(-1.0 / (fps * tau)) : 1.0;
+        }
+
+        public float Value { get { return (float)value; } }
+
+        public void Reset() { started = false; value = 0; }
+
+        /// <summary>Advance one video frame (1 / fps seconds) towards opacity; returns the eased value.</summary>
+        public float Step(float opacity)
+        {
+            return Advance(opacity, aFrame);
+        }
+
+        /// <summary>Advance dtS seconds towards opacity; returns the eased value.</summary>
+        public float Update(float opacity, double dtS)
+        {
+            return Advance(opacity, tau > 0 ? 1.0 - Math.Exp(-Math.Max(0.0, dtS) / tau) : 1.0);
+        }
+
+        float Advance(double x, double a)
+        {
+            if (!started) { value = x; started = true; }
+            value = value + a * (x - value);
+            return (float)value;
+        }
+    }
+
+    // ======================================================================== paper mode
+    /// <summary>
+    /// simulator.epof.ViewportOverlaps, ported: the overlap of the viewport with every window,
+    /// tabulated over viewport pitch x roll x yaw offset within one yaw step (built at load,
+    /// ~1 s) and interpolated trilinearly; EPOF = sum POF OL / sum OL.
+    /// </summary>
+    internal sealed class PaperModel
+    {
+        internal readonly int P, Y;
+        readonly int nU, nP, nR;
+        readonly double step, yawStart, dp, dr;
+        internal readonly float[] Table; // (nP, nR, nU + 1, P, Y)
+        readonly double[] centres;       // P*Y*3 window centre directions
+        readonly int[] corner = new int[8];
+
+        public PaperModel(double[] yawDeg, double[] pitchDeg, double yawStepDeg, double yawStartDeg,
+                          double winHfov, double winVfov, double hfov, double vfov,
+                          double pitchStep, double rollStep, double yawTableStep, int rays,
+                          double latStep, double lonStep)
+        {
+            P = pitchDeg.Length; Y = yawDeg.Length;
+            step = yawStepDeg; yawStart = yawStartDeg;
+            nU = Math.Max(1, (int)Math.Ceiling(step / yawTableStep - 1e-9));
+            double du = step / nU, invDu = 1.0 / du;
+            int n = Y * nU;
+            nP = (int)VimsimEpof.RoundEven(180.0 / pitchStep) + 1;
+            nR = (int)VimsimEpof.RoundEven(360.0 / rollStep) + 1;
+            double[] pg = Linspace(-90.0, 90.0, nP), rg = Linspace(-180.0, 180.0, nR);
+            dp = pg[1] - pg[0]; dr = rg[1] - rg[0];
+
+            int nLat, R;
+            double[] runStart, runLen; // (P, nLat, R)
+            WindowRuns(pitchDeg, winHfov, winVfov, latStep, lonStep, out nLat, out R, out runStart, out runLen);
+
+            // Viewport rays (perspective_rays: float32 directions and solid angles).
+            int nr = rays * rays;
+            var dx = new double[nr]; var dy = new double[nr]; var dz = new double[nr]; var sa = new double[nr];
+            double tx = Math.Tan(VimsimEpof.Rad(hfov) / 2.0), ty = Math.Tan(VimsimEpof.Rad(vfov) / 2.0);
+            double omega = 0;
+            for (int j = 0; j < rays; j++)
+                for (int i = 0; i < rays; i++)
+                {
+                    double u = ((i + 0.5) / rays * 2.0 - 1.0) * tx;
+                    double v = (1.0 - (j + 0.5) / rays * 2.0) * ty;
+                    double r2 = 1.0 + u * u + v * v, rn = Math.Sqrt(r2);
+                    int k = j * rays + i;
+                    dx[k] = (float)(u / rn); dy[k] = (float)(v / rn); dz[k] = (float)(1.0 / rn);
+                    sa[k] = (float)((2.0 * tx / rays) * (2.0 * ty / rays) / (r2 * rn));
+                    omega += sa[k];
+                }
+
+            var table = new float[nP * nR * (nU + 1) * P * Y];
+            // One pitch row of the table per task (entries are independent: same numbers on any
+            // number of cores).
+            System.Threading.Tasks.Parallel.For(0, nP, ip =>
+            {
+                var diff = new double[P * (2 * n + 1)];
+                var B = new double[P * n];
+                var bandOf = new int[nr];
+                var lonOf = new double[nr];
+                var cs = new double[2 * n];
+                for (int jr = 0; jr < nR; jr++)
+                {
+                    double[] M = VimsimEpof.HeadRotation(0.0, VimsimEpof.Rad(pg[ip]), VimsimEpof.Rad(rg[jr]));
+                    for (int k = 0; k < nr; k++)
+                    {
+                        double wx = dx[k] * M[0] + dy[k] * M[1] + dz[k] * M[2];
+                        double wy = dx[k] * M[3] + dy[k] * M[4] + dz[k] * M[5];
+                        double wz = dx[k] * M[6] + dy[k] * M[7] + dz[k] * M[8];
+                        lonOf[k] = Math.Atan2(wx, wz) * (180.0 / Math.PI);
+                        double lat = Math.Asin(Math.Max(-1.0, Math.Min(1.0, wy))) * (180.0 / Math.PI);
+                        int b = (int)((lat + 90.0) / latStep);
+                        bandOf[k] = b < 0 ? 0 : b > nLat - 1 ? nLat - 1 : b;
+                    }
+                    Array.Clear(diff, 0, diff.Length);
+                    for (int p = 0; p < P; p++)
+                    {
+                        int poff = p * (2 * n + 1), pq = p * nLat;
+                        for (int k = 0; k < nr; k++)
+                        {
+                            int q0 = (pq + bandOf[k]) * R;
+                            double lonk = lonOf[k];
+                            for (int r = 0; r < R; r++)
+                            {
+                                double L = runLen[q0 + r];
+                                if (L <= 0) continue;
+                                double s = runStart[q0 + r];
+                                // the lattice points j du (relative yaw) with s <= lon + j du <= s + L
+                                // (1e-9 step of slack: a ray exactly on an edge is inside)
+                                double lo = Math.Ceiling((s - lonk) * invDu - 1e-9);
+                                double hi = Math.Floor((s + L - lonk) * invDu + 1e-9);
+                                int cnt = (int)(hi - lo) + 1;
+                                if (cnt <= 0) continue;
+                                if (cnt > n) cnt = n;
+                                int j0 = (int)lo % n;
+                                if (j0 < 0) j0 += n;
+                                diff[poff + j0] += sa[k];
+                                diff[poff + j0 + cnt] -= sa[k];
+                            }
+                        }
+                        double acc = 0;
+                        for (int j = 0; j < 2 * n; j++) { acc += diff[poff + j]; cs[j] = acc; }
+                        for (int j = 0; j < n; j++) B[p * n + j] = (cs[j] + cs[j + n]) / omega;
+                    }
+                    int baseIdx = (ip * nR + jr) * (nU + 1);
+                    for (int u = 0; u <= nU; u++)
+                    {
+                        int o = (baseIdx + u) * P * Y;
+                        for (int p = 0; p < P; p++)
+                            for (int m = 0; m < Y; m++)
+                                table[o + p * Y + m] = (float)B[p * n + (m * nU + u) % n];
+                    }
+                }
+            });
+            Table = table;
+            int nu1 = nU + 1, c = 0;
+            for (int a = 0; a < 2; a++)
+                for (int b = 0; b < 2; b++)
+                    for (int cc = 0; cc < 2; cc++)
+                        corner[c++] = a * nR * nu1 + b * nu1 + cc;
+            centres = new double[P * Y * 3];
+            for (int p = 0; p < P; p++)
+                for (int y = 0; y < Y; y++)
+                {
+                    double cp = VimsimEpof.Rad(pitchDeg[p]), cyw = VimsimEpof.Rad(yawDeg[y]);
+                    int o = (p * Y + y) * 3;
+                    centres[o] = Math.Sin(cyw) * Math.Cos(cp); centres[o + 1] = Math.Sin(cp); centres[o + 2] = Math.Cos(cyw) * Math.Cos(cp);
+                }
+        }
+
+        static double[] Linspace(double a, double b, int num)
+        {
+            var y = new double[num];
+            double s = (b - a) / (num - 1);
+            for (int i = 0; i < num; i++) y[i] = i * s + a;
+            y[num - 1] = b;
+            return y;
+        }
+
+        /// <summary>simulator.epof._window_runs: each window row's membership as runs of
+        /// window-relative longitude per latitude band (float32 inside test, as numpy).</summary>
+        static void WindowRuns(double[] pitchDeg, double hfov, double vfov, double latStep, double lonStep,
+                               out int nLat, out int R, out double[] start, out double[] length)
+        {
+            int nLt = (int)VimsimEpof.RoundEven(180.0 / latStep);
+            nLat = nLt;
+            int nLon = (int)VimsimEpof.RoundEven(360.0 / lonStep);
+            int P = pitchDeg.Length;
+            var sinLon = new double[nLon]; var cosLon = new double[nLon];
+            for (int j = 0; j < nLon; j++)
+            {
+                double lon = VimsimEpof.Rad(-180.0 + (j + 0.5) * lonStep);
+                sinLon[j] = Math.Sin(lon); cosLon[j] = Math.Cos(lon);
+            }
+            float tx = (float)Math.Tan(VimsimEpof.Rad(hfov) / 2), ty = (float)Math.Tan(VimsimEpof.Rad(vfov) / 2);
+            var runs = new List<double[]>[P * nLt];
+            System.Threading.Tasks.Parallel.For(0, P, p =>
+            {
+                var inside = new bool[nLon];
+                // head_rotation(0, pitch, 0) = Rx(-pitch), as float32 (scipy's quaternion formula).
+                double half = VimsimEpof.Rad(-pitchDeg[p]) / 2.0;
+                double qx = Math.Sin(half), qw = Math.Cos(half);
+                float m11 = (float)(qw * qw - qx * qx), m12 = (float)(-2.0 * qx * qw), m21 = (float)(2.0 * qx * qw), m22 = m11;
+                for (int b = 0; b < nLt; b++)
+                {
+                    double lat = VimsimEpof.Rad(-90.0 + (b + 0.5) * latStep);
+                    double cl = Math.Cos(lat);
+                    float d1 = (float)Math.Sin(lat);
+                    bool all = true, any = false;
+                    for (int j = 0; j < nLon; j++)
+                    {
+                        float d0 = (float)(cl * sinLon[j]), d2 = (float)(cl * cosLon[j]);
+                        // w = d @ m (float32): w0 = d0, w1 = d1 m11 + d2 m21, w2 = d1 m12 + d2 m22
+                        float w1 = (float)((float)(d1 * m11) + (float)(d2 * m21));
+                        float w2 = (float)((float)(d1 * m12) + (float)(d2 * m22));
+                        bool ins = w2 > 0 && Math.Abs(d0) <= (float)(tx * w2) && Math.Abs(w1) <= (float)(ty * w2);
+                        inside[j] = ins;
+                        all &= ins; any |= ins;
+                    }
+                    var list = new List<double[]>();
+                    if (all) list.Add(new double[] { -180.0, 360.0 });
+                    else if (any)
+                    {
+                        var starts = new List<int>(); var ends = new List<int>();
+                        for (int j = 0; j < nLon; j++)
+                        {
+                            if (inside[j] && !inside[(j - 1 + nLon) % nLon]) starts.Add(j);
+                            if (inside[j] && !inside[(j + 1) % nLon]) ends.Add(j);
+                        }
+                        if (ends[0] < starts[0]) { int e0 = ends[0]; ends.RemoveAt(0); ends.Add(e0); }
+                        for (int k = 0; k < starts.Count; k++)
+                        {
+                            int L = ((ends[k] - starts[k]) % nLon + nLon) % nLon + 1;
+                            list.Add(new double[] { -180.0 + starts[k] * lonStep, L * lonStep });
+                        }
+                    }
+                    runs[p * nLt + b] = list;
+                }
+            });
+            int maxR = 1;
+            foreach (var list in runs) maxR = Math.Max(maxR, list.Count);
+            R = maxR;
+            start = new double[P * nLat * R];
+            length = new double[P * nLat * R];
+            for (int q = 0; q < P * nLat; q++)
+                for (int k = 0; k < runs[q].Count; k++)
+                {
+                    start[q * R + k] = runs[q][k][0];
+                    length[q * R + k] = runs[q][k][1];
+                }
+        }
+
+        /// <summary>EPOF of one viewport; ol: scratch of P * Y doubles (per caller: the table is shared).</summary>
+        public double Query(float[] pof, int off, double yaw, double pitch, double roll, double[] ol)
+        {
+            if (pitch > 90.0 || pitch < -90.0)
+            {   // re-express the same rotation with pitch in [-90, 90] (yaw + 180, 180 - pitch, roll + 180)
+                double p2 = VimsimEpof.Wrap180(pitch);
+                if (p2 > 90.0) { yaw += 180.0; pitch = 180.0 - p2; roll += 180.0; }
+                else if (p2 < -90.0) { yaw += 180.0; pitch = -180.0 - p2; roll += 180.0; }
+                else pitch = p2;
+                yaw = VimsimEpof.Wrap180(yaw);
+            }
+            roll = VimsimEpof.PyMod(roll + 180.0, 360.0) - 180.0;
+            double fp = (pitch + 90.0) / dp;
+            int i0 = Clamp((int)Math.Floor(fp), 0, nP - 2);
+            double wp = fp - i0;
+            double fr = (roll + 180.0) / dr;
+            int j0 = Clamp((int)Math.Floor(fr), 0, nR - 2);
+            double wr = fr - j0;
+            double a = (yaw - yawStart) / step;
+            double kf = Math.Floor(a);
+            double fu = (a - kf) * nU;
+            int u0 = Clamp((int)Math.Floor(fu), 0, nU - 1);
+            double wu = fu - u0;
+            int k = (int)VimsimEpof.PyMod(kf, Y);
+            int baseRow = (i0 * nR + j0) * (nU + 1) + u0;
+            int PY = P * Y;
+            Array.Clear(ol, 0, PY);
+            int c = 0;
+            for (int ia = 0; ia < 2; ia++)
+                for (int ib = 0; ib < 2; ib++)
+                    for (int ic = 0; ic < 2; ic++)
+                    {
+                        double w = (ia == 0 ? 1 - wp : wp) * (ib == 0 ? 1 - wr : wr) * (ic == 0 ? 1 - wu : wu);
+                        int o = (baseRow + corner[c++]) * PY;
+                        if (w == 0) continue;
+                        for (int q = 0; q < PY; q++) ol[q] += w * Table[o + q];
+                    }
+            double num = 0, den = 0;
+            for (int p = 0; p < P; p++)
+            {
+                int rowOff = off + p * Y, po = p * Y;
+                for (int m = 0; m < Y; m++)
+                {
+                    int col = k - m; if (col < 0) col += Y;
+                    double w = ol[po + m];
+                    num += w * pof[rowOff + col];
+                    den += w;
+                }
+            }
+            if (den > 1e-6) return num / den;
+            // Viewport outside every window: the flow of the window nearest the view axis.
+            double[] Rm = VimsimEpof.HeadRotation(VimsimEpof.Rad(yaw), VimsimEpof.Rad(pitch), VimsimEpof.Rad(roll));
+            double fx = Rm[2], fy = Rm[5], fz = Rm[8], best = double.NegativeInfinity;
+            int near = 0;
+            for (int q = 0; q < PY; q++)
+            {
+                double dot = fx * centres[3 * q] + fy * centres[3 * q + 1] + fz * centres[3 * q + 2];
+                if (dot > best) { best = dot; near = q; }
+            }
+            return pof[off + near];
+        }
+
+        static int Clamp(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
+    }
+
+    // ======================================================================= sphere mode
+    /// <summary>
+    /// simulator.sphere.ViewportQuery, ported: exact EPOF = sum_c f_c w_c / sum_c w_c over the
+    /// lon/lat cells, w_c the solid angle of cell c inside the viewport; weights computed per
+    /// (pitch, roll, yaw mod one cell) bin of query_step_deg and cached, the yaw's whole cells
+    /// applied as a column shift.
+    /// </summary>
+    internal sealed class SphereModel
+    {
+        internal readonly int NLat, NLon;
+        readonly int nSub, cacheSize;
+        readonly double c, invC, st, radius;
+        readonly double[] normals; // 4 x 3, head frame
+        readonly double[] rowCl, rowSl, rowHalfE, rowSa, colSin, colCos;
+        readonly double halfN;
+        readonly Dictionary<long, Bin> bins = new Dictionary<long, Bin>();
+        readonly Queue<long> order = new Queue<long>();
+        double[] scratchW = new double[0];
+        int[] scratchR = new int[0], scratchC = new int[0];
+        readonly double[] nw = new double[12], hk = new double[4], phik = new double[4], hRow = new double[4], nySl = new double[4];
+        int[] cand = new int[16], inner = new int[16], tmp = new int[16];
+        readonly int[] arc = new int[4];
+        int[] runRowS = new int[64], runJ0S = new int[64], runJ1S = new int[64];
+        double[] runSaS = new double[64];
+
+        /// <summary>One bin's weights: interior runs (row, columns [j0, j1), each weighing the
+        /// row's cell area: coverage 1) and the boundary cells with their own weights.</summary>
+        sealed class Bin
+        {
+            public int count, runs;
+            public int[] rowBase, cols, runRow, runJ0, runJ1;
+            public double[] w, runSa;
+            public double wsum;
+        }
+        Bin spare; // the last evicted bin: its arrays are reused
+
+        public SphereModel(double cellDeg, double stepDeg, double hfov, double vfov, int cacheBins)
+        {
+            NLat = (int)VimsimEpof.RoundEven(180.0 / cellDeg);
+            NLon = 2 * NLat;
+            st = stepDeg;
+            nSub = (int)VimsimEpof.RoundEven(cellDeg / stepDeg);
+            cacheSize = cacheBins > 0 ? cacheBins : 4096;
+            c = VimsimEpof.Rad(cellDeg);
+            invC = 1.0 / c;
+            double lf = VimsimEpof.Rad(hfov / 2.0), up = VimsimEpof.Rad(vfov / 2.0);
+            normals = new double[] {
+                Math.Cos(lf), 0.0, Math.Sin(lf),
+                -Math.Cos(lf), 0.0, Math.Sin(lf),
+                0.0, Math.Cos(up), Math.Sin(up),
+                0.0, -Math.Cos(up), Math.Sin(up) };
+            double t = Math.Tan(lf), tv = Math.Tan(up);
+            radius = Math.Atan(Math.Sqrt(t * t + tv * tv)) + c;
+            rowCl = new double[NLat]; rowSl = new double[NLat]; rowHalfE = new double[NLat]; rowSa = new double[NLat];
+            for (int i = 0; i < NLat; i++)
+            {
+                double lat = Math.PI / 2 - (i + 0.5) * c;
+                rowCl[i] = Math.Cos(lat); rowSl[i] = Math.Sin(lat);
+                rowSa[i] = c * (Math.Sin(lat + c / 2) - Math.Sin(lat - c / 2));
+                double edge = Math.Abs(Math.Cos(lat - Math.Sign(lat) * c / 2));
+                rowHalfE[i] = 0.5 * c * Math.Max(rowCl[i], edge);
+            }
+            halfN = 0.5 * c;
+            colSin = new double[NLon]; colCos = new double[NLon];
+            for (int j = 0; j < NLon; j++)
+            {
+                double lon = -Math.PI + (j + 0.5) * c;
+                colSin[j] = Math.Sin(lon); colCos[j] = Math.Cos(lon);
+            }
+        }
+
+        public int CachedBins { get { return bins.Count; } }
+
+        public double Query(float[] field, int off, double yaw, double pitch, double roll)
+        {
+            if (pitch > 90.0 || pitch < -90.0)
+            {   // the same rotation with pitch in [-90, 90]
+                double p2 = VimsimEpof.Wrap180(pitch);
+                if (p2 > 90.0) { yaw += 180.0; pitch = 180.0 - p2; roll += 180.0; }
+                else if (p2 < -90.0) { yaw += 180.0; pitch = -180.0 - p2; roll += 180.0; }
+                else pitch = p2;
+            }
+            long M = (long)NLon * nSub;
+            long y = VimsimEpof.RoundEven(yaw / st) % M;
+            if (y < 0) y += M;
+            int shift = (int)(y / nSub), sub = (int)(y % nSub);
+            int ip = (int)VimsimEpof.RoundEven(Math.Max(-90.0, Math.Min(90.0, pitch)) / st);
+            int ir = (int)VimsimEpof.RoundEven((VimsimEpof.PyMod(roll + 180.0, 360.0) - 180.0) / st);
+            long key = (((long)ip + 100000) * 200000 + (ir + 100000)) * 1000 + sub;
+            Bin b;
+            if (!bins.TryGetValue(key, out b))
+            {
+                if (bins.Count >= cacheSize)
+                {
+                    long old = order.Dequeue();
+                    spare = bins[old];
+                    bins.Remove(old);
+                }
+                b = Compute(sub * st, ip * st, ir * st);
+                bins[key] = b;
+                order.Enqueue(key);
+            }
+            double s = 0;
+            int nLon = NLon;
+            int[] rr = b.runRow, r0 = b.runJ0, r1 = b.runJ1;
+            double[] rs = b.runSa;
+            for (int q = 0, nq = b.runs; q < nq; q++)
+            {   // columns j0 + shift .. j1 + shift, wrapping at nLon: one or two contiguous pieces
+                int o = off + rr[q], a = r0[q] + shift, e = r1[q] + shift;
+                if (a >= nLon) { a -= nLon; e -= nLon; }
+                double t = 0;
+                if (e <= nLon) for (int j = a; j < e; j++) t += field[o + j];
+                else
+                {
+                    int j = a;
+                    for (; j < nLon; j++) t += field[o + j];
+                    for (j = 0; j < e - nLon; j++) t += field[o + j];
+                }
+                s += t * rs[q];
+            }
+            int[] rb = b.rowBase, cols = b.cols;
+            double[] w = b.w;
+            for (int q = 0, nq = b.count; q < nq; q++)
+            {
+                int col = cols[q] + shift;
+                if (col >= nLon) col -= nLon;
+                s += field[off + rb[q] + col] * w[q];
+            }
+            return s / b.wsum;
+        }
+
+        /// <summary>
+        /// The weights of one bin: w_c = A_c prod_k clip(0.5 + 0.5 d_k / hw_k, 0, 1) over the 4
+        /// frustum planes (d_k: signed distance of the cell centre, hw_k: the cell's half extent
+        /// along the normal), kept where w > max(w) 1e-7, rows as simulator.sphere's band. Per
+        /// row, d_k(lon) = rho_k cos(lon - phi_k) + ny_k sin(lat) and hw_k <= H_k, so the columns
+        /// with d_k > -H_k for every plane (all others weigh exactly 0) and those with d_k >= H_k
+        /// for every plane (weight exactly A_c) are arcs found analytically, with a column of
+        /// margin; only the columns in between get the formula.
+        /// </summary>
+        Bin Compute(double yawDeg, double pitchDeg, double rollDeg)
+        {
+            double[] R = VimsimEpof.HeadRotation(VimsimEpof.Rad(yawDeg), VimsimEpof.Rad(pitchDeg), VimsimEpof.Rad(rollDeg));
+            for (int k = 0; k < 4; k++)
+            {   // plane normals in the world frame: n_world = R n_head
+                for (int i = 0; i < 3; i++)
+                    nw[3 * k + i] = R[3 * i] * normals[3 * k] + R[3 * i + 1] * normals[3 * k + 1] + R[3 * i + 2] * normals[3 * k + 2];
+                hk[k] = Math.Sqrt(nw[3 * k] * nw[3 * k] + nw[3 * k + 2] * nw[3 * k + 2]);
+                phik[k] = Math.Atan2(nw[3 * k], nw[3 * k + 2]);
+            }
+            double axisLat = Math.Asin(Math.Max(-1.0, Math.Min(1.0, R[5])));
+            int i0 = Math.Max(0, (int)Math.Floor((Math.PI / 2 - axisLat - radius) / c));
+            int i1 = Math.Min(NLat, (int)Math.Floor((Math.PI / 2 - axisLat + radius) / c) + 1);
+            int cap = (i1 - i0) * NLon;
+            if (scratchW.Length < cap) { scratchW = new double[cap]; scratchR = new int[cap]; scratchC = new int[cap]; }
+            int cnt = 0, nRun = 0;
+            double wmax = 0, minBoundary = double.PositiveInfinity;
+            // Locals: Mono does not hoist field loads out of loops.
+            double[] sw = scratchW, cs = colSin, cc = colCos;
+            int[] sr = scratchR, sc = scratchC;
+            double hn = halfN;
+            int nLon = NLon;
+            double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2], nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
+            double nx2 = nw[6], ny2 = nw[7], nz2 = nw[8], nx3 = nw[9], ny3 = nw[10], nz3 = nw[11];
+            for (int i = i0; i < i1; i++)
+            {
+                double cl = rowCl[i], sl = rowSl[i], he = rowHalfE[i], sa = rowSa[i];
+                int rowBase = i * nLon;
+                for (int k = 0; k < 4; k++)
+                {
+                    double ny = nw[3 * k + 1];
+                    hRow[k] = he * hk[k] + halfN * (Math.Abs(ny) * cl + Math.Abs(sl) * hk[k]) + 1e-9;
+                    nySl[k] = ny * sl;
+                }
+                int nc = 1, ni = 1;
+                cand[0] = 0; cand[1] = nLon; inner[0] = 0; inner[1] = nLon;
+                for (int k = 0; k < 4 && nc > 0; k++)
+                    nc = Intersect(ref cand, nc, cl * hk[k], phik[k], -hRow[k] - nySl[k], 1);
+                if (nc == 0) continue;
+                for (int k = 0; k < 4 && ni > 0; k++)
+                    ni = Intersect(ref inner, ni, cl * hk[k], phik[k], hRow[k] - nySl[k], -1);
+                for (int q = 0; q < ni; q++)
+                {   // interior runs: coverage exactly 1, weight = the row's cell area
+                    if (nRun == runRowS.Length) GrowRuns();
+                    runRowS[nRun] = rowBase; runJ0S[nRun] = inner[2 * q]; runJ1S[nRun] = inner[2 * q + 1];
+                    runSaS[nRun] = sa;
+                    nRun++;
+                    if (sa > wmax) wmax = sa;
+                }
+                double h0 = hRow[0], h1 = hRow[1], h2 = hRow[2], h3 = hRow[3];
+                double s0 = nySl[0], s1 = nySl[1], s2 = nySl[2], s3 = nySl[3];
+                int iq = 0;
+                for (int q = 0; q < nc; q++)
+                {
+                    int cur = cand[2 * q], ce = cand[2 * q + 1];
+                    while (cur < ce)
+                    {   // the next boundary piece: candidate columns outside the interior runs
+                        while (iq < ni && inner[2 * iq + 1] <= cur) iq++;
+                        int pe = ce;
+                        if (iq < ni && inner[2 * iq] < ce)
+                        {
+                            if (inner[2 * iq] <= cur) { cur = inner[2 * iq + 1]; continue; }
+                            pe = inner[2 * iq];
+                        }
+                        for (int j = cur; j < pe; j++)
+                        {   // per plane clip(0.5 + 0.5 d / hw, 0, 1), hw = |n . east_half| +
+                            // |n . north_half| + 1e-9 (simulator.sphere); H >= hw settles most planes
+                            double so = cs[j], co = cc[j], cov = 1.0, u, d0, hw;
+                            u = nx0 * so + nz0 * co; d0 = cl * u + s0; // n . centre
+                            if (d0 < h0)
+                            {
+                                if (d0 <= -h0) continue;
+                                hw = Math.Abs(he * (nx0 * co - nz0 * so)) + Math.Abs(hn * (ny0 * cl - sl * u)) + 1e-9;
+                                if (d0 <= -hw) continue;
+                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                            }
+                            u = nx1 * so + nz1 * co; d0 = cl * u + s1; // n . centre
+                            if (d0 < h1)
+                            {
+                                if (d0 <= -h1) continue;
+                                hw = Math.Abs(he * (nx1 * co - nz1 * so)) + Math.Abs(hn * (ny1 * cl - sl * u)) + 1e-9;
+                                if (d0 <= -hw) continue;
+                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                            }
+                            u = nx2 * so + nz2 * co; d0 = cl * u + s2; // n . centre
+                            if (d0 < h2)
+                            {
+                                if (d0 <= -h2) continue;
+                                hw = Math.Abs(he * (nx2 * co - nz2 * so)) + Math.Abs(hn * (ny2 * cl - sl * u)) + 1e-9;
+                                if (d0 <= -hw) continue;
+                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                            }
+                            u = nx3 * so + nz3 * co; d0 = cl * u + s3; // n . centre
+                            if (d0 < h3)
+                            {
+                                if (d0 <= -h3) continue;
+                                hw = Math.Abs(he * (nx3 * co - nz3 * so)) + Math.Abs(hn * (ny3 * cl - sl * u)) + 1e-9;
+                                if (d0 <= -hw) continue;
+                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                            }
+                            double w = cov * sa;
+                            if (w < minBoundary) minBoundary = w;
+                            sw[cnt] = w;
+                            sr[cnt] = rowBase;
+                            sc[cnt] = j;
+                            cnt++;
+                            if (w > wmax) wmax = w;
+                        }
+                        cur = pe;
+                    }
+                }
+            }
+            // simulator.sphere keeps w > max(w) 1e-7: only boundary cells can be that small.
+            double thr = wmax * 1e-7;
+            int keep = cnt;
+            if (minBoundary <= thr)
+            {
+                keep = 0;
+                for (int q = 0; q < cnt; q++)
+                    if (sw[q] > thr)
+                    {
+                        sw[keep] = sw[q]; sr[keep] = sr[q]; sc[keep] = sc[q];
+                        keep++;
+                    }
+            }
+            Bin bin = spare ?? new Bin();
+            spare = null;
+            if (bin.w == null || bin.w.Length < keep)
+            {
+                int size = keep + keep / 4 + 8;
+                bin.w = new double[size]; bin.rowBase = new int[size]; bin.cols = new int[size];
+            }
+            if (bin.runSa == null || bin.runSa.Length < nRun)
+            {
+                int size = nRun + nRun / 4 + 8;
+                bin.runSa = new double[size]; bin.runRow = new int[size]; bin.runJ0 = new int[size]; bin.runJ1 = new int[size];
+            }
+            Array.Copy(sw, bin.w, keep);
+            Array.Copy(sr, bin.rowBase, keep);
+            Array.Copy(sc, bin.cols, keep);
+            Array.Copy(runSaS, bin.runSa, nRun);
+            Array.Copy(runRowS, bin.runRow, nRun);
+            Array.Copy(runJ0S, bin.runJ0, nRun);
+            Array.Copy(runJ1S, bin.runJ1, nRun);
+            double wsum = 0;
+            for (int q = 0; q < nRun; q++) wsum += runSaS[q] * (runJ1S[q] - runJ0S[q]);
+            for (int q = 0; q < keep; q++) wsum += sw[q];
+            bin.count = keep;
+            bin.runs = nRun;
+            bin.wsum = wsum;
+            return bin;
+        }
+
+        void GrowRuns()
+        {
+            int n = 2 * runRowS.Length;
+            Array.Resize(ref runRowS, n); Array.Resize(ref runJ0S, n); Array.Resize(ref runJ1S, n); Array.Resize(ref runSaS, n);
+        }
+
+        /// <summary>acos(x), x in [-1, 1], within 6.8e-5 rad (Abramowitz and Stegun 4.4.45).</summary>
+        static double AcosApprox(double x)
+        {
+            double ax = x < 0 ? -x : x;
+            double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+            return x < 0 ? Math.PI - r : r;
+        }
+
+        /// <summary>
+        /// Intersect the sorted column ranges set[0..2n) (pairs [start, end)) with the columns j
+        /// whose centre longitude lon_j satisfies rho cos(lon_j - phi) >= b, grown (margin 1) or
+        /// shrunk (margin -1) by a column on each side; returns the new number of ranges.
+        /// </summary>
+        int Intersect(ref int[] set, int n, double rho, double phi, double b, int margin)
+        {
+            if (n == 0) return 0;
+            if (rho < 1e-12)
+            {
+                if (margin > 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) return n; // constant in lon
+                return 0;
+            }
+            double x = b / rho;
+            if (x <= -1.0) return margin > 0 || x < -1.0 - 1e-12 ? n : 0;
+            if (x >= 1.0)
+            {
+                if (margin < 0) return 0;
+                x = 1.0;
+            }
+            double al = AcosApprox(x); // within 7e-5 rad: the column of margin absorbs it
+            double fa = (phi - al + Math.PI) * invC - 0.5, fb = (phi + al + Math.PI) * invC - 0.5;
+            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (fa, fb > -1: phi >= -pi)
+            if (a0 < fa) a0++;
+            if (fb < 0 && a1 > fb) a1--;
+            a0 -= margin; a1 += margin;
+            if (a1 < a0) return 0;
+            if (a1 - a0 + 1 >= NLon) return n;
+            int s0 = a0;
+            while (s0 < 0) s0 += NLon;
+            while (s0 >= NLon) s0 -= NLon;
+            int end = s0 + a1 - a0 + 1;
+            // The arc as sorted ranges in [0, NLon): [0, end - NLon) then [s0, NLon) if it wraps.
+            int m;
+            if (end > NLon) { arc[0] = 0; arc[1] = end - NLon; arc[2] = s0; arc[3] = NLon; m = 2; }
+            else { arc[0] = s0; arc[1] = end; m = 1; }
+            int outN = 0, p = 0, q = 0;
+            while (p < n && q < m)
+            {   // two sorted lists of disjoint ranges: merge
+                int sa = set[2 * p], sb = set[2 * p + 1], aa = arc[2 * q], ab = arc[2 * q + 1];
+                int lo = sa > aa ? sa : aa, hi = sb < ab ? sb : ab;
+                if (lo < hi) { tmp[2 * outN] = lo; tmp[2 * outN + 1] = hi; outN++; }
+                if (sb < ab) p++; else q++;
+            }
+            int[] t = set; set = tmp; tmp = t;
+            return outN;
+        }
+    }
+
+    // ============================================================================ helpers
+    /// <summary>Typed access to the JSON header; a missing or mistyped key is a VimsimLoadException.</summary>
+    internal sealed class Header
+    {
+        readonly Dictionary<string, object> d;
+        readonly string src, where;
+
+        public Header(Dictionary<string, object> d, string src, string where = "")
+        {
+            this.d = d; this.src = src; this.where = where;
+        }
+
+        object Get(string k)
+        {
+            object v;
+            if (!d.TryGetValue(k, out v) || v == null)
+                throw new VimsimLoadException(src, "header lacks '" + where + k + "'; not a vimsim export of this version");
+            return v;
+        }
+
+        public bool Has(string k) { object v; return d.TryGetValue(k, out v) && v != null; }
+
+        public double Num(string k)
+        {
+            object v = Get(k);
+            if (v is double) return (double)v;
+            if (v is bool) return (bool)v ? 1 : 0;
+            throw new VimsimLoadException(src, "header '" + where + k + "' is not a number");
+        }
+
+        public string Str(string k)
+        {
+            var v = Get(k) as string;
+            if (v == null) throw new VimsimLoadException(src, "header '" + where + k + "' is not a string");
+            return v;
+        }
+
+        public Header Obj(string k)
+        {
+            var v = Get(k) as Dictionary<string, object>;
+            if (v == null) throw new VimsimLoadException(src, "header '" + where + k + "' is not an object");
+            return new Header(v, src, where + k + ".");
+        }
+
+        public double[] DoubleArray(string k)
+        {
+            var v = Get(k) as List<object>;
+            if (v == null) throw new VimsimLoadException(src, "header '" + where + k + "' is not an array");
+            var a = new double[v.Count];
+            for (int i = 0; i < a.Length; i++)
+            {
+                if (!(v[i] is double)) throw new VimsimLoadException(src, "header '" + where + k + "' has a non-number");
+                a[i] = (double)v[i];
+            }
+            return a;
+        }
+
+        public int[] IntArray(string k)
+        {
+            var a = DoubleArray(k);
+            var r = new int[a.Length];
+            for (int i = 0; i < a.Length; i++) r[i] = (int)a[i];
+            return r;
+        }
+    }
+
+    /// <summary>A small JSON reader: objects (Dictionary), arrays (List), strings, doubles, bools, null.</summary>
+    internal static class MiniJson
+    {
+        public static object Parse(string s)
+        {
+            int i = 0;
+            object v = Value(s, ref i);
+            Ws(s, ref i);
+            if (i != s.Length) throw new FormatException("unexpected text at character " + i);
+            return v;
+        }
+
+        static void Ws(string s, ref int i)
+        {
+            while (i < s.Length && (s[i] == ' ' || s[i] == '\t' || s[i] == '\n' || s[i] == '\r')) i++;
+        }
+
+        static object Value(string s, ref int i)
+        {
+            Ws(s, ref i);
+            if (i >= s.Length) throw new FormatException("unexpected end");
+            char ch = s[i];
+            if (ch == '{')
+            {
+                var d = new Dictionary<string, object>();
+                i++; Ws(s, ref i);
+                if (i < s.Length && s[i] == '}') { i++; return d; }
+                while (true)
+                {
+                    Ws(s, ref i);
+                    if (i >= s.Length || s[i] != '"') throw new FormatException("expected a key at character " + i);
+                    string k = Str(s, ref i);
+                    Ws(s, ref i);
+                    if (i >= s.Length || s[i] != ':') throw new FormatException("expected ':' at character " + i);
+                    i++;
+                    d[k] = Value(s, ref i);
+                    Ws(s, ref i);
+                    if (i < s.Length && s[i] == ',') { i++; continue; }
+                    if (i < s.Length && s[i] == '}') { i++; return d; }
+                    throw new FormatException("expected ',' or '}' at character " + i);
+                }
+            }
+            if (ch == '[')
+            {
+                var a = new List<object>();
+                i++; Ws(s, ref i);
+                if (i < s.Length && s[i] == ']') { i++; return a; }
+                while (true)
+                {
+                    a.Add(Value(s, ref i));
+                    Ws(s, ref i);
+                    if (i < s.Length && s[i] == ',') { i++; continue; }
+                    if (i < s.Length && s[i] == ']') { i++; return a; }
+                    throw new FormatException("expected ',' or ']' at character " + i);
+                }
+            }
+            if (ch == '"') return Str(s, ref i);
+            if (string.CompareOrdinal(s, i, "true", 0, 4) == 0) { i += 4; return true; }
+            if (string.CompareOrdinal(s, i, "false", 0, 5) == 0) { i += 5; return false; }
+            if (string.CompareOrdinal(s, i, "null", 0, 4) == 0) { i += 4; return null; }
+            int st = i;
+            while (i < s.Length && "+-0123456789.eE".IndexOf(s[i]) >= 0) i++;
+            double x;
+            if (i == st || !double.TryParse(s.Substring(st, i - st), NumberStyles.Float, CultureInfo.InvariantCulture, out x))
+                throw new FormatException("bad value at character " + st);
+            return x;
+        }
+
+        static string Str(string s, ref int i)
+        {
+            var sb = new StringBuilder();
+            i++; // opening quote
+            while (i < s.Length)
+            {
+                char ch = s[i++];
+                if (ch == '"') return sb.ToString();
+                if (ch != '\\') { sb.Append(ch); continue; }
+                if (i >= s.Length) break;
+                char e = s[i++];
+                switch (e)
+                {
+                    case '"': sb.Append('"'); break;
+                    case '\\': sb.Append('\\'); break;
+                    case '/': sb.Append('/'); break;
+                    case 'b': sb.Append('\b'); break;
+                    case 'f': sb.Append('\f'); break;
+                    case 'n': sb.Append('\n'); break;
+                    case 'r': sb.Append('\r'); break;
+                    case 't': sb.Append('\t'); break;
+                    case 'u':
+                        if (i + 4 > s.Length) throw new FormatException("bad \\u escape");
+                        sb.Append((char)int.Parse(s.Substring(i, 4), NumberStyles.HexNumber, CultureInfo.InvariantCulture));
+                        i += 4; break;
+                    default: throw new FormatException("bad escape \\" + e);
+                }
+            }
+            throw new FormatException("unterminated string");
+        }
+    }
+}
