@@ -11,7 +11,7 @@ import numpy as np
 
 from simulator.epof.viewing import EpofResult, compute_epof, write_epof_csv
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import grain_count
 from simulator.gridfile import GridFile, load_grid
 from simulator.headpath import HeadPath
@@ -26,18 +26,6 @@ __all__ = ["OUTDIR_FILES", "render_viewing"]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
-
-
-def _clear_outputs(out) -> None:
-    """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
-    for name in OUTDIR_FILES:
-        p = out / name
-        try:
-            p.unlink(missing_ok=True)
-        except OSError as e:
-            raise InputError(
-                f"{p}: cannot remove the previous run's output ({e.strerror})"
-            ) from None
 
 
 def render_viewing(
@@ -150,8 +138,13 @@ def render_viewing(
 
     if ctx is None:
         ctx = create_context()
-    out = check_output_dir(outdir)
-    _clear_outputs(out)  # a failed run must not leave the previous run's files beside new ones
+    # Only our own earlier outputs are removed (a failed run must not leave them beside new
+    # ones); a file of one of our names that we did not write, or an input, is refused.
+    folder = OutputFolder(outdir, OUTDIR_FILES, "render")
+    out = folder.prepare(
+        inputs=[video, *([] if isinstance(headpath, HeadPath) else [headpath])]
+        + ([grid.path] if grid is not None and getattr(grid, "path", None) else [])
+    )
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
@@ -216,7 +209,8 @@ def render_viewing(
     }
     if note:
         summary["note"] = note
-    # Last: the completion marker.
+    # Last: the manifest saying which files are ours, then the completion marker.
+    folder.complete()
     with atomic_output(out / "summary.json") as tmp:
         Path(tmp).write_text(json_text(summary) + "\n")
     return summary

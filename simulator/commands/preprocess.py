@@ -175,15 +175,6 @@ def run(args: argparse.Namespace) -> int:
             )
         print(f"wrote {out}")
         return 0
-    import signal
-
-    def _term(signum, frame):  # SIGTERM (batch schedulers) behaves like Ctrl-C
-        raise KeyboardInterrupt
-
-    try:
-        old_term = signal.signal(signal.SIGTERM, _term)
-    except ValueError:  # not the main thread
-        old_term = None
     try:
         with (
             warnings_to_stderr("vimsim preprocess"),
@@ -204,10 +195,9 @@ def run(args: argparse.Namespace) -> int:
                 progress=bar,
             )
     except PreprocessInterrupted as e:
+        from simulator.commands._signals import exit_status
+
         print(f"vimsim preprocess: {e.message}", file=sys.stderr)
-        return 130
-    finally:
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
+        return exit_status()
     print(f"wrote {out}")
     return 0
