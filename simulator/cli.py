@@ -137,12 +137,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{name}: {signal_name()}; temporary files removed", file=sys.stderr)
         return exit_status()
     except MemoryError:
-        print(f"{name}: error: out of memory (choose smaller sizes or fewer frames)", file=sys.stderr)
+        print(
+            f"{name}: error: out of memory (choose smaller sizes or fewer frames)", file=sys.stderr
+        )
         return 1
     except OSError as e:
         print(f"{name}: error: {_one_line(_os_error_line(e))}", file=sys.stderr)
         return 1
-    except Exception as e:  # noqa: BLE001 - the last line of defence: never a traceback
+    except Exception as e:
         if os.environ.get("VIMSIM_DEBUG"):
             raise
         print(

@@ -81,9 +81,7 @@ def _same_file(a: Path, b: Path) -> bool:
             return False
 
 
-def check_not_input(
-    target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()
-) -> None:
+def check_not_input(target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> None:
     """InputError if ``target`` is the same file as an input (by ``os.path.samefile``, so
     symlinks, hard links and ``./`` spellings count; by resolved path where it does not
     exist yet). ``inputs`` adds to those recorded by :func:`register_input`."""

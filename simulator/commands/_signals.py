@@ -11,7 +11,7 @@ __all__ = ["exit_status", "handle_signals", "signal_name"]
 _received: list[int] = []
 
 
-def _handler(signum, frame):  # noqa: ARG001 - signal handler signature
+def _handler(signum, frame):
     _received.append(signum)
     raise KeyboardInterrupt
 
