@@ -23,6 +23,7 @@ __all__ = [
     "check_not_input",
     "check_output_dir",
     "check_output_file",
+    "csv_cell",
     "input_scope",
     "json_text",
     "known_inputs",
@@ -268,6 +269,18 @@ def check_output_dir(path: str | os.PathLike) -> Path:
     if not os.access(p, os.W_OK):
         raise InputError(f"{p}: output directory is not writable")
     return p
+
+
+def csv_cell(value: str) -> str:
+    """A text cell for a CSV output that a spreadsheet will not run as a formula: one
+    beginning with ``=``, ``+``, ``@``, a tab or carriage return, or ``-`` not followed by
+    a digit (``-3`` stays a number) gets a leading ``'`` (OWASP's CSV-injection advice)."""
+    s = str(value)
+    if s and (
+        s[0] in "=+@\t\r" or (s[0] == "-" and not (len(s) > 1 and (s[1].isdigit() or s[1] == ".")))
+    ):
+        return "'" + s
+    return s
 
 
 def _json_safe(x):

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from simulator.analyze.data import Participant, Study
 from simulator.analyze.scores import k_of
 from simulator.errors import InputError
-from simulator.fileio import OutputFolder, atomic_output
+from simulator.fileio import OutputFolder, atomic_output, csv_cell
 
 __all__ = ["Analysis", "analyze_study", "write_report"]
 
@@ -250,7 +250,8 @@ def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for r in rows:
-            w.writerow([_fmt(v) for v in r])
+            # text cells (ids, labels, reasons) cannot start a spreadsheet formula
+            w.writerow([csv_cell(v) if isinstance(v, str) else _fmt(v) for v in r])
 
 
 def _p_text(p: float) -> str:
