@@ -627,7 +627,8 @@ def test_cli_render_head_path_warning_is_one_line(ctx, tmp_path, capsys):
     vid = tmp_path / "m.mp4"
     _tiny_video(vid, n=2)
     p = tmp_path / "rad.csv"
-    p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,0.5,0.2,0\n")  # radians?
+    rows = "".join(f"{k * 0.1:.1f},{-2.8 + k * 0.3:.2f},0.2,0\n" for k in range(20))
+    p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n" + rows)  # radians (strong evidence)
     assert main(_render_argv(vid, p, tmp_path / "o", "--opacity", "0.5")) == 0
     err = capsys.readouterr().err
     warn = [ln for ln in err.splitlines() if "RADIANS" in ln]

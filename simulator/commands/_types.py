@@ -9,6 +9,7 @@ import argparse
 
 __all__ = [
     "add_fov_arguments",
+    "crf",
     "fov_deg",
     "fov_from_args",
     "nonneg_int",
@@ -34,6 +35,21 @@ def size_wxh(text: str) -> tuple[int, int]:
             f"size must be 1..16384 per side, e.g. 256x256; got {text!r}"
         )
     return w, h
+
+
+def crf(text: str) -> int:
+    """Parse an x264 constant rate factor, an integer 0..51 (e.g. ``18``)."""
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer 0..51, e.g. 18; got {text!r}"
+        ) from None
+    if not 0 <= v <= 51:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer 0..51 (x264's range), e.g. 18; got {text!r}"
+        )
+    return v
 
 
 def fov_deg(text: str) -> float:

@@ -9,9 +9,17 @@ import argparse
 import sys
 
 from simulator.choices import LAYOUTS, X264_PRESETS
-from simulator.commands._types import add_fov_arguments, fov_from_args, nonneg_int, size_wxh
+from simulator.commands._types import add_fov_arguments, crf, fov_from_args, nonneg_int, size_wxh
 
 __all__ = ["register", "run"]
+
+#: H.264 level 6.2's largest frame in 16x16 macroblocks (8192x4320 and the like).
+MAX_H264_MACROBLOCKS = 139264
+#: Estimated bytes per eye pixel while rendering (framebuffers, read-back, encoder frames).
+BYTES_PER_EYE_PIXEL = 48
+#: Grains the mask pass takes, and their estimated bytes each (directions, buckets).
+MAX_GRAINS = 5_000_000
+BYTES_PER_GRAIN = 64
 
 
 def _opacity(text: str) -> float | str:
@@ -133,7 +141,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--crf",
-        type=nonneg_int,
+        type=crf,
         default=18,
         metavar="N",
         help="x264 quality, lower = better (default 18)",
@@ -146,13 +154,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Parse the options and run :func:`simulator.render.render_viewing`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
-    from simulator.grf import GrfConfig
+    from simulator.errors import InputError
+    from simulator.grf import GrfConfig, grain_count
     from simulator.gridfile import load_grid
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
+    from simulator.resources import check_fits
     from simulator.viewing import render_viewing
 
     hfov, vfov = fov_from_args(args, (107.0, 107.0))
+    w, h = args.eye_size
+    if w % 2 or h % 2:
+        raise InputError(f"--eye-size {w}x{h}: H.264 needs even numbers, e.g. 480x480")
+    if -(-w // 16) * -(-h // 16) > MAX_H264_MACROBLOCKS or max(w, h) > 8192:
+        raise InputError(
+            f"--eye-size {w}x{h}: beyond H.264's largest frame (level 6.2: 8192x4320); "
+            "e.g. 2048x2048"
+        )
+    check_fits(2 * w * h * BYTES_PER_EYE_PIXEL, f"--eye-size {w}x{h}")
+    if not (0.0 < args.grain_size < 90.0):
+        raise InputError(f"--grain-size must be degrees in (0, 90); got {args.grain_size}")
+    if not (0.0 < args.density < 1.0):
+        raise InputError(f"--density must be in (0, 1); got {args.density}")
     with warnings_to_stderr("vimsim render"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
@@ -172,6 +195,13 @@ def run(args: argparse.Namespace) -> int:
             seed=args.seed,
             distance_m=args.grain_distance,
         )
+        n = grain_count(grf)
+        if n > MAX_GRAINS:
+            raise InputError(
+                f"--grain-size {args.grain_size:g} with --density {args.density:g} needs {n} "
+                f"grains (at most {MAX_GRAINS}); choose a larger --grain-size, e.g. 0.5"
+            )
+        check_fits(n * BYTES_PER_GRAIN, f"--grain-size {args.grain_size:g}")
     config = RenderConfig(eye_size=args.eye_size, hfov_deg=hfov, vfov_deg=vfov, grf=grf)
     with (
         warnings_to_stderr("vimsim render"),
