@@ -200,11 +200,15 @@ class OutputFolder:
             return {}
         return obj if isinstance(obj, dict) else {}
 
-    def prepare(self, inputs: Iterable[str | os.PathLike] = ()) -> Path:
-        """Check and clear the folder; returns it (created). InputError on refusal."""
-        out = check_output_dir(self.path)
-        if (out / MANIFEST_NAME).resolve() in _INPUTS:
-            raise InputError(f"{out / MANIFEST_NAME}: an input; refusing to overwrite it")
+    def check(self, inputs: Iterable[str | os.PathLike] = ()) -> set[str]:
+        """The refusals of :meth:`prepare` without touching anything (call it before the
+        work); returns the names an earlier run of this command wrote."""
+        if str(self.path).strip() == "":
+            raise InputError("output folder name is empty; give a folder, e.g. -o out")
+        out = self.path
+        if out.exists() and not out.is_dir():
+            raise InputError(f"{out}: output folder is an existing file; expected a folder")
+        check_not_input(out / MANIFEST_NAME, inputs)
         prev = self._manifest()
         mine = prev.get("files", []) if prev.get("command") == self.command else []
         mine = {str(n) for n in mine if isinstance(n, str)}
@@ -216,6 +220,12 @@ class OutputFolder:
                     f"{f}: exists and was not written by vimsim {self.command}; "
                     "refusing to replace it (move it or choose another output folder)"
                 )
+        return mine
+
+    def prepare(self, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+        """Check (:meth:`check`) and clear the folder; returns it (created)."""
+        mine = self.check(inputs)
+        out = check_output_dir(self.path)
         for name in sorted(mine):
             if "/" in name or name.startswith("."):
                 continue

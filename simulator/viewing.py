@@ -110,6 +110,12 @@ def render_viewing(
         grid = load_grid(grid)
     if grid is not None:
         grid.check_video(info, source=grid.path)
+    # Only our own earlier outputs are removed (a failed run must not leave them beside new
+    # ones); a file of one of our names that we did not write, or an input, is refused.
+    folder = OutputFolder(outdir, OUTDIR_FILES, "render")
+    inputs = [video, *([] if isinstance(headpath, HeadPath) else [headpath])]
+    inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
+    folder.check(inputs)  # before the GL context and any work
     if grf is not None and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
@@ -138,13 +144,7 @@ def render_viewing(
 
     if ctx is None:
         ctx = create_context()
-    # Only our own earlier outputs are removed (a failed run must not leave them beside new
-    # ones); a file of one of our names that we did not write, or an input, is refused.
-    folder = OutputFolder(outdir, OUTDIR_FILES, "render")
-    out = folder.prepare(
-        inputs=[video, *([] if isinstance(headpath, HeadPath) else [headpath])]
-        + ([grid.path] if grid is not None and getattr(grid, "path", None) else [])
-    )
+    out = folder.prepare(inputs)
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
