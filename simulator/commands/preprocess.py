@@ -70,7 +70,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="dis",
         metavar="METHOD",
         help="flow backend: dis (OpenCV DIS ultrafast, default), dis:fast, dis:medium, "
-        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow)",
+        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow; "
+        "the model file runs as code: trusted files only)",
     )
     p.add_argument(
         "--layout",
