@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +40,7 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
 from simulator.windows import WindowGrid
 
-__all__ = ["FORMAT", "VERSION", "GridFile", "content_hash", "load_grid", "save_grid"]
+__all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
 
 FORMAT = "vimsim-grid"
 VERSION = 1
@@ -116,6 +117,54 @@ class GridFile:
             )
 
 
+class FieldSpool:
+    """Per-frame fields ``(n_lat, n_lon)`` float32 streamed to an anonymous temporary file
+    beside the output as they are made (memory flat in the video's length; the file has no
+    name, so nothing is left even after ``kill -9``). Row 0 repeats row 1 (frame 0 has no
+    predecessor). :func:`save_grid` copies it into the grid file chunk by chunk."""
+
+    def __init__(self, shape: tuple[int, int], directory: str | os.PathLike = "."):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self._fh = tempfile.TemporaryFile(dir=directory)  # noqa: SIM115 - closed by close()
+        self.n_rows = 0
+        self.finite = True
+
+    def append(self, f: NDArray) -> None:
+        row = np.ascontiguousarray(f, np.float32).reshape(self.shape)
+        self.finite = self.finite and bool(np.all(np.isfinite(row)))
+        b = row.tobytes()
+        self._fh.write(b + b if self.n_rows == 0 else b)  # row 0 = row 1
+        self.n_rows += 2 if self.n_rows == 0 else 1
+
+    def chunks(self, rows: int = 256):
+        """The rows in order, ``(<= rows, n_lat, n_lon)`` float32 arrays."""
+        self._fh.flush()
+        self._fh.seek(0)
+        size = self.shape[0] * self.shape[1] * 4
+        while b := self._fh.read(rows * size):
+            yield np.frombuffer(b, np.float32).reshape(-1, *self.shape)
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _write_npz(fh, arrays: dict, spool: FieldSpool, dtype: str) -> None:
+    """``np.savez_compressed``'s layout, with ``field_dps`` copied from ``spool``."""
+    with zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
+        for k, a in arrays.items():
+            with zf.open(k + ".npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
+        header = {
+            "descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+            "fortran_order": False,
+            "shape": (spool.n_rows, *spool.shape),
+        }
+        with zf.open("field_dps.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_1_0(f, header)
+            for c in spool.chunks():
+                f.write(c.astype(dtype).tobytes())
+
+
 def save_grid(
     path: str | os.PathLike,
     pof_dps: NDArray,
@@ -149,6 +198,10 @@ def save_grid(
         "pitch_deg": np.asarray(grid.pitch_deg, np.float64),
         "meta": np.array(json.dumps(m, sort_keys=True)),
     }
+    if isinstance(field_dps, tuple) and isinstance(field_dps[0], FieldSpool):
+        with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+            _write_npz(fh, arrays, *field_dps)
+        return
     if field_dps is not None:
         arrays["field_dps"] = np.asarray(field_dps)
     with atomic_output(path) as tmp, open(tmp, "wb") as fh:

@@ -543,3 +543,20 @@ def test_signal_cleans_up(base, long_video, tmp_path, which, sig):
     after = _snapshot(d)
     assert not [n for n in after if ".tmp-" in n], after
     assert {k: v for k, v in after.items() if k in before} == before
+
+
+def test_sphere_field_streamed_equals_in_memory(base):
+    """Sphere preprocess streams the field to an unnamed temporary file; the grid file it
+    writes is bit-identical to the in-memory field (float16) and its window matrix."""
+    from simulator.cells import window_pof
+    from simulator.gridfile import load_grid
+    from simulator.preprocess import SphereConfig
+    from simulator.preprocess.sphere import field_from_video
+    from simulator.windows import grid_preset
+
+    g = load_grid(base / "S.npz")
+    f, info = field_from_video(base / "v.mp4", SphereConfig(cell_deg=10))
+    d, x = window_pof(f, 10, grid_preset("default", size=(32, 32)), info.fps)
+    assert g.field_dps.dtype == np.float16 and np.array_equal(g.field_dps, f.astype(np.float16))
+    assert np.array_equal(g.pof_dps, d) and np.array_equal(g.pof_px, x)
+    assert not [p for p in base.iterdir() if p.name.startswith(("tmp", "."))]
