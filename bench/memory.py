@@ -1,6 +1,7 @@
 """Peak memory of the long-running commands against video length (streaming check).
 
-Usage: .venv/bin/python bench/memory.py [--frames 60] [--factor 8]
+Usage: .venv/bin/python bench/memory.py [--frames 60] [--factor 8] [--only sphere]
+(issue 13 quotes ``--frames 300 --factor 10``: 300 and 3000 frames)
 
 Makes two 1024x512 H.264 clips of the same content (petra.jpg panning), one ``--factor``
 times longer than the other, and runs each command on both in a fresh process:
@@ -62,6 +63,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--frames", type=int, default=60, help="frames of the short clip")
     ap.add_argument("--factor", type=int, default=8, help="long clip = factor x short")
+    ap.add_argument(
+        "--only",
+        default="",
+        help="run only the commands whose name contains this text (e.g. sphere)",
+    )
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as d:
         d = Path(d)
@@ -101,6 +107,8 @@ def main(argv=None) -> int:
         short, long_ = jobs("short", clips["short"]), jobs("long", clips["long"])
         worst = 0.0
         for name in short:
+            if a.only not in name:
+                continue
             ms, ml = peak_mib(short[name]), peak_mib(long_[name])
             worst = max(worst, ml / ms)
             print(

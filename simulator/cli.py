@@ -3,13 +3,18 @@
 One subcommand per job. Each lives in ``simulator/commands/<name>.py`` with two
 functions: ``register(subparsers)`` adds its parser (light: no heavy imports) and
 ``run(args) -> int`` does the work (heavy imports inside). Exit status: 0 success,
-2 bad input or usage (one line on stderr), 1 internal error.
+2 bad input or usage (one line on stderr), 1 an environment error (disk full, read-only
+or vanished folder, permission; one line naming the file and the OS error) or an
+internal error (one line; ``VIMSIM_DEBUG=1`` shows the traceback), 130 / 143 after
+SIGINT / SIGTERM (temporary files removed). Before any work the outputs are checked:
+not empty, not a directory where a file is expected, not the same file as an input.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from simulator.errors import InputError
@@ -30,6 +35,61 @@ COMMANDS: dict[str, str] = {
     "analyze": "analyze",
     "export": "export",
 }
+
+
+#: Commands whose ``-o`` is a folder (the rest write one file).
+FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo"})
+#: Suffixes ``--plot`` / ``headpath plot -o`` may have (matplotlib writes these).
+PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
+_OUTPUT_KEYS = ("output", "plot")
+
+
+def _inputs_named(args: argparse.Namespace) -> list[str]:
+    """Every argument value (not an output) naming an existing file: the run's inputs."""
+    found = []
+    for key, val in vars(args).items():
+        if key in _OUTPUT_KEYS or key in ("func", "command"):
+            continue
+        for v in val if isinstance(val, (list, tuple)) else [val]:
+            if isinstance(v, str) and v.strip() and os.path.isfile(v):
+                found.append(v)
+    return found
+
+
+def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+    """InputError before any work for an unusable output name (see the module text)."""
+    from simulator.fileio import check_not_input, check_output_file
+
+    out = getattr(args, "output", None)
+    if args.command in FOLDER_OUTPUTS:
+        if out is not None:
+            if str(out).strip() == "":
+                raise InputError("output folder name is empty; give a folder, e.g. -o out")
+            if os.path.exists(out) and not os.path.isdir(out):
+                raise InputError(f"{out}: output folder is an existing file; expected a folder")
+            check_not_input(out, inputs)
+    elif out is not None:
+        check_output_file(out, inputs)
+        if args.command == "synth":
+            base = out[: -len(os.path.splitext(out)[1])] if os.path.splitext(out)[1] else out
+            check_output_file(base + ".truth.npz", inputs)
+    plot = getattr(args, "plot", None)
+    if args.command == "headpath" and getattr(args, "headpath_command", "") == "show":
+        plot = out
+    for p in [plot] if plot else []:
+        if not str(p).lower().endswith(PLOT_SUFFIXES):
+            raise InputError(
+                f"{p}: plot suffix {os.path.splitext(p)[1] or '(none)'} cannot be written; "
+                f"use one of {', '.join(PLOT_SUFFIXES)}"
+            )
+        if plot is not out:
+            check_output_file(p, [*inputs, out] if out else inputs)
+
+
+def _os_error_line(e: OSError) -> str:
+    name = e.filename if e.filename is not None else None
+    what = e.strerror or str(e) or type(e).__name__
+    return f"{name}: {what}" if name else what
 
 
 class _Parser(argparse.ArgumentParser):
@@ -63,14 +123,43 @@ def main(argv: list[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help(sys.stderr)
         return 2
+    from simulator.commands._signals import exit_status, handle_signals, signal_name
+    from simulator.fileio import input_scope
+
+    name = f"vimsim {args.command}"
     try:
-        return int(args.func(args) or 0)
+        with handle_signals():
+            inputs = _inputs_named(args)
+            with input_scope(inputs):
+                _check_outputs(args, inputs)
+                return int(args.func(args) or 0)
     except InputError as e:
-        print(f"vimsim {args.command}: error: {e}", file=sys.stderr)
+        print(f"{name}: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"vimsim {args.command}: interrupted", file=sys.stderr)
-        return 130
+        print(f"{name}: {signal_name()}; temporary files removed", file=sys.stderr)
+        return exit_status()
+    except MemoryError:
+        print(
+            f"{name}: error: out of memory (choose smaller sizes or fewer frames)", file=sys.stderr
+        )
+        return 1
+    except OSError as e:
+        print(f"{name}: error: {_one_line(_os_error_line(e))}", file=sys.stderr)
+        return 1
+    except Exception as e:
+        if os.environ.get("VIMSIM_DEBUG"):
+            raise
+        print(
+            f"{name}: internal error: {type(e).__name__}: {_one_line(e)[:300]} "
+            "(VIMSIM_DEBUG=1 shows the traceback; please report it)",
+            file=sys.stderr,
+        )
+        return 1
+
+
+def _one_line(e: object) -> str:
+    return " ".join(str(e).split())
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ import numpy as np
 
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.fileio import OutputFolder, atomic_output, json_text
 from simulator.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.gridfile import load_grid
@@ -187,7 +187,10 @@ def run_demo(
     is recorded in the summary and README instead of aborting the other outputs.
     """
 
-    out = check_output_dir(output)
+    folder = OutputFolder(
+        output, [k for k in _FILES if "/" not in k] + ["grid.npz.partial.npz"], "demo"
+    )
+    out = folder.prepare()  # refuses files we did not write; clears our previous run's
     log: list[tuple[str, float]] = []
     t_all = time.perf_counter()
     t0 = t_all
@@ -365,6 +368,7 @@ def run_demo(
     ]
     with atomic_output(out / "README.txt") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
+    folder.complete()  # the manifest, then the completion marker
     with atomic_output(out / "summary.json") as tmp:
         Path(tmp).write_text(json_text(summary) + "\n")
     return summary

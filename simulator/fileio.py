@@ -10,12 +10,144 @@ import contextlib
 import json
 import math
 import os
-from collections.abc import Iterator
+import re
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from simulator.errors import InputError
 
-__all__ = ["atomic_output", "check_input_file", "check_output_dir", "json_text"]
+__all__ = [
+    "OutputFolder",
+    "atomic_output",
+    "check_input_file",
+    "check_not_input",
+    "check_output_dir",
+    "check_output_file",
+    "csv_cell",
+    "input_scope",
+    "json_text",
+    "known_inputs",
+    "register_input",
+    "remove_stale_temporaries",
+]
+
+#: Every file read through :func:`check_input_file` inside :func:`input_scope` (the CLI
+#: opens one per command; resolved paths): an output that is the same file as one of
+#: them is refused (never destroy an input). Empty and unused outside a scope.
+_INPUTS: set[Path] = set()
+_SCOPES: list[set[Path]] = []
+
+#: The temporary-name pattern of :func:`atomic_output`: ``.<stem>.tmp-<pid><suffix>``.
+_TMP_RE = re.compile(r"^\.(?P<stem>.*)\.tmp-(?P<pid>\d+)(?P<suffix>(\.[^.]*)?)$")
+
+#: The manifest a folder output keeps of the files it wrote (see :class:`OutputFolder`).
+MANIFEST_NAME = ".vimsim-manifest.json"
+
+
+@contextlib.contextmanager
+def input_scope(inputs: Iterable[str | os.PathLike] = ()) -> Iterator[None]:
+    """Within it, every file read through :func:`check_input_file` (and ``inputs``) is an
+    input of one run, and :func:`atomic_output` refuses to write over any of them."""
+    saved = set(_INPUTS)
+    _SCOPES.append(saved)
+    _INPUTS.clear()
+    try:
+        for x in inputs:
+            register_input(x)
+        yield
+    finally:
+        _INPUTS.clear()
+        _INPUTS.update(_SCOPES.pop())
+
+
+def register_input(path: str | os.PathLike) -> None:
+    """Record ``path`` as an input of this run (inside :func:`input_scope` only)."""
+    if _SCOPES:
+        with contextlib.suppress(OSError):
+            _INPUTS.add(Path(path).resolve())
+
+
+def known_inputs() -> list[Path]:
+    """The inputs recorded so far (resolved paths)."""
+    return sorted(_INPUTS)
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        try:
+            return a.resolve() == b.resolve()
+        except OSError:
+            return False
+
+
+def check_not_input(target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """InputError if ``target`` is the same file as an input (by ``os.path.samefile``, so
+    symlinks, hard links and ``./`` spellings count; by resolved path where it does not
+    exist yet). ``inputs`` adds to those recorded by :func:`register_input`."""
+    t = Path(target)
+    for inp in [*_INPUTS, *(Path(x) for x in inputs if x is not None and str(x).strip())]:
+        if _same_file(t, inp):
+            raise InputError(
+                f"{target}: output is the same file as the input {inp}; "
+                "refusing to overwrite an input (choose another output name)"
+            )
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return True
+    return True
+
+
+def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
+    """Remove temporary files of :func:`atomic_output` for ``target`` left by a process
+    that is gone (e.g. after ``kill -9``); only names of that pattern whose pid is not
+    running. Returns the paths removed."""
+    t = Path(target)
+    parent = t.parent if str(t.parent) else Path(".")
+    removed = []
+    try:
+        entries = list(parent.iterdir())
+    except OSError:
+        return removed
+    for e in entries:
+        m = _TMP_RE.match(e.name)
+        if not m or m["stem"] != t.stem or m["suffix"] != t.suffix:
+            continue
+        if _pid_alive(int(m["pid"])):
+            continue
+        with contextlib.suppress(OSError):
+            e.unlink()
+            removed.append(e)
+    return removed
+
+
+def check_output_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+    """``path`` as a Path if a file can be written there, checked before any work:
+    InputError for an empty name, a directory, a missing or read-only folder, or the
+    same file as an input."""
+    if str(path).strip() == "":
+        raise InputError("output name is empty; give a file name, e.g. -o out.png")
+    target = Path(path)
+    if target.is_dir():
+        raise InputError(f"{target}: output is a directory; expected a file name")
+    parent = target.parent if str(target.parent) else Path(".")
+    if not parent.is_dir():
+        raise InputError(f"{target}: output directory {parent} does not exist")
+    if not os.access(parent, os.W_OK):
+        raise InputError(f"{target}: output directory {parent} is not writable")
+    check_not_input(target, inputs)
+    return target
 
 
 @contextlib.contextmanager
@@ -24,26 +156,102 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
 
     The temporary name keeps the suffix (``.out.png`` -> ``.out.tmp-<pid>.png``) so that
     libraries choosing a format from the extension (Pillow, matplotlib, PyAV) still work.
-    On any exception the temporary file is removed and the target is left untouched.
+    On any exception (a signal too, which the CLI turns into one) the temporary file is
+    removed and the target is left untouched. Refused (InputError) before anything is
+    written: an output that is the same file as an input of this run, a directory, a
+    missing or read-only folder. Temporaries of the same target left by dead processes
+    are removed first.
     """
-    target = Path(path)
+    target = check_output_file(path)
     parent = target.parent if str(target.parent) else Path(".")
-    if not parent.is_dir():
-        raise InputError(f"{target}: output directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise InputError(f"{target}: output directory {parent} is not writable")
+    remove_stale_temporaries(target)
     tmp = parent / f".{target.stem}.tmp-{os.getpid()}{target.suffix}"
     try:
         yield tmp
+        check_not_input(target)  # an input registered while writing
         os.replace(tmp, target)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             tmp.unlink()
         raise
 
 
+class OutputFolder:
+    """A folder output (``render``, ``analyze``, ``demo``) that only touches its own files.
+
+    ``names`` are the files the command writes. Opening it (:meth:`prepare`) refuses an
+    input among them and a file of one of those names that no earlier run of the command
+    wrote (no manifest lists it); it removes the files the earlier run listed (so an
+    interrupted run never leaves old files beside new ones) and writes the manifest
+    (state ``incomplete``) before any output. :meth:`complete` rewrites it as
+    ``complete`` beside the completion marker, last.
+    """
+
+    def __init__(self, path: str | os.PathLike, names: Iterable[str], command: str):
+        self.path = Path(path)
+        self.names = list(dict.fromkeys(names))
+        self.command = command
+
+    def _manifest(self) -> dict:
+        m = self.path / MANIFEST_NAME
+        try:
+            obj = json.loads(m.read_text(encoding="utf-8"))
+        except (OSError, ValueError, RecursionError):
+            return {}
+        return obj if isinstance(obj, dict) else {}
+
+    def check(self, inputs: Iterable[str | os.PathLike] = ()) -> set[str]:
+        """The refusals of :meth:`prepare` without touching anything (call it before the
+        work); returns the names an earlier run of this command wrote."""
+        if str(self.path).strip() == "":
+            raise InputError("output folder name is empty; give a folder, e.g. -o out")
+        out = self.path
+        if out.exists() and not out.is_dir():
+            raise InputError(f"{out}: output folder is an existing file; expected a folder")
+        check_not_input(out / MANIFEST_NAME, inputs)
+        prev = self._manifest()
+        mine = prev.get("files", []) if prev.get("command") == self.command else []
+        mine = {str(n) for n in mine if isinstance(n, str)}
+        for name in self.names:
+            f = out / name
+            check_not_input(f, inputs)
+            if (f.exists() or f.is_symlink()) and name not in mine:
+                raise InputError(
+                    f"{f}: exists and was not written by vimsim {self.command}; "
+                    "refusing to replace it (move it or choose another output folder)"
+                )
+        return mine
+
+    def prepare(self, inputs: Iterable[str | os.PathLike] = ()) -> Path:
+        """Check (:meth:`check`) and clear the folder; returns it (created)."""
+        mine = self.check(inputs)
+        out = check_output_dir(self.path)
+        for name in sorted(mine):
+            if "/" in name or name.startswith("."):
+                continue
+            remove_stale_temporaries(out / name)
+            with contextlib.suppress(FileNotFoundError):
+                (out / name).unlink()
+        self._write(state="incomplete", files=sorted(mine | set(self.names)))
+        return out
+
+    def _write(self, *, state: str, files: list[str]) -> None:
+        with atomic_output(self.path / MANIFEST_NAME) as tmp:
+            tmp.write_text(
+                json_text({"command": self.command, "state": state, "files": files}) + "\n",
+                encoding="utf-8",
+            )
+
+    def complete(self, written: Iterable[str] | None = None) -> None:
+        """Record the files written (default: every name) as a complete run."""
+        files = self.names if written is None else list(written)
+        self._write(state="complete", files=sorted(set(files)))
+
+
 def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
     """Return ``path`` as a Path if it is a readable regular file, else raise InputError."""
+    if str(path).strip() == "":
+        raise InputError(f"{what} file name is empty")
     p = Path(path)
     if not p.exists():
         raise InputError(f"{p}: {what} file not found")
@@ -53,12 +261,17 @@ def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
         raise InputError(f"{p}: {what} file is not readable")
     if p.stat().st_size == 0:
         raise InputError(f"{p}: {what} file is empty")
+    register_input(p)
     return p
 
 
 def check_output_dir(path: str | os.PathLike) -> Path:
     """Create ``path`` (a directory for outputs) if needed; InputError if impossible."""
+    if str(path).strip() == "":
+        raise InputError("output folder name is empty; give a folder, e.g. -o out")
     p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise InputError(f"{p}: output folder is an existing file; expected a folder")
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -66,6 +279,18 @@ def check_output_dir(path: str | os.PathLike) -> Path:
     if not os.access(p, os.W_OK):
         raise InputError(f"{p}: output directory is not writable")
     return p
+
+
+def csv_cell(value: str) -> str:
+    """A text cell for a CSV output that a spreadsheet will not run as a formula: one
+    beginning with ``=``, ``+``, ``@``, a tab or carriage return, or ``-`` not followed by
+    a digit (``-3`` stays a number) gets a leading ``'`` (OWASP's CSV-injection advice)."""
+    s = str(value)
+    if s and (
+        s[0] in "=+@\t\r" or (s[0] == "-" and not (len(s) > 1 and (s[1].isdigit() or s[1] == ".")))
+    ):
+        return "'" + s
+    return s
 
 
 def _json_safe(x):

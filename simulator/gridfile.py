@@ -27,6 +27,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import tempfile
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -39,7 +40,7 @@ from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
 from simulator.windows import WindowGrid
 
-__all__ = ["FORMAT", "VERSION", "GridFile", "content_hash", "load_grid", "save_grid"]
+__all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
 
 FORMAT = "vimsim-grid"
 VERSION = 1
@@ -131,6 +132,54 @@ class GridFile:
             )
 
 
+class FieldSpool:
+    """Per-frame fields ``(n_lat, n_lon)`` float32 streamed to an anonymous temporary file
+    beside the output as they are made (memory flat in the video's length; the file has no
+    name, so nothing is left even after ``kill -9``). Row 0 repeats row 1 (frame 0 has no
+    predecessor). :func:`save_grid` copies it into the grid file chunk by chunk."""
+
+    def __init__(self, shape: tuple[int, int], directory: str | os.PathLike = "."):
+        self.shape = (int(shape[0]), int(shape[1]))
+        self._fh = tempfile.TemporaryFile(dir=directory)  # noqa: SIM115 - closed by close()
+        self.n_rows = 0
+        self.finite = True
+
+    def append(self, f: NDArray) -> None:
+        row = np.ascontiguousarray(f, np.float32).reshape(self.shape)
+        self.finite = self.finite and bool(np.all(np.isfinite(row)))
+        b = row.tobytes()
+        self._fh.write(b + b if self.n_rows == 0 else b)  # row 0 = row 1
+        self.n_rows += 2 if self.n_rows == 0 else 1
+
+    def chunks(self, rows: int = 256):
+        """The rows in order, ``(<= rows, n_lat, n_lon)`` float32 arrays."""
+        self._fh.flush()
+        self._fh.seek(0)
+        size = self.shape[0] * self.shape[1] * 4
+        while b := self._fh.read(rows * size):
+            yield np.frombuffer(b, np.float32).reshape(-1, *self.shape)
+
+    def close(self) -> None:
+        self._fh.close()
+
+
+def _write_npz(fh, arrays: dict, spool: FieldSpool, dtype: str) -> None:
+    """``np.savez_compressed``'s layout, with ``field_dps`` copied from ``spool``."""
+    with zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
+        for k, a in arrays.items():
+            with zf.open(k + ".npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
+        header = {
+            "descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+            "fortran_order": False,
+            "shape": (spool.n_rows, *spool.shape),
+        }
+        with zf.open("field_dps.npy", "w", force_zip64=True) as f:
+            np.lib.format.write_array_header_1_0(f, header)
+            for c in spool.chunks():
+                f.write(c.astype(dtype).tobytes())
+
+
 def save_grid(
     path: str | os.PathLike,
     pof_dps: NDArray,
@@ -164,10 +213,84 @@ def save_grid(
         "pitch_deg": np.asarray(grid.pitch_deg, np.float64),
         "meta": np.array(json.dumps(m, sort_keys=True)),
     }
+    if isinstance(field_dps, tuple) and isinstance(field_dps[0], FieldSpool):
+        with atomic_output(path) as tmp, open(tmp, "wb") as fh:
+            _write_npz(fh, arrays, *field_dps)
+        return
     if field_dps is not None:
         arrays["field_dps"] = np.asarray(field_dps)
     with atomic_output(path) as tmp, open(tmp, "wb") as fh:
         np.savez_compressed(fh, **arrays)
+
+
+def _check_headers(p: Path, need: set[str]) -> None:
+    """InputError before reading if an array header of the .npz claims more data than its
+    member holds (a header claiming terabytes), or names an object dtype."""
+    try:
+        with zipfile.ZipFile(p) as zf:
+            for info in zf.infolist():
+                if not info.filename.endswith(".npy"):
+                    continue
+                name = info.filename[:-4]
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    if version == (1, 0):
+                        shape, _fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+                    else:
+                        shape, _fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+                if dtype.hasobject:
+                    raise InputError(
+                        f"{p}: array {name} holds Python objects; not a vimsim grid file"
+                    )
+                nbytes = int(np.prod(shape, dtype=object)) * dtype.itemsize
+                if nbytes > info.file_size + 4096:
+                    raise InputError(
+                        f"{p}: array {name} header claims {nbytes} bytes but the file holds "
+                        f"{info.file_size}; corrupt grid file"
+                    )
+    except InputError:
+        raise
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
+        raise InputError(
+            f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
+        ) from None
+
+
+def _is_num(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
+
+
+def _check_meta(p: Path, meta: dict) -> None:
+    """InputError naming the first meta field of the wrong type or out of range."""
+    if not _is_num(meta["fps"]) or not meta["fps"] > 0:
+        raise InputError(f"{p}: grid meta fps must be a number > 0; got {str(meta['fps'])[:20]!r}")
+    if (
+        not isinstance(meta["n_frames"], int)
+        or isinstance(meta["n_frames"], bool)
+        or meta["n_frames"] < 1
+    ):
+        raise InputError(f"{p}: grid meta n_frames must be an integer >= 1")
+    for k in ("grid", "video", "flow"):
+        if not isinstance(meta[k], dict):
+            raise InputError(f"{p}: grid meta {k} must be an object; got {type(meta[k]).__name__}")
+    for k in ("layout", "eye"):
+        if not isinstance(meta[k], str):
+            raise InputError(f"{p}: grid meta {k} must be a string")
+    v = meta["video"]
+    for k in ("width", "height"):
+        if k in v and not (isinstance(v[k], int) and not isinstance(v[k], bool) and v[k] > 0):
+            raise InputError(f"{p}: grid meta video.{k} must be an integer > 0")
+    if "n_frames" in v and not (isinstance(v["n_frames"], int) and v["n_frames"] >= 0):
+        raise InputError(f"{p}: grid meta video.n_frames must be an integer >= 0")
+    if "path" in v and not isinstance(v["path"], str):
+        raise InputError(f"{p}: grid meta video.path must be a string")
+    sf = meta.get("start_frame", 0)
+    if sf is not None and not (isinstance(sf, int) and not isinstance(sf, bool) and sf >= 0):
+        raise InputError(f"{p}: grid meta start_frame must be an integer >= 0")
+    if "field" in meta:
+        fm = meta["field"]
+        if not isinstance(fm, dict) or not _is_num(fm.get("cell_deg")) or not fm["cell_deg"] > 0:
+            raise InputError(f"{p}: grid meta field.cell_deg must be a number > 0")
 
 
 def load_grid(path: str | os.PathLike) -> GridFile:
@@ -176,10 +299,11 @@ def load_grid(path: str | os.PathLike) -> GridFile:
     p = check_input_file(path, "grid")
     if not zipfile.is_zipfile(p):
         raise InputError(f"{p}: not a vimsim grid file (expected a .npz made by vimsim preprocess)")
+    need = {"pof_dps", "pof_px", "yaw_deg", "pitch_deg", "meta"}
+    _check_headers(p, need)
     try:
         with np.load(p, allow_pickle=False) as z:
             names = set(z.files)
-            need = {"pof_dps", "pof_px", "yaw_deg", "pitch_deg", "meta"}
             if not need <= names:
                 raise InputError(
                     f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing"
@@ -187,35 +311,70 @@ def load_grid(path: str | os.PathLike) -> GridFile:
             arrs = {k: z[k] for k in names}
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError) as e:
-        raise InputError(f"{p}: not a vimsim grid file (.npz expected): {e}") from None
-    try:
-        meta = json.loads(str(arrs["meta"]))
-    except (json.JSONDecodeError, TypeError):
-        raise InputError(f"{p}: grid meta is not JSON; not a vimsim grid file") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, MemoryError) as e:
         raise InputError(
-            f"{p}: not a vimsim grid file (format {meta.get('format') if isinstance(meta, dict) else None!r})"
-        )
+            f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
+        ) from None
+    m = arrs["meta"]
+    if m.ndim != 0 or m.dtype.kind != "U":
+        raise InputError(f"{p}: grid meta is not a JSON string; not a vimsim grid file")
+    try:
+        meta = json.loads(str(m))
+    except (json.JSONDecodeError, TypeError, RecursionError):
+        raise InputError(
+            f"{p}: grid meta is not JSON (or nested too deeply); not a vimsim grid file"
+        ) from None
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
+        fmt = meta.get("format") if isinstance(meta, dict) else None
+        raise InputError(f"{p}: not a vimsim grid file (format {str(fmt)[:40]!r})")
     if meta.get("version") != VERSION:
         raise InputError(
-            f"{p}: grid file version {meta.get('version')}; this vimsim reads version {VERSION}: re-run vimsim preprocess"
+            f"{p}: grid file version {str(meta.get('version'))[:20]}; this vimsim reads version {VERSION}: re-run vimsim preprocess"
         )
     missing = [k for k in _REQUIRED_META if k not in meta]
     if missing:
         raise InputError(f"{p}: grid meta lacks {missing}")
+    _check_meta(p, meta)
+    for k in (
+        "pof_dps",
+        "pof_px",
+        "yaw_deg",
+        "pitch_deg",
+        *(["field_dps"] if "field_dps" in arrs else []),
+    ):
+        if arrs[k].dtype.kind != "f":
+            raise InputError(
+                f"{p}: {k} has dtype {arrs[k].dtype}; expected real floating point numbers"
+            )
     dps, px = arrs["pof_dps"], arrs["pof_px"]
-    Y, P = arrs["yaw_deg"].shape[0], arrs["pitch_deg"].shape[0]
+    yaw, pitch = arrs["yaw_deg"], arrs["pitch_deg"]
+    for k, a, lo, hi in (("yaw_deg", yaw, -180.0, 360.0), ("pitch_deg", pitch, -90.0, 90.0)):
+        if a.ndim != 1 or a.size < 1:
+            raise InputError(f"{p}: {k} has shape {a.shape}; expected a non-empty 1-D array")
+        if not np.all(np.isfinite(a)) or a.min() < lo or a.max() > hi:
+            raise InputError(f"{p}: {k} has values outside [{lo:g}, {hi:g}] deg or non-finite")
+        if a.size > 1 and not np.all(np.diff(a) > 0):
+            raise InputError(f"{p}: {k} is not strictly increasing")
+    Y, P = yaw.shape[0], pitch.shape[0]
     if dps.ndim != 3 or dps.shape[1:] != (P, Y) or px.shape != dps.shape:
         raise InputError(
             f"{p}: pof arrays have shape {dps.shape}/{px.shape}; expected (T, {P}, {Y})"
         )
-    if dps.shape[0] < 1 or not np.all(np.isfinite(dps)):
-        raise InputError(f"{p}: pof_dps is empty or has non-finite values")
+    for k, a in (("pof_dps", dps), ("pof_px", px)):
+        if a.shape[0] < 1 or not np.all(np.isfinite(a)):
+            raise InputError(f"{p}: {k} is empty or has non-finite values")
+        if a.min() < 0:
+            raise InputError(
+                f"{p}: {k} has negative values ({float(a.min()):.3g}); flow magnitudes are >= 0"
+            )
+    if "field_dps" in arrs:
+        f = arrs["field_dps"]
+        if f.ndim != 3 or not np.all(np.isfinite(f)) or (f.size and f.min() < 0):
+            raise InputError(f"{p}: field_dps must be (T, n_lat, n_lon), finite and >= 0")
     try:
         WindowGrid.from_dict(meta["grid"])
-    except (TypeError, InputError) as e:
-        raise InputError(f"{p}: grid description in meta is invalid ({e})") from None
+    except (TypeError, KeyError, ValueError, AttributeError, InputError) as e:
+        raise InputError(f"{p}: grid description in meta is invalid ({type(e).__name__})") from None
     return GridFile(
         pof_dps=dps.astype(np.float32, copy=False),
         pof_px=px.astype(np.float32, copy=False),

@@ -68,6 +68,10 @@ class RadiansWarning(UserWarning):
     """Angles in a file that should hold degrees all lie within +-2*pi: radians?"""
 
 
+class MillisecondsWarning(UserWarning):
+    """Times in a file that should hold seconds look like milliseconds."""
+
+
 class CoarseSamplingWarning(UserWarning):
     """Consecutive poses differ by more than 90 deg: Slerp takes the shortest arc between
     them, which may not be the way the head turned."""

@@ -12,9 +12,10 @@ import numpy as np
 
 from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import OpacityRule
 from simulator.gridfile import require_field
+from simulator.headpath import HeadPath
 from simulator.mitigation import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
 from simulator.progress import Progress
@@ -46,18 +47,6 @@ def _ratio(num, den) -> float | None:
     n, d = np.asarray(num, float), np.asarray(den, float)
     ok = np.isfinite(n) & np.isfinite(d)
     return float(n[ok].sum() / d[ok].sum()) if ok.any() and d[ok].sum() > 0 else None
-
-
-def _clear_outputs(out) -> None:
-    """Remove a previous run's :data:`OUTDIR_FILES` from ``out`` (only those names)."""
-    for name in OUTDIR_FILES + REVIEW_FILES:
-        p = out / name
-        try:
-            p.unlink(missing_ok=True)
-        except OSError as e:
-            raise InputError(
-                f"{p}: cannot remove the previous run's output ({e.strerror})"
-            ) from None
 
 
 def render_viewing(
@@ -166,6 +155,14 @@ def render_viewing(
     yaw, pitch, roll = plan.angles_deg.T
     epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
     epof_method = plan.epof_method
+    # Only our own earlier outputs are removed (a failed run must not leave them beside new
+    # ones); a file of one of our names that we did not write, or an input, is refused.
+    folder = OutputFolder(outdir, OUTDIR_FILES + (REVIEW_FILES if review else ()), "render")
+    inputs = [video, *([] if isinstance(headpath, HeadPath) else [headpath])]
+    inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
+    if isinstance(opacity, str) and opacity != "auto":
+        inputs.append(opacity)  # an EPOF CSV
+    folder.check(inputs)  # before the GL context and any work
 
     # What reaches the eye: the flow of each direction (the sphere-mode field, rows of the
     # plan's frames) weighted by what is drawn over it.
@@ -194,8 +191,7 @@ def render_viewing(
 
     if ctx is None:
         ctx = create_context()
-    out = check_output_dir(outdir)
-    _clear_outputs(out)  # a failed run must not leave the previous run's files beside new ones
+    out = folder.prepare(inputs)
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
@@ -312,7 +308,8 @@ def render_viewing(
     }
     if note:
         summary["note"] = note
-    # Last: the completion marker.
+    # Last: the manifest saying which files are ours, then the completion marker.
+    folder.complete()
     with atomic_output(out / "summary.json") as tmp:
         Path(tmp).write_text(json_text(summary) + "\n")
     return summary

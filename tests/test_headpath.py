@@ -281,9 +281,11 @@ def test_bad_files_one_line_exit_2(tmp_path, capsys, name):
 
 
 def test_radians_warning(tmp_path, capsys):
-    p = _write(
-        tmp_path, "rad.csv", "time_s,yaw_deg,pitch_deg,roll_deg\n0,0.5,0.2,0\n1,1.5,-0.3,0\n"
+    # strong evidence: 20 samples all within +-2*pi, yaw sweeping 5.6 units (radians: 320 deg)
+    rows = "".join(
+        f"{k * 0.1:.1f},{-2.8 + k * 0.3:.2f},{0.2 * (-1) ** k:.1f},0\n" for k in range(20)
     )
+    p = _write(tmp_path, "rad.csv", "time_s,yaw_deg,pitch_deg,roll_deg\n" + rows)
     with pytest.warns(RadiansWarning, match="RADIANS"):
         load_headpath(p)
     assert main(["headpath", "convert", str(p), "-o", str(tmp_path / "o.csv")]) == 0
@@ -291,6 +293,10 @@ def test_radians_warning(tmp_path, capsys):
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         load_headpath(_write(tmp_path, "deg.csv", "time_s,yaw_deg,pitch_deg\n0,10,5\n1,40,-20\n"))
+        # small degree values of a still viewer are not evidence of radians
+        load_headpath(
+            _write(tmp_path, "small.csv", "time_s,yaw_deg,pitch_deg\n0,0.5,0.2\n1,1.5,-0.3\n")
+        )
 
 
 # ------------------------------------------------------------------ review fixes

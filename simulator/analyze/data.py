@@ -121,7 +121,9 @@ def _check_columns(path: Path, header: Sequence[str]) -> dict[str, bool]:
             problems.append(f"column '{c}' missing")
     have_items = any(c in cols for c in SSQ_ITEMS)
     have_sub = all(c in cols for c in _SSQ_SUBSCORE_COLUMNS)
-    if have_items and not all(c in cols for c in SSQ_ITEMS) and not have_sub:
+    # a partial item set is a file-level error even where subscores are given too: a
+    # missing or misspelt item column would otherwise drop every row that gives items
+    if have_items and not all(c in cols for c in SSQ_ITEMS):
         miss = [c for c in SSQ_ITEMS if c not in cols]
         problems.append(f"SSQ item columns missing: {_missing_message(miss, unknown)}")
     elif not have_items and not have_sub:
@@ -132,7 +134,7 @@ def _check_columns(path: Path, header: Sequence[str]) -> dict[str, bool]:
         )
     mssq_cols = _MSSQ_CHILD + _MSSQ_ADULT
     have_answers = any(c in cols for c in mssq_cols)
-    if have_answers and not all(c in cols for c in mssq_cols) and "mssq" not in cols:
+    if have_answers and not all(c in cols for c in mssq_cols):
         miss = [c for c in mssq_cols if c not in cols]
         problems.append(f"MSSQ-short answer columns missing: {_missing_message(miss, unknown)}")
     elif not have_answers and "mssq" not in cols:

@@ -15,7 +15,7 @@ from numpy.typing import NDArray
 from simulator.analyze.data import Participant, Study
 from simulator.analyze.scores import k_of
 from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir
+from simulator.fileio import OutputFolder, atomic_output, csv_cell
 
 __all__ = ["Analysis", "analyze_study", "write_report"]
 
@@ -250,7 +250,8 @@ def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(header)
         for r in rows:
-            w.writerow([_fmt(v) for v in r])
+            # text cells (ids, labels, reasons) cannot start a spreadsheet formula
+            w.writerow([csv_cell(v) if isinstance(v, str) else _fmt(v) for v in r])
 
 
 def _p_text(p: float) -> str:
@@ -299,6 +300,10 @@ def _boxplot(an: Analysis, path: Path) -> None:
     plt.close(fig)
 
 
+#: What :func:`write_report` writes, in this order; ``report.md`` (the completion marker) last.
+REPORT_FILES = ("scores.csv", "table.csv", "normality.csv", "table.md", "boxplots.png", "report.md")
+
+
 def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     """Write the analysis into ``out_dir`` (created if needed), each file atomically.
 
@@ -308,7 +313,10 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     condition), ``boxplots.png``, ``report.md`` (all of it plus exclusions, row problems
     and notes). Returns the paths written.
     """
-    out = check_output_dir(out_dir)
+    folder = OutputFolder(out_dir, REPORT_FILES, "analyze")
+    # refuses an input among our names (DATA.csv, an EPOF CSV) and files we did not write;
+    # clears our previous run's files so an interrupted run never looks complete
+    out = folder.prepare(inputs=[an.study.path])
     written: list[Path] = []
 
     reasons = dict(an.excluded)
@@ -388,6 +396,7 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     lines += [f"- {s}" for s in an.study.problems] or ["- none"]
     lines += ["", "## Notes", ""]
     lines += [f"- {s}" for s in an.messages()] or ["- none"]
+    folder.complete()  # the manifest, then the completion marker
     with atomic_output(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     written.append(out / "report.md")

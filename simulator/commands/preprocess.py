@@ -60,7 +60,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="dis",
         metavar="METHOD",
         help="flow backend: dis (OpenCV DIS ultrafast, default), dis:fast, dis:medium, "
-        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow)",
+        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow; "
+        "the model file runs as code: trusted files only)",
     )
     p.add_argument(
         "--layout",
@@ -165,15 +166,6 @@ def run(args: argparse.Namespace) -> int:
             )
         print(f"wrote {out}")
         return 0
-    import signal
-
-    def _term(signum, frame):  # SIGTERM (batch schedulers) behaves like Ctrl-C
-        raise KeyboardInterrupt
-
-    try:
-        old_term = signal.signal(signal.SIGTERM, _term)
-    except ValueError:  # not the main thread
-        old_term = None
     try:
         with (
             warnings_to_stderr("vimsim preprocess"),
@@ -194,10 +186,9 @@ def run(args: argparse.Namespace) -> int:
                 progress=bar,
             )
     except PreprocessInterrupted as e:
+        from simulator.commands._signals import exit_status
+
         print(f"vimsim preprocess: {e.message}", file=sys.stderr)
-        return 130
-    finally:
-        if old_term is not None:
-            signal.signal(signal.SIGTERM, old_term)
+        return exit_status()
     print(f"wrote {out}")
     return 0

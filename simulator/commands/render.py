@@ -17,7 +17,16 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
     size_wxh,
+    x264_crf,
 )
+
+#: H.264 level 6.2's largest frame in 16x16 macroblocks (8192x4320 and the like).
+MAX_H264_MACROBLOCKS = 139264
+#: Estimated bytes per eye pixel while rendering (framebuffers, read-back, encoder frames).
+BYTES_PER_EYE_PIXEL = 48
+#: Grains the mask pass takes, and their estimated bytes each (directions, buckets).
+MAX_GRAINS = 5_000_000
+BYTES_PER_GRAIN = 64
 
 __all__ = ["add_view_options", "register", "run", "view_from_args"]
 
@@ -160,13 +169,29 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     options: the one frustum, the GRF, the stereo layout (the grid's when not given) and
     the opacity rule."""
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.grf import GrfConfig
+    from simulator.errors import InputError
+    from simulator.grf import GrfConfig, grain_count
     from simulator.gridfile import load_grid
     from simulator.mitigation import Mitigation, parse_color
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
+    from simulator.resources import check_fits
 
     frustum = frustum_from_args(args, (107.0, 107.0))
+    w, h = args.eye_size
+    if command == "render":  # frames writes PNGs: any size the GL limits allow
+        if w % 2 or h % 2:
+            raise InputError(f"--eye-size {w}x{h}: H.264 needs even numbers, e.g. 480x480")
+        if -(-w // 16) * -(-h // 16) > MAX_H264_MACROBLOCKS or max(w, h) > 8192:
+            raise InputError(
+                f"--eye-size {w}x{h}: beyond H.264's largest frame (level 6.2: 8192x4320); "
+                "e.g. 2048x2048"
+            )
+    check_fits(2 * w * h * BYTES_PER_EYE_PIXEL, f"--eye-size {w}x{h}")
+    if not (0.0 < args.grain_size < 90.0):
+        raise InputError(f"--grain-size must be degrees in (0, 90); got {args.grain_size}")
+    if not (0.0 < args.density < 1.0):
+        raise InputError(f"--density must be in (0, 1); got {args.density}")
     mitigation = Mitigation(
         args.mitigation or "grf",
         aperture_min_deg=args.aperture_min,
@@ -199,6 +224,13 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
             seed=args.seed,
             distance_m=args.grain_distance,
         )
+        n = grain_count(grf)
+        if n > MAX_GRAINS:
+            raise InputError(
+                f"--grain-size {args.grain_size:g} with --density {args.density:g} needs {n} "
+                f"grains (at most {MAX_GRAINS}); choose a larger --grain-size, e.g. 0.5"
+            )
+        check_fits(n * BYTES_PER_GRAIN, f"--grain-size {args.grain_size:g}")
     config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf, mitigation=mitigation)
     return hp, grid, config, note, layout, rule
 
@@ -250,10 +282,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--crf",
-        type=nonneg_int,
+        type=x264_crf,
         default=18,
         metavar="N",
-        help="x264 quality, lower = better (default 18)",
+        help="x264 quality 0..51, lower = better (default 18)",
     )
     p.add_argument(
         "--eyes",

@@ -91,8 +91,11 @@ def run(args: argparse.Namespace) -> int:
 
     from simulator import geometry, video
     from simulator.fileio import atomic_output
+    from simulator.resources import check_fits
 
     hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
+    # rays (float64 x 3, twice), lon/lat, maps and the image: about 120 bytes per pixel
+    check_fits(args.size[0] * args.size[1] * 120, f"--size {args.size[0]}x{args.size[1]}")
     info = video.probe(args.src)
     w, h = info.eye_size(args.layout)  # checks 2:1 per eye (SAR-aware) and the layout
     if info.is_video and args.frame >= info.n_frames:

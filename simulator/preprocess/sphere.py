@@ -37,7 +37,7 @@ from simulator.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.gridfile import content_hash, save_grid
+from simulator.gridfile import FieldSpool, content_hash, save_grid
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
 from simulator.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
@@ -325,11 +325,11 @@ def field_from_frames(
     return _fields(est, (est.tiles(f) for f in frames), 256, progress, "")
 
 
-def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str):
+def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None):
     """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
     repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
     ``source`` prefixes the error for fewer than 2 frames."""
-    out = _FieldRows(est.cells.shape, expected)
+    out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
@@ -339,9 +339,9 @@ def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str):
         n += 1
         if progress is not None:
             progress(n)
-    if out.n < 2:
+    if (out.n if sink is None else out.n_rows) < 2:
         raise InputError(f"{source}sphere mode needs at least 2 frames; got {n}")
-    return out.result()
+    return out.result() if sink is None else out
 
 
 def field_from_video(
@@ -354,6 +354,7 @@ def field_from_video(
     end: int | None = None,
     flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
+    sink: FieldSpool | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
@@ -370,7 +371,7 @@ def field_from_video(
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
-        return _fields(est, tiles, last - int(start), progress, f"{path}: "), info
+        return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file
@@ -434,44 +435,47 @@ def preprocess_sphere(
     def tick(n: int) -> None:
         bar.update(n - bar.done)
 
-    try:
-        field, _ = field_from_video(
-            video,
-            config,
-            layout=layout,
-            eye=eye,
-            start=start_f,
-            end=end_f,
-            flow=backend,
-            progress=tick,
-        )
-    finally:
-        bar.close()
-    if not np.all(np.isfinite(field)):
-        raise InputError(f"{src}: flow gave non-finite values")
     cells = CellGrid(config.cell_deg)
-    dps, px = window_pof(field, cells.cell_deg, grid, fps)
-    T = field.shape[0]
-    if T != end_f - start_f:
-        warnings.warn(f"{src}: expected {end_f - start_f} frames, decoded {T}", stacklevel=2)
-    meta = {
-        "method": "sphere",
-        **common_meta(
-            video,
-            info,
-            n_rows=T,
-            start_frame=start_f,
-            flow=desc,
-            layout=layout,
-            eye=eye,
-            content_hash=content_hash(video),
-            units={
-                "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
-                "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
-                "field_dps": "deg/s of visual angle",
-            },
-        ),
-        "field": field_meta(replace(config, stride=config.stride or default_stride), field_dtype),
-    }
-    save_grid(out, dps, px, grid, meta, field_dps=field.astype(field_dtype))
+    # the field streams to an unnamed temporary file: memory flat in the video's length
+    spool = FieldSpool(cells.shape, out.parent if str(out.parent) else ".")
+    try:
+        try:
+            field_from_video(
+                video, config, layout=layout, eye=eye, start=start_f, end=end_f,
+                flow=backend, progress=tick, sink=spool,
+            )  # fmt: skip
+        finally:
+            bar.close()
+        if not spool.finite:
+            raise InputError(f"{src}: flow gave non-finite values")
+        parts = [window_pof(c, cells.cell_deg, grid, fps) for c in spool.chunks()]
+        dps = np.concatenate([d for d, _ in parts])
+        px = np.concatenate([x for _, x in parts])
+        T = spool.n_rows
+        if T != end_f - start_f:
+            warnings.warn(f"{src}: expected {end_f - start_f} frames, decoded {T}", stacklevel=2)
+        meta = {
+            "method": "sphere",
+            **common_meta(
+                video,
+                info,
+                n_rows=T,
+                start_frame=start_f,
+                flow=desc,
+                layout=layout,
+                eye=eye,
+                content_hash=content_hash(video),
+                units={
+                    "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
+                    "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
+                    "field_dps": "deg/s of visual angle",
+                },
+            ),
+            "field": field_meta(
+                replace(config, stride=config.stride or default_stride), field_dtype
+            ),
+        }
+        save_grid(out, dps, px, grid, meta, field_dps=(spool, field_dtype))
+    finally:
+        spool.close()
     return out

@@ -38,12 +38,12 @@ def detect_format(path: str | os.PathLike) -> str:
     head = _first_line(p)
     low = head.lower()
     if head.startswith(("{", "[")):
-        with open(p, encoding="utf-8", errors="replace") as fh:
+        with open(p, encoding="utf-8-sig", errors="replace") as fh:
             text = fh.read(1 << 16)
         if "pitch_yaw_roll_data_hmd" in text:
             return "avtrack360"
         return "keyframes-json"
-    toks = set(low.replace(",", " ").split())
+    toks = set(low.replace(",", " ").replace('"', " ").replace("'", " ").split())
     if {"timestamp", "viewpoint", "w", "x", "y", "z"} <= toks:
         return "corbillon"
     if {"timestamp", "viewpoint", "yaw", "pitch", "roll"} <= toks:

@@ -17,9 +17,11 @@ def _read_avtrack360(p: Path, video: str | None) -> HeadPath:
     ``sec`` = playback time. Their pitch is + down, yaw + right (yaw 0 = start view),
     roll + right ear down: ours = (yaw, -pitch, roll), applied yaw, pitch, roll."""
     try:
-        obj = json.loads(p.read_text(encoding="utf-8"))
+        obj = json.loads(p.read_text(encoding="utf-8-sig"))
         entries = obj["data"]
         names = [str(e["filename"]) for e in entries]
+    except RecursionError:
+        raise InputError(f"{p}: JSON nested too deeply; not an AVTrack360 file") from None
     except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
         raise InputError(
             f"{p}: not an AVTrack360 head rotation file ({type(e).__name__}: {e})"

@@ -12,9 +12,11 @@ from simulator.headpath import CANONICAL_COLUMNS, HeadPath
 from simulator.readers.common import (
     _check_finite,
     _check_increasing,
+    _check_pitch,
     _columns,
     _parse_table,
     _quats_to_rotation,
+    _warn_if_milliseconds,
     _warn_if_radians,
 )
 
@@ -30,6 +32,8 @@ def _read_canonical(p: Path) -> HeadPath:
     _check_increasing(p, t, lines)
     y, pi = data[:, ix["yaw_deg"]], data[:, ix["pitch_deg"]]
     r = data[:, ix["roll_deg"]] if "roll_deg" in ix else np.zeros_like(t)
+    _check_pitch(p, pi, lines)
+    _warn_if_milliseconds(p, t)
     _warn_if_radians(p, y, pi, r)
     return HeadPath.from_angles_deg(t, y, pi, r, source=str(p))
 
@@ -47,6 +51,7 @@ def _read_quat(p: Path) -> HeadPath:
     _check_finite(p, cols, data, lines)
     t = data[:, ix["time_s"]]
     _check_increasing(p, t, lines)
+    _warn_if_milliseconds(p, t)
     q = data[:, [ix["qx"], ix["qy"], ix["qz"], ix["qw"]]]
     return HeadPath(t, _quats_to_rotation(p, q, lines), str(p))
 
@@ -55,9 +60,11 @@ def _read_keyframes_json(p: Path) -> HeadPath:
     """JSON keyframes: a list of ``{"time_s", "yaw_deg", "pitch_deg", "roll_deg"?}`` objects
     (or ``{"keyframes": [...]}``), degrees."""
     try:
-        obj = json.loads(p.read_text(encoding="utf-8"))
+        obj = json.loads(p.read_text(encoding="utf-8-sig"))
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
         raise InputError(f"{p}: not valid JSON ({e})") from None
+    except RecursionError:
+        raise InputError(f"{p}: JSON nested too deeply; expected a list of keyframes") from None
     if isinstance(obj, dict):
         obj = obj.get("keyframes")
     if not isinstance(obj, list) or not obj:
@@ -86,5 +93,6 @@ def _read_keyframes_json(p: Path) -> HeadPath:
     lines = list(range(len(rows)))  # keyframe numbers, 0-based as in the messages above
     _check_finite(p, list(CANONICAL_COLUMNS), data, lines, "keyframe")
     _check_increasing(p, data[:, 0], lines, "keyframe")
+    _check_pitch(p, data[:, 2], lines, "keyframe")
     _warn_if_radians(p, data[:, 1], data[:, 2], data[:, 3])
     return HeadPath.from_angles_deg(data[:, 0], data[:, 1], data[:, 2], data[:, 3], source=str(p))

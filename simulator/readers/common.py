@@ -12,11 +12,17 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from simulator.errors import InputError
-from simulator.headpath import COARSE_STEP_DEG, CoarseSamplingWarning, HeadPath, RadiansWarning
+from simulator.headpath import (
+    COARSE_STEP_DEG,
+    CoarseSamplingWarning,
+    HeadPath,
+    MillisecondsWarning,
+    RadiansWarning,
+)
 
 
 def _first_line(p: Path) -> str:
-    with open(p, encoding="utf-8", errors="replace") as fh:
+    with open(p, encoding="utf-8-sig", errors="replace") as fh:
         for line in fh:
             if line.strip():
                 return line.strip()
@@ -50,7 +56,7 @@ def _parse_table(
     Returns ``(columns, data (N, C), line_numbers)``; InputError on ragged or
     non-numeric rows (names the line) and on a file with a header only.
     """
-    with open(p, encoding="utf-8", errors="replace") as fh:
+    with open(p, encoding="utf-8-sig", errors="replace") as fh:
         lines = fh.read().splitlines()
     rows = [
         (i + 1, ln) for i, ln in enumerate(lines) if ln.strip() and not ln.lstrip().startswith("#")
@@ -97,13 +103,49 @@ def _check_increasing(p: Path, t: NDArray, lines: list[int], what: str = "line")
 
 
 def _warn_if_radians(p: Path, *angles: NDArray) -> None:
+    """RadiansWarning only on strong evidence: every angle within +-2*pi *and* the first
+    (yaw) spanning more than 3 units with at least 10 samples: in degrees that would be a
+    viewer who never turned more than 6 deg yet moved over 3 deg; in radians, over 170 deg
+    of looking around. Small degree values (a still viewer) raise nothing."""
     a = np.concatenate([np.abs(np.ravel(x)) for x in angles])
-    if a.size and a.max() <= 2 * math.pi + 1e-9 and a.max() > 0.05:
+    yaw = np.ravel(angles[0]) if angles else np.zeros(0)
+    if (
+        a.size
+        and yaw.size >= 10
+        and a.max() <= 2 * math.pi + 1e-9
+        and float(yaw.max() - yaw.min()) > 3.0
+    ):
         warnings.warn(
-            f"{p}: every angle lies within +-2*pi (max {a.max():.3f}): these look like RADIANS, "
+            f"{p}: every angle lies within +-2*pi (max {a.max():.3f}) while yaw spans "
+            f"{float(yaw.max() - yaw.min()):.2f}: these look like RADIANS, "
             "but this format holds DEGREES; convert them (x 180/pi) if so",
             RadiansWarning,
             stacklevel=3,
+        )
+
+
+def _warn_if_milliseconds(p: Path, t: NDArray) -> None:
+    """MillisecondsWarning when times look like milliseconds: at least 20 samples, a
+    median step of 4 to 50 (a 20-250 Hz tracker in ms; in seconds, one sample every
+    4-50 s) and a span over 200."""
+    if t.size >= 20:
+        step = float(np.median(np.diff(t)))
+        if 4.0 <= step <= 50.0 and float(t[-1] - t[0]) > 200.0:
+            warnings.warn(
+                f"{p}: time_s steps by {step:.3g} (median) over {float(t[-1] - t[0]):.6g}: these "
+                "look like MILLISECONDS, but this format holds seconds; divide by 1000 if so",
+                MillisecondsWarning,
+                stacklevel=3,
+            )
+
+
+def _check_pitch(p: Path, pitch: NDArray, lines: list[int], what: str = "line") -> None:
+    """InputError for a pitch outside [-90, 90] deg (naming the first such row)."""
+    bad = np.flatnonzero(np.abs(pitch) > 90.0 + 1e-9)
+    if bad.size:
+        k = int(bad[0])
+        raise InputError(
+            f"{p}: {what} {lines[k]}: pitch_deg is {pitch[k]:.6g}; expected degrees in [-90, 90]"
         )
 
 
