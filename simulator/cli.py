@@ -38,7 +38,7 @@ COMMANDS: dict[str, str] = {
 
 
 #: Commands whose ``-o`` is a folder (the rest write one file).
-FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo"})
+FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo", "frames", "export", "study"})
 #: Suffixes ``--plot`` / ``headpath plot -o`` may have (matplotlib writes these).
 PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
 _OUTPUT_KEYS = ("output", "plot")
