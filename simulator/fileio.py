@@ -18,6 +18,7 @@ from simulator.errors import InputError
 
 __all__ = [
     "OutputFolder",
+    "PendingOutput",
     "atomic_output",
     "check_input_file",
     "check_not_input",
@@ -150,6 +151,36 @@ def check_output_file(path: str | os.PathLike, inputs: Iterable[str | os.PathLik
     return target
 
 
+class PendingOutput:
+    """One output file being written: checked, written to ``tmp``, then committed by rename.
+
+    The one output-file helper every writer uses (:func:`atomic_output` for ``with``
+    blocks, :class:`simulator.video.VideoWriter` for encoders). Construction refuses
+    (InputError) an output that is the same file as an input of this run, a directory, a
+    missing or read-only folder, and removes temporaries of the same target left by dead
+    processes. The temporary name keeps the suffix (``.out.png`` ->
+    ``.out.tmp-<pid>.png``) so libraries choosing a format from the extension still work.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.target = check_output_file(path)
+        parent = self.target.parent if str(self.target.parent) else Path(".")
+        remove_stale_temporaries(self.target)
+        self.tmp = parent / f".{self.target.stem}.tmp-{os.getpid()}{self.target.suffix}"
+
+    def commit(self) -> Path:
+        """Rename the finished temporary file into place (refused if the target became an
+        input meanwhile); returns the target."""
+        check_not_input(self.target)  # an input registered while writing
+        os.replace(self.tmp, self.target)
+        return self.target
+
+    def discard(self) -> None:
+        """Remove the temporary file (the target is left untouched)."""
+        with contextlib.suppress(OSError):
+            self.tmp.unlink()
+
+
 @contextlib.contextmanager
 def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it to ``path`` on success.
@@ -162,17 +193,12 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     missing or read-only folder. Temporaries of the same target left by dead processes
     are removed first.
     """
-    target = check_output_file(path)
-    parent = target.parent if str(target.parent) else Path(".")
-    remove_stale_temporaries(target)
-    tmp = parent / f".{target.stem}.tmp-{os.getpid()}{target.suffix}"
+    out = PendingOutput(path)
     try:
-        yield tmp
-        check_not_input(target)  # an input registered while writing
-        os.replace(tmp, target)
+        yield out.tmp
+        out.commit()
     except BaseException:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
+        out.discard()
         raise
 
 

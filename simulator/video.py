@@ -13,7 +13,6 @@ error, so an interrupted encode never leaves an MP4 that looks complete.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import queue
 import threading
@@ -27,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.fileio import PendingOutput, check_input_file
 from simulator.geometry import check_equirect_aspect, split_eye
 
 __all__ = [
@@ -339,12 +338,8 @@ class VideoWriter:
             )
         if not (fps > 0):
             raise InputError(f"{self.path}: frame rate must be > 0; got {fps}")
-        parent = self.path.parent
-        if not parent.is_dir() or not os.access(parent, os.W_OK):
-            raise InputError(
-                f"{self.path}: output directory {parent} does not exist or is not writable"
-            )
-        self._tmp = parent / f".{self.path.stem}.tmp-{os.getpid()}{self.path.suffix or '.mp4'}"
+        self._out = PendingOutput(self.path)  # the one output-file helper (checks, temp name)
+        self._tmp = self._out.tmp
         self.size = (w, h)
         self.n_written = 0
         self._container = av.open(str(self._tmp), mode="w", format="mp4")
@@ -379,10 +374,9 @@ class VideoWriter:
         finally:
             self._container.close()
         if ok:
-            os.replace(self._tmp, self.path)
+            self._out.commit()
         else:
-            with contextlib.suppress(FileNotFoundError):
-                self._tmp.unlink()
+            self._out.discard()
 
     def __enter__(self) -> VideoWriter:  # noqa: PYI034
         return self
