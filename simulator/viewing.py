@@ -11,12 +11,15 @@ from typing import Literal
 
 import numpy as np
 
+from simulator.audio import audio_source
+from simulator.cells import Frustum
 from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_output_dir, json_text
 from simulator.grf import OpacityRule, grain_count
 from simulator.gridfile import GridFile, load_grid
 from simulator.headpath import HeadPath
+from simulator.inputs import check_right_eye, csv_opacity, frame_range
 from simulator.progress import Progress
 from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
@@ -39,63 +42,6 @@ __all__ = [
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
 #: Written besides with ``review=True`` (before ``summary.json``).
 REVIEW_FILES = ("review.mp4", "sheet.png")
-
-
-def frame_range(
-    n_frames: int,
-    fps: float,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    *,
-    video: str = "",
-) -> tuple[int, int]:
-    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
-
-    None = the video's start / end. InputError (naming ``video``) for a range outside the
-    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
-    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
-    """
-    dur = n_frames / fps
-    src = f"{video}: " if video else ""
-    s = 0.0 if start_s is None else float(start_s)
-    e = dur if end_s is None else float(end_s)
-    if not (np.isfinite(s) and np.isfinite(e)):
-        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
-    if e <= s:
-        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
-    if s < 0 or s >= dur:
-        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
-    if e > dur + 1e-6:
-        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
-    eps = 1e-6
-    f0 = int(np.ceil(s * fps - eps))
-    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
-    if f1 <= f0:
-        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
-    return f0, f1
-
-
-def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
-    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
-    has a row for each of them and no frame beyond the video)."""
-    fr = np.asarray(res.frame, np.int64)
-    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
-        raise InputError(
-            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
-            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
-        )
-    pos = {int(f): i for i, f in enumerate(fr)}
-    missing = [int(f) for f in frames if int(f) not in pos]
-    if missing:
-        raise InputError(
-            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
-            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
-            f"({len(missing)} missing, first {missing[0]})"
-        )
-    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
-    if np.any((op < 0) | (op > 1)):
-        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
-    return op
 
 
 def _clear_outputs(out) -> None:
@@ -124,6 +70,11 @@ class ViewingPlan:
     thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
     epof_method : ``paper`` or ``sphere`` (None without a grid)
     opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
+    right : the right eye's equirect file (two per-eye files), or None
+    epof_eye : the eye whose view the EPOF measures: the grid's eye (its meta) for a
+        stereo source, else ``left``
+    epof_frustum : the frustum the EPOF was computed over (that eye's; the right eye's
+        mirrors the left eye's left and right half-angles)
     """
 
     info: MediaInfo
@@ -137,6 +88,9 @@ class ViewingPlan:
     thresholds_dps: tuple[float, float]
     epof_method: str | None = None
     opacity_label: object = "auto"
+    right: str | None = None
+    epof_eye: str = "left"
+    epof_frustum: Frustum | None = None
 
     @property
     def ranged(self) -> bool:
@@ -172,6 +126,7 @@ def plan_viewing(
     end_s: float | None = None,
     rule: OpacityRule = OpacityRule(),
     method: str = "auto",
+    right=None,
 ) -> ViewingPlan:
     """Check a viewing's inputs and work out what every frame shows (no GL, no output).
 
@@ -179,8 +134,9 @@ def plan_viewing(
     the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
     (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
     EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
-    it to a time range (:func:`frame_range`). Raises InputError for a bad video, head
-    path, grid, range or opacity.
+    it to a time range (:func:`frame_range`). ``right``: the right eye's equirect file
+    (``video`` is then the left eye's; both mono, same size, frame rate and frame count).
+    Raises InputError for a bad video, right-eye file, head path, grid, range or opacity.
     """
     grf = config.grf
     op_csv = None
@@ -198,6 +154,9 @@ def plan_viewing(
         raise InputError(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
+    if right is not None:
+        right = str(right)
+        check_right_eye(info, right, layout)
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
     f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
     ranged = (f0, f1) != (0, info.n_frames)
@@ -211,7 +170,7 @@ def plan_viewing(
     if grid is not None:
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
-        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
+        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
     if grf is not None and opacity == "auto" and grid is None:
         raise InputError(
             "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
@@ -223,6 +182,16 @@ def plan_viewing(
     thresholds = (float("nan"), float("nan"))
     op_auto = None
     epof_method = None
+    stereo = layout != "mono" or right is not None
+    epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
+    epof_frustum = config.frustum
+    if epof_eye == "right":  # the grid holds the right eye's flow: that eye's view
+        epof_frustum = Frustum(
+            config.frustum.right_deg,
+            config.frustum.left_deg,
+            config.frustum.down_deg,
+            config.frustum.up_deg,
+        )
     if grid is not None:
         # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
         # and easing have their state at the range's start (cost ~ the range).
@@ -234,7 +203,7 @@ def plan_viewing(
         res = compute_epof(
             grid,
             hp,
-            frustum=config.frustum,
+            frustum=epof_frustum,
             hold=True if ranged else hold,
             rule=rule,
             method=method,
@@ -256,7 +225,20 @@ def plan_viewing(
         op = np.full(nf, float(opacity))
     angles = np.stack([yaw, pitch, roll], axis=-1)
     return ViewingPlan(
-        info, hp, grid, frames, times, angles, epof_dps, op, thresholds, epof_method, opacity
+        info,
+        hp,
+        grid,
+        frames,
+        times,
+        angles,
+        epof_dps,
+        op,
+        thresholds,
+        epof_method,
+        opacity,
+        right,
+        epof_eye,
+        epof_frustum,
     )
 
 
@@ -281,6 +263,8 @@ def render_viewing(
     method: str = "auto",
     review: bool = False,
     eyes: str | None = None,
+    right=None,
+    audio: bool = True,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -305,6 +289,11 @@ def render_viewing(
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
         byte copy) and ``both`` for a stereo one
+    right : the right eye's equirect file: ``video`` and ``right`` are then a stereo
+        source of two per-eye files (same size, frame rate and frame count; layout mono)
+    audio : copy the source's audio (of ``video``; the range's part) into every output
+        video (:mod:`simulator.audio`); False: silent outputs. A source without audio
+        gives silent outputs either way (``summary.json`` says which)
     review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
@@ -338,7 +327,7 @@ def render_viewing(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
     if eyes is None:
-        eyes = "left" if layout == "mono" else "both"
+        eyes = "left" if layout == "mono" and right is None else "both"
     if eyes not in ("left", "right", "both"):
         raise InputError(f"eyes must be left, right or both; got {eyes!r}")
     plan = plan_viewing(
@@ -353,6 +342,7 @@ def render_viewing(
         end_s=end_s,
         rule=rule,
         method=method,
+        right=right,
     )
     info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label
     frames, times = plan.frames, plan.times_s
@@ -361,6 +351,10 @@ def render_viewing(
     yaw, pitch, roll = plan.angles_deg.T
     epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
     epof_method = plan.epof_method
+    ranged = plan.ranged
+    aud = None
+    if audio:
+        aud = audio_source(video, times[0] if ranged else None, f1 / info.fps if ranged else None)
 
     if ctx is None:
         ctx = create_context()
@@ -383,6 +377,7 @@ def render_viewing(
             hfov_deg=hfov,
             vfov_deg=vfov,
             fps=info.fps,
+            audio=aud,
         )
     try:
         result = render_video(
@@ -403,6 +398,9 @@ def render_viewing(
             progress=progress,
             start_frame=f0,
             on_frame=None if rev is None else rev.add_yuv,
+            audio=aud,
+            right_path=plan.right,
+            review_eye=plan.epof_eye,
         )
     except BaseException:
         if rev is not None:
@@ -411,10 +409,35 @@ def render_viewing(
     if rev is not None:
         rev.close(ok=True)
 
-    # epof.csv: one row per video frame.
+    if aud is None:
+        audio_info = {
+            "copied": False,
+            "why": "off (--no-audio)" if not audio else "no audio stream in the source",
+        }
+    else:
+        audio_info = {
+            "copied": True,
+            "codec": aud.codec,
+            "mode": "packets copied" if aud.copy else "re-encoded to AAC",
+            "range_s": [aud.start_s, aud.end_s],
+        }
+    fr_ = plan.epof_frustum
+    settings = {
+        "epof_method": epof_method,
+        "epof_eye": plan.epof_eye,
+        "frustum_deg": None
+        if fr_ is None
+        else {"left": fr_.left_deg, "right": fr_.right_deg, "down": fr_.down_deg, "up": fr_.up_deg},
+        "fov_deg": [hfov, vfov],
+        "opacity": "off" if grf is None else str(opacity),
+        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
+        "opacity_thresholds_dps": list(thresholds),
+    }
+    # epof.csv: one row per video frame, the settings as '#' lines above the header.
     write_epof_csv(
         out / "epof.csv",
         EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
+        settings=settings,
     )
 
     def pct(a):
@@ -428,7 +451,9 @@ def render_viewing(
         "headpath": hp.source or str(headpath),
         "grid": None if grid is None else (grid.path or None),
         "layout": layout,
+        "right": plan.right,
         "eyes": eyes,
+        "audio": audio_info,
         "fps": info.fps,
         "frames_video": info.n_frames,
         "range_s": [float(times[0]), float(times[-1])],
@@ -449,6 +474,8 @@ def render_viewing(
         "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
         "opacity_thresholds_dps": list(thresholds),
         "epof_method": epof_method,
+        "epof_eye": plan.epof_eye,
+        "epof_frustum_deg": settings["frustum_deg"],
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
         "x264": {"preset": preset, "crf": crf},
