@@ -103,6 +103,12 @@ class _AudioMuxer:
                 # by channel count: a layout of unspecified order ("1 channels") is refused
                 mono = layout is not None and layout.nb_channels == 1
                 self.stream.layout = "mono" if mono else "stereo"
+        except av.error.FFmpegError as e:
+            self._in.close()
+            raise InputError(
+                f"{src.path}: its {src.codec} audio cannot go into an MP4 "
+                f"({e.strerror or type(e).__name__}); --no-audio renders without it"
+            ) from None
         except BaseException:
             self._in.close()
             raise
@@ -111,8 +117,15 @@ class _AudioMuxer:
     def mux_all(self) -> int:
         """Write the range's audio into the output (call once, before or after the video
         packets: the muxer interleaves); returns the number of packets written."""
+        import av
+
         try:
             return self._copy() if self.src.copy else self._transcode()
+        except av.error.FFmpegError as e:
+            raise InputError(
+                f"{self.src.path}: cannot carry its {self.src.codec} audio into the output "
+                f"({e.strerror or type(e).__name__}); --no-audio renders without it"
+            ) from None
         finally:
             self._in.close()
 
