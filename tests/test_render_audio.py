@@ -201,3 +201,23 @@ def test_right_eye_with_stereo_layout_refused(ctx, tmp_path, capsys):
                    "--layout", "top-bottom") == 2  # fmt: skip
     assert "--layout top-bottom" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_review_shows_the_grid_eye_of_two_eye_files(ctx, tmp_path):
+    """With two per-eye files the review panel gets the eye asked for (the grid's eye)."""
+    from simulator.render import RenderConfig
+    from simulator.render.video import render_video
+
+    left, right = tmp_path / "l.mp4", tmp_path / "r.mp4"
+    _clip(left, gray=60, audio=None)
+    _clip(right, gray=180, audio=None)
+    for eye, want in (("left", 60), ("right", 180)):
+        seen = []
+        render_video(ctx, str(left), (str(tmp_path / f"{eye}L.mp4"), str(tmp_path / f"{eye}R.mp4")),
+                     np.zeros((N, 3)), config=RenderConfig(eye_size=(32, 32), grf=None),
+                     preset="ultrafast", right_path=str(right), review_eye=eye,
+                     on_frame=lambda eq, img, seen=seen: seen.append((float(eq.mean()), float(img[:32].mean()))))  # fmt: skip
+        assert len(seen) == N
+        assert np.allclose([s[0] for s in seen], want, atol=3)  # the equirect of that eye
+        # its view: the Y plane, limited range (BT.601/709 luma of a gray: 16 + 219 g / 255)
+        assert np.allclose([s[1] for s in seen], 16 + 219 * want / 255, atol=3)
