@@ -15,73 +15,18 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.epof.viewing import EpofResult, compute_epof, read_epof_csv
+from simulator.cells import Frustum
+from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.errors import InputError
 from simulator.grf import OpacityRule, grain_count
 from simulator.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.headpath import HeadPath
+from simulator.inputs import check_right_eye, csv_opacity, frame_range
 from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.video import MediaInfo, probe
 
-__all__ = ["ViewingPlan", "frame_range", "grf_settings", "plan_viewing"]
-
-
-def frame_range(
-    n_frames: int,
-    fps: float,
-    start_s: float | None = None,
-    end_s: float | None = None,
-    *,
-    video: str = "",
-) -> tuple[int, int]:
-    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
-
-    None = the video's start / end. InputError (naming ``video``) for a range outside the
-    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
-    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
-    """
-    dur = n_frames / fps
-    src = f"{video}: " if video else ""
-    s = 0.0 if start_s is None else float(start_s)
-    e = dur if end_s is None else float(end_s)
-    if not (np.isfinite(s) and np.isfinite(e)):
-        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
-    if e <= s:
-        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
-    if s < 0 or s >= dur:
-        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
-    if e > dur + 1e-6:
-        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
-    eps = 1e-6
-    f0 = int(np.ceil(s * fps - eps))
-    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
-    if f1 <= f0:
-        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
-    return f0, f1
-
-
-def _csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
-    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
-    has a row for each of them and no frame beyond the video)."""
-    fr = np.asarray(res.frame, np.int64)
-    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
-        raise InputError(
-            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
-            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
-        )
-    pos = {int(f): i for i, f in enumerate(fr)}
-    missing = [int(f) for f in frames if int(f) not in pos]
-    if missing:
-        raise InputError(
-            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
-            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
-            f"({len(missing)} missing, first {missing[0]})"
-        )
-    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
-    if np.any((op < 0) | (op > 1)):
-        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
-    return op
+__all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
 
 
 @dataclass(frozen=True)
@@ -98,6 +43,11 @@ class ViewingPlan:
     thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
     epof_method : ``paper`` or ``sphere`` (None without a grid)
     opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
+    right : the right eye's equirect file (two per-eye files), or None
+    epof_eye : the eye whose view the EPOF measures: the grid's eye (its meta) for a
+        stereo source, else ``left``
+    epof_frustum : the frustum the EPOF was computed over (that eye's; the right eye's
+        mirrors the left eye's left and right half-angles)
     """
 
     info: MediaInfo
@@ -111,6 +61,9 @@ class ViewingPlan:
     thresholds_dps: tuple[float, float]
     epof_method: str | None = None
     opacity_label: object = "auto"
+    right: str | None = None
+    epof_eye: str = "left"
+    epof_frustum: Frustum | None = None
 
     @property
     def ranged(self) -> bool:
@@ -146,6 +99,7 @@ def plan_viewing(
     end_s: float | None = None,
     rule: OpacityRule = OpacityRule(),
     method: str = "auto",
+    right=None,
 ) -> ViewingPlan:
     """Check a viewing's inputs and work out what every frame shows (no GL, no output).
 
@@ -153,8 +107,10 @@ def plan_viewing(
     the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
     (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
     EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
-    it to a time range (:func:`frame_range`). Raises InputError for a bad video, head
-    path, grid, range or opacity.
+    it to a time range (:func:`simulator.inputs.frame_range`). ``right``: the right eye's
+    equirect file (``video`` is then the left eye's; both mono, same size, frame rate and
+    frame count). Raises InputError for a bad video, right-eye file, head path, grid,
+    range or opacity.
     """
     grf = config.grains
     mit = config.mitigation
@@ -174,6 +130,9 @@ def plan_viewing(
         raise InputError(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
+    if right is not None:
+        right = str(right)
+        check_right_eye(info, right, layout)
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
     f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
     ranged = (f0, f1) != (0, info.n_frames)
@@ -187,7 +146,7 @@ def plan_viewing(
     if grid is not None:
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
-        op_from_csv = _csv_opacity(op_csv, opacity, frames, info.n_frames)
+        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
     if mit.local and grf is not None and grid is None:
         raise InputError(
             f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
@@ -206,6 +165,16 @@ def plan_viewing(
     thresholds = (float("nan"), float("nan"))
     op_auto = None
     epof_method = None
+    stereo = layout != "mono" or right is not None
+    epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
+    epof_frustum = config.frustum
+    if epof_eye == "right":  # the grid holds the right eye's flow: that eye's view
+        epof_frustum = Frustum(
+            config.frustum.right_deg,
+            config.frustum.left_deg,
+            config.frustum.down_deg,
+            config.frustum.up_deg,
+        )
     if grid is not None:
         # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
         # and easing have their state at the range's start (cost ~ the range).
@@ -217,7 +186,7 @@ def plan_viewing(
         res = compute_epof(
             grid,
             hp,
-            frustum=config.frustum,
+            frustum=epof_frustum,
             hold=True if ranged else hold,
             rule=rule,
             method=method,
@@ -239,5 +208,18 @@ def plan_viewing(
         op = np.full(nf, float(opacity))
     angles = np.stack([yaw, pitch, roll], axis=-1)
     return ViewingPlan(
-        info, hp, grid, frames, times, angles, epof_dps, op, thresholds, epof_method, opacity
+        info,
+        hp,
+        grid,
+        frames,
+        times,
+        angles,
+        epof_dps,
+        op,
+        thresholds,
+        epof_method,
+        opacity,
+        right,
+        epof_eye,
+        epof_frustum,
     )

@@ -90,6 +90,7 @@ class ReviewWriter:
     n_sheet : eye views on the contact sheet (evenly spaced times)
     preset, crf : x264 settings of the review video (ultrafast: it must cost little
         beside the eye videos)
+    audio : None, or a :class:`simulator.audio.AudioSource` carried into the review video
     """
 
     def __init__(
@@ -110,6 +111,7 @@ class ReviewWriter:
         n_sheet: int = 12,
         preset: str = "ultrafast",
         crf: int = 23,
+        audio=None,
     ):
         self.t = np.asarray(times_s, float)
         self.yaw, self.pitch = np.asarray(yaw_deg, float), np.asarray(pitch_deg, float)
@@ -125,7 +127,7 @@ class ReviewWriter:
         k = min(int(n_sheet), n)
         self.sheet_at = {int(i): None for i in np.linspace(0, n - 1, k).round().astype(int)}
         self._strip = self._base_strip()
-        self._writer = VideoWriter(video_path, fps, self.size, crf=crf, preset=preset)
+        self._writer = VideoWriter(video_path, fps, self.size, crf=crf, preset=preset, audio=audio)
         self.n = 0
 
     # ------------------------------------------------------------------ strip

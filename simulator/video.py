@@ -315,6 +315,8 @@ class VideoWriter:
     fps : frame rate, frames/s (a float such as 29.97 is kept as an exact fraction)
     size : (width, height) pixels; even numbers (yuv420p)
     crf : x264 constant rate factor (lower = better quality)
+    audio : None, or a :class:`simulator.audio.AudioSource` (duck-typed: ``add_to(container)``)
+        whose audio (range) is carried into the file
 
     Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
     """
@@ -327,6 +329,7 @@ class VideoWriter:
         *,
         crf: int = 18,
         preset: str = "veryfast",
+        audio=None,
     ):
         import av
 
@@ -349,6 +352,14 @@ class VideoWriter:
         self._stream.pix_fmt = "yuv420p"
         self._stream.options = {"crf": str(crf), "preset": preset}
         self._closed = False
+        self.n_audio_packets = 0
+        if audio is not None:
+            try:
+                # All audio first: the muxer interleaves it with the video packets by time.
+                self.n_audio_packets = audio.add_to(self._container).mux_all()
+            except BaseException:
+                self.close(ok=False)
+                raise
 
     def write(self, frame: NDArray[np.uint8]) -> None:
         import av

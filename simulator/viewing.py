@@ -10,6 +10,7 @@ from typing import Literal
 
 import numpy as np
 
+from simulator.audio import audio_source
 from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import OutputFolder, atomic_output, json_text
@@ -70,6 +71,8 @@ def render_viewing(
     method: str = "auto",
     review: bool = False,
     eyes: str | None = None,
+    right=None,
+    audio: bool = True,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -97,6 +100,11 @@ def render_viewing(
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
         byte copy) and ``both`` for a stereo one
+    right : the right eye's equirect file: ``video`` and ``right`` are then a stereo
+        source of two per-eye files (same size, frame rate and frame count; layout mono)
+    audio : copy the source's audio (of ``video``; the range's part) into every output
+        video (:mod:`simulator.audio`); False: silent outputs. A source without audio
+        gives silent outputs either way (``summary.json`` says which)
     review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
@@ -132,7 +140,7 @@ def render_viewing(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
     if eyes is None:
-        eyes = "left" if layout == "mono" else "both"
+        eyes = "left" if layout == "mono" and right is None else "both"
     if eyes not in ("left", "right", "both"):
         raise InputError(f"eyes must be left, right or both; got {eyes!r}")
     plan = plan_viewing(
@@ -147,6 +155,7 @@ def render_viewing(
         end_s=end_s,
         rule=rule,
         method=method,
+        right=right,
     )
     info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label
     frames, times = plan.frames, plan.times_s
@@ -155,11 +164,13 @@ def render_viewing(
     yaw, pitch, roll = plan.angles_deg.T
     epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
     epof_method = plan.epof_method
+    ranged = plan.ranged
     # Only our own earlier outputs are removed (a failed run must not leave them beside new
     # ones); a file of one of our names that we did not write, or an input, is refused.
     folder = OutputFolder(outdir, OUTDIR_FILES + (REVIEW_FILES if review else ()), "render")
     inputs = [video, *([] if isinstance(headpath, HeadPath) else [headpath])]
     inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
+    inputs += [plan.right] if plan.right is not None else []
     if isinstance(opacity, str) and opacity != "auto":
         inputs.append(opacity)  # an EPOF CSV
     folder.check(inputs)  # before the GL context and any work
@@ -189,6 +200,10 @@ def render_viewing(
     per_direction = field_dps is not None
     del field_dps  # the render needs only cell_op (local-grf); long videos hold less
 
+    aud = None
+    if audio:
+        aud = audio_source(video, times[0] if ranged else None, f1 / info.fps if ranged else None)
+
     if ctx is None:
         ctx = create_context()
     out = folder.prepare(inputs)
@@ -209,6 +224,7 @@ def render_viewing(
             hfov_deg=hfov,
             vfov_deg=vfov,
             fps=info.fps,
+            audio=aud,
         )
     try:
         result = render_video(
@@ -230,6 +246,9 @@ def render_viewing(
             progress=progress,
             start_frame=f0,
             on_frame=None if rev is None else rev.add_yuv,
+            audio=aud,
+            right_path=plan.right,
+            review_eye=plan.epof_eye,
         )
     except BaseException:
         if rev is not None:
@@ -238,11 +257,38 @@ def render_viewing(
     if rev is not None:
         rev.close(ok=True)
 
-    # epof.csv: one row per video frame.
+    if aud is None:
+        audio_info = {
+            "copied": False,
+            "why": "off (--no-audio)" if not audio else "no audio stream in the source",
+        }
+    else:
+        audio_info = {
+            "copied": True,
+            "codec": aud.codec,
+            "mode": "packets copied" if aud.copy else "re-encoded to AAC",
+            "range_s": [aud.start_s, aud.end_s],
+        }
+    fr_ = plan.epof_frustum
+    settings = {
+        "epof_method": epof_method,
+        "epof_eye": plan.epof_eye,
+        "frustum_deg": None
+        if fr_ is None
+        else {"left": fr_.left_deg, "right": fr_.right_deg, "down": fr_.down_deg, "up": fr_.up_deg},
+        "fov_deg": [hfov, vfov],
+        "mitigation": mit.kind,
+        "opacity": "off" if not drawn else str(opacity),
+        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
+        "opacity_thresholds_dps": list(thresholds),
+    }
+    # epof.csv: one row per video frame, the settings as '#' lines above the header, the
+    # visible flow after the EPOF columns.
     write_epof_csv(
         out / "epof.csv",
         EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
         extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
+        settings=settings,
     )
 
     def pct(a):
@@ -256,7 +302,9 @@ def render_viewing(
         "headpath": hp.source or str(headpath),
         "grid": None if grid is None else (grid.path or None),
         "layout": layout,
+        "right": plan.right,
         "eyes": eyes,
+        "audio": audio_info,
         "fps": info.fps,
         "frames_video": info.n_frames,
         "range_s": [float(times[0]), float(times[-1])],
@@ -288,6 +336,8 @@ def render_viewing(
         "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
         "opacity_thresholds_dps": list(thresholds),
         "epof_method": epof_method,
+        "epof_eye": plan.epof_eye,
+        "epof_frustum_deg": settings["frustum_deg"],
         "epof_dps_percentiles": pct(epof_dps),
         "opacity_percentiles": pct(op),
         "visible_flow": {

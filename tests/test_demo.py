@@ -15,6 +15,12 @@ from simulator.demo import DemoConfig, run_demo
 from simulator.gridfile import load_grid
 from simulator.video import probe
 
+
+def _data_lines(path):
+    """The lines of an EPOF CSV without its '#' settings lines (header first)."""
+    return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+
+
 TINY = DemoConfig(
     seconds=0.5, fps=10.0, eye_size=(128, 64), window=32, render_size=(64, 64), seed=3
 )
@@ -47,7 +53,7 @@ def test_demo_writes_every_file(demo_dir):
     g = load_grid(demo_dir / "grid.npz")
     assert g.pof_dps.shape == (5, 11, 24)
     assert g.meta["layout"] == "top-bottom" and g.meta["eye"] == "left"
-    rows = (demo_dir / "epof.csv").read_text().splitlines()
+    rows = _data_lines(demo_dir / "epof.csv")
     assert rows[0] == "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity" and len(rows) == 6
     readme = (demo_dir / "README.txt").read_text()
     assert "coaster.mp4" in readme and "pof_heatmaps.png" in readme

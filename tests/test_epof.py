@@ -217,7 +217,14 @@ def test_cli_epof_writes_csv_and_plot(tmp_path, capsys):
     out, png = tmp_path / "e.csv", tmp_path / "e.png"
     assert main(["epof", str(grid), str(path), "-o", str(out), "--plot", str(png)]) == 0
     res = read_epof_csv(out)
-    assert out.read_text().splitlines()[0] == ",".join(EPOF_COLUMNS)
+    lines = out.read_text().splitlines()
+    data = [ln for ln in lines if not ln.startswith("#")]
+    assert data[0] == ",".join(EPOF_COLUMNS) and len(data) == 46
+    # the settings, as '#' lines above the header, come back from the reader
+    assert lines[0].startswith("# ") and res.meta["settings"]["epof_method"] == "paper"
+    assert res.meta["settings"]["fov_deg"] == [107.0, 107.0]
+    assert res.thresholds_dps == pytest.approx(res.meta["settings"]["opacity_thresholds_dps"])
+    assert np.isfinite(res.thresholds_dps).all()
     assert len(res.frame) == 45 and np.array_equal(res.frame, np.arange(45))
     assert png.read_bytes()[:4] == b"\x89PNG"
     out2 = tmp_path / "e2.csv"
@@ -298,7 +305,7 @@ def test_grid_of_part_of_the_video_uses_its_frame_numbers_and_times(tmp_path):
     out, csv = tmp_path / "e.csv", tmp_path / "p.csv"
     save_headpath_csv(csv, hp)
     assert main(["epof", str(path), str(csv), "-o", str(out)]) == 0
-    first = out.read_text().splitlines()[1].split(",")
+    first = [ln for ln in out.read_text().splitlines() if ln[0] != "#"][1].split(",")
     assert first[0] == "50" and float(first[1]) == pytest.approx(2.0)
 
 

@@ -330,7 +330,7 @@ def test_cli_render_mitigations_write_visible_flow(ctx, tmp_path, half_grid):
         rc = main(["render", str(vid), str(hp), "-o", str(out), "--grid", str(grid.path),
                    "--eye-size", "64x64", "--mitigation", kind, "--no-progress"])  # fmt: skip
         assert rc == 0
-        rows = (out / "epof.csv").read_text().splitlines()
+        rows = [r for r in (out / "epof.csv").read_text().splitlines() if not r.startswith("#")]
         head = rows[0].split(",")
         assert head[-3:] == ["visible_flow_dps", "visible_ratio", "blocked_share"]
         data = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])

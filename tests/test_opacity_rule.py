@@ -12,6 +12,11 @@ from simulator.errors import InputError
 from simulator.grf import OpacityRule, comfort_rule, ease
 
 
+def _data_lines(path):
+    """The lines of an EPOF CSV without its '#' settings lines (header first)."""
+    return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+
+
 def test_ease_is_a_slew_rate_limit_analytic():
     step = np.array([0, 1, 1, 1, 1, 1, 1, 0, 0, 0, 0, 0, 0, 0, 0.0])
     out = ease(step, 10.0, 0.5, 1.0)  # up 0.2 / frame, down 0.1 / frame
@@ -56,7 +61,7 @@ def _grid_and_path(tmp_path: Path, n: int = 6):
 
 
 def _opacity(csv: Path) -> np.ndarray:
-    return np.array([float(r.split(",")[6]) for r in csv.read_text().splitlines()[1:]])
+    return np.array([float(r.split(",")[6]) for r in _data_lines(csv)[1:]])
 
 
 def test_epof_cli_comfort_default_paper_one_option_away(tmp_path, capsys):
@@ -69,8 +74,13 @@ def test_epof_cli_comfort_default_paper_one_option_away(tmp_path, capsys):
     oa, ob = _opacity(a), _opacity(b)
     assert np.abs(np.diff(oa)).max() <= 1 / (10 * 0.4) + 1e-6
     assert not np.allclose(oa, ob)
-    e = np.array([float(r.split(",")[5]) for r in b.read_text().splitlines()[1:]])
+    e = np.array([float(r.split(",")[5]) for r in _data_lines(b)[1:]])
     assert np.corrcoef(e, ob)[0, 1] > 0.99  # paper: opacity follows EPOF frame by frame
+    from simulator.epof import read_epof_csv
+
+    # each CSV records the rule that made its opacity
+    assert read_epof_csv(a).meta["settings"]["opacity_rule"]["rule"] == "eased"
+    assert read_epof_csv(b).meta["settings"]["opacity_rule"]["rule"] == "paper"
     capsys.readouterr()
     c = tmp_path / "c.csv"
     assert (
@@ -110,7 +120,7 @@ def test_render_takes_epof_csv_opacity(tmp_path, capsys):
     assert s["grf"] is not None and s["opacity"] == str(ecsv)
     # A CSV with other frame counts: one line, exit 2, nothing written.
     short = tmp_path / "short.csv"
-    short.write_text("\n".join(ecsv.read_text().splitlines()[:4]) + "\n")
+    short.write_text("\n".join(_data_lines(ecsv)[:4]) + "\n")
     out2 = tmp_path / "o2"
     capsys.readouterr()
     assert main([*base[:4], str(out2), *base[5:], "--opacity", str(short)]) == 2

@@ -23,6 +23,12 @@ from simulator.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
 from simulator.viewing import OUTDIR_FILES, render_viewing
 
+
+def _data_lines(path):
+    """The lines of an EPOF CSV without its '#' settings lines (header first)."""
+    return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+
+
 REPO = Path(__file__).resolve().parents[1]
 GOLDEN = REPO / "tests" / "golden"
 
@@ -386,7 +392,7 @@ def test_cli_render_outputs(ctx, tmp_path):
     left = read_frame(out / "left.mp4").astype(float).mean(axis=(0, 1))
     right = read_frame(out / "right.mp4").astype(float).mean(axis=(0, 1))
     assert left[0] > left[2] + 40 and right[2] > right[0] + 40  # each eye its own half
-    rows = (out / "epof.csv").read_text().splitlines()
+    rows = _data_lines(out / "epof.csv")
     assert (
         rows[0]
         == (
@@ -616,7 +622,7 @@ def test_cli_render_multi_trace_head_path(ctx, tmp_path, capsys, writer, name, o
     assert rc == 2 and missing in err and err.count("\n") == 1
     assert not out.exists() or not list(out.iterdir())
     assert main(_render_argv(vid, tmp_path / name, out, *option)) == 0
-    rows = (out / "epof.csv").read_text().splitlines()[1:]
+    rows = _data_lines(out / "epof.csv")[1:]
     assert len(rows) == 4
     assert float(rows[-1].split(",")[2]) > 5  # yaw_deg: the right-turning trace was chosen
     assert json.loads((out / "summary.json").read_text())["frames_written"] == 4

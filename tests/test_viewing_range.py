@@ -12,6 +12,11 @@ from simulator.errors import InputError
 from simulator.plan import frame_range
 
 
+def _data_lines(path):
+    """The lines of an EPOF CSV without its '#' settings lines (header first)."""
+    return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
+
+
 @pytest.fixture(scope="module")
 def ctx():
     from simulator.render import create_context
@@ -83,7 +88,7 @@ def test_render_range_has_exactly_the_frames(ctx, tmp_path):
     m = _means(out / "left.mp4")
     want = [20 + 20 * i for i in range(3, 7)]
     assert len(m) == 4 and np.allclose(m, want, atol=3), m
-    rows = [r.split(",") for r in (out / "epof.csv").read_text().splitlines()[1:]]
+    rows = [r.split(",") for r in _data_lines(out / "epof.csv")[1:]]
     assert [int(r[0]) for r in rows] == [3, 4, 5, 6]
     assert np.allclose([float(r[1]) for r in rows], [0.3, 0.4, 0.5, 0.6])
     assert np.allclose([float(r[2]) for r in rows], [3.0, 4.0, 5.0, 6.0], atol=1e-6)  # yaw 10 t
@@ -108,12 +113,12 @@ def test_render_range_with_partial_grid(ctx, tmp_path):
     assert not (out / "summary.json").exists()
     assert main([*base, "--start", "0.0", "--end", "0.5"]) == 2  # starts before the grid
     assert main([*base, "--start", "0.3", "--end", "0.8"]) == 0
-    rows = [r.split(",") for r in (out / "epof.csv").read_text().splitlines()[1:]]
+    rows = [r.split(",") for r in _data_lines(out / "epof.csv")[1:]]
     assert [int(r[0]) for r in rows] == [3, 4, 5, 6, 7]
     ecsv = tmp_path / "e.csv"
     assert main(["epof", str(g), str(tmp_path / "p.csv"), "-o", str(ecsv),
                  "--fov", "107"]) == 0  # fmt: skip
-    ref = {int(r.split(",")[0]): r.split(",")[5] for r in ecsv.read_text().splitlines()[1:]}
+    ref = {int(r.split(",")[0]): r.split(",")[5] for r in _data_lines(ecsv)[1:]}
     assert [r[5] for r in rows] == [ref[f] for f in range(3, 8)]
 
 

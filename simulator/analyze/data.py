@@ -182,22 +182,25 @@ def session_flow(path: str | Path, stat: str = "mean") -> float:
         raise InputError(f"flow statistic must be one of {FLOW_STATS}; got {stat!r}")
     p = check_input_file(path, "EPOF CSV")
     with open(p, newline="", encoding="utf-8-sig") as fh:
-        reader = csv.reader(fh)
-        header = [_norm_col(c) for c in next(reader, [])]
-        if "epof_dps" not in header:
-            raise InputError(f"EPOF CSV {p}: column 'epof_dps' missing; found {header}")
-        k = header.index("epof_dps")
-        vals = []
-        for n, cells in enumerate(reader, start=2):
-            if not cells:
-                continue
-            try:
-                v = float(cells[k])
-            except (ValueError, IndexError):
-                raise InputError(f"EPOF CSV {p}: line {n}: epof_dps is not a number") from None
-            if not math.isfinite(v):
-                raise InputError(f"EPOF CSV {p}: line {n}: epof_dps = {v} is not finite")
-            vals.append(v)
+        # '#' lines (the settings vimsim writes above the header) are comments.
+        rows = [
+            (n, next(csv.reader([ln])))
+            for n, ln in enumerate(fh, start=1)
+            if ln.strip() and not ln.lstrip().startswith("#")
+        ]
+    header = [_norm_col(c) for c in rows[0][1]] if rows else []
+    if "epof_dps" not in header:
+        raise InputError(f"EPOF CSV {p}: column 'epof_dps' missing; found {header}")
+    k = header.index("epof_dps")
+    vals = []
+    for n, cells in rows[1:]:
+        try:
+            v = float(cells[k])
+        except (ValueError, IndexError):
+            raise InputError(f"EPOF CSV {p}: line {n}: epof_dps is not a number") from None
+        if not math.isfinite(v):
+            raise InputError(f"EPOF CSV {p}: line {n}: epof_dps = {v} is not finite")
+        vals.append(v)
     if not vals:
         raise InputError(f"EPOF CSV {p}: no data rows")
     a = np.asarray(vals)

@@ -300,6 +300,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also write OUTDIR/review.mp4 (equirect frame with the viewport's outline beside "
         "the eye view, EPOF and opacity strip with a cursor) and OUTDIR/sheet.png (contact sheet)",
     )
+    p.add_argument(
+        "--right",
+        metavar="FILE",
+        default=None,
+        help="the right eye's equirect video: VIDEO (left eye) and FILE are a stereo source of "
+        "two per-eye files (same size, frame rate and frame count)",
+    )
+    p.add_argument(
+        "--no-audio",
+        action="store_true",
+        help="silent outputs (default: the source's audio, the range's part, is copied into "
+        "every output video)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_reader_options(p)
     p.set_defaults(func=run)
@@ -334,13 +347,17 @@ def run(args: argparse.Namespace) -> int:
             method=args.method,
             review=args.review,
             eyes=args.eyes,
+            right=args.right,
+            audio=not args.no_audio,
         )
     w, h = s["eye_size"]
     files = {"left": ["left.mp4"], "right": ["right.mp4"], "both": ["left.mp4", "right.mp4"]}
     names = files[s["eyes"]] + (s["review"] or [])
+    a = s["audio"]
+    sound = f"audio {a['codec']} {a['mode']}" if a["copied"] else f"silent: {a['why']}"
     print(
         f"vimsim render: {s['frames_written']} frames, eye {w}x{h} -> {s['outdir']}/"
-        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s)",
+        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s; {sound})",
         file=sys.stderr,
     )
     return 0

@@ -9,6 +9,7 @@ degrees (yaw + right, pitch + up, roll + right ear down); times in seconds.
 from __future__ import annotations
 
 import io
+import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -30,6 +31,7 @@ __all__ = [
     "EPOF_COLUMNS",
     "EpofResult",
     "compute_epof",
+    "epof_settings",
     "plot_epof",
     "read_epof_csv",
     "write_epof_csv",
@@ -172,11 +174,56 @@ def compute_epof(
     return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
 
 
-def write_epof_csv(path: str | os.PathLike, result: EpofResult, extra: dict | None = None) -> None:
-    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically,
-    then the ``extra`` columns (name -> array of one value per row), if any, in order."""
+def epof_settings(result: EpofResult) -> dict:
+    """The settings of a computed EPOF (:func:`compute_epof`'s ``meta``) as recorded in
+    the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds."""
+    m = result.meta
+    rule = m.get("rule")
+    fr = m.get("frustum_deg")
+    return {
+        "epof_method": m.get("method"),
+        "fov_deg": [m.get("hfov_deg"), m.get("vfov_deg")],
+        "frustum_deg": None if fr is None else dict(zip(("left", "right", "down", "up"), fr)),
+        "top_k": m.get("top_k"),
+        "opacity_rule": None if rule is None else rule.describe(),
+        "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
+    }
+
+
+def _json_value(v) -> str:
+    """JSON of a setting, NaN as null (a threshold without a grid)."""
+
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(y) for k, y in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(y) for y in x]
+        return x
+
+    return json.dumps(clean(v), sort_keys=True, allow_nan=False)
+
+
+def write_epof_csv(
+    path: str | os.PathLike,
+    result: EpofResult,
+    *,
+    extra: dict | None = None,
+    settings: dict | None = None,
+) -> None:
+    """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically, then
+    the ``extra`` columns (name -> array of one value per row), if any, in order.
+
+    The settings that produced it come first as ``# key: JSON value`` comment lines
+    (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
+    :func:`read_epof_csv` (and ``pandas.read_csv(path, comment="#")``) skip those lines."""
     extra = extra or {}
     buf = io.StringIO()
+    if settings is None and result.meta:
+        settings = epof_settings(result)
+    for k, v in (settings or {}).items():
+        buf.write(f"# {k}: {_json_value(v)}\n")
     buf.write(",".join((*EPOF_COLUMNS, *extra)) + "\n")
     cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
     cols += [np.round(np.asarray(v, float), 9) + 0.0 for v in extra.values()]
@@ -187,13 +234,28 @@ def write_epof_csv(path: str | os.PathLike, result: EpofResult, extra: dict | No
 
 
 def read_epof_csv(path: str | os.PathLike) -> EpofResult:
-    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed);
-    extra columns after the EPOF columns (e.g. ``vimsim render``'s visible flow) are
-    ignored."""
+    """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed).
+
+    ``#`` lines are comments; those of the form ``# key: JSON`` (the settings
+    :func:`write_epof_csv` records) come back in ``meta["settings"]``. Extra columns after
+    the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored."""
     p = check_input_file(path, "EPOF")
-    lines = [
-        ln for ln in p.read_text(encoding="utf-8", errors="replace").splitlines() if ln.strip()
-    ]
+    lines, settings = [], {}
+    for ln in p.read_text(encoding="utf-8", errors="replace").splitlines():
+        t = ln.strip()
+        if not t:
+            continue
+        if t.startswith("#"):
+            key, sep, val = t[1:].partition(":")
+            if sep:
+                try:
+                    settings[key.strip()] = json.loads(val)
+                except ValueError:
+                    settings[key.strip()] = val.strip()
+            continue
+        lines.append(ln)
+    if not lines:
+        raise InputError(f"{p}: EPOF file is empty; expected the header {','.join(EPOF_COLUMNS)}")
     cols = [c.strip() for c in lines[0].split(",")]
     if cols[: len(EPOF_COLUMNS)] != list(EPOF_COLUMNS):
         raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
@@ -210,7 +272,13 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
     arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}
     arrs["frame"] = arrs["frame"].astype(np.int64)
-    return EpofResult(**arrs)
+    thr = settings.get("opacity_thresholds_dps")
+    try:
+        thr = tuple(math.nan if v is None else float(v) for v in thr[:2]) if thr else None
+        thr = thr if thr and len(thr) == 2 else (math.nan, math.nan)
+    except (TypeError, ValueError):
+        thr = (math.nan, math.nan)
+    return EpofResult(**arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {})
 
 
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:

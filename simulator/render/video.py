@@ -98,6 +98,29 @@ class _Worker:
             raise self.error
 
 
+def _decode(video_path: str, right_path: str | None, start: int, end: int):
+    """Decoded frames ``start <= i < end`` (copies): of ``video_path``, or ``(left, right)``
+    pairs of two per-eye files; both files are closed on every exit."""
+    left = iter_frames(video_path, layout="mono", start=start, end=end)
+    if right_path is None:
+        try:
+            for f in left:
+                yield np.array(f)
+        finally:
+            left.close()
+        return
+    right = iter_frames(right_path, layout="mono", start=start, end=end)
+    try:
+        for fl in left:
+            fr = next(right, None)
+            if fr is None:
+                raise InputError(f"{right_path}: right eye ends before the left eye ({video_path})")
+            yield np.array(fl), np.array(fr)
+    finally:
+        left.close()
+        right.close()
+
+
 def render_video(
     ctx,
     video_path: str,
@@ -115,6 +138,9 @@ def render_video(
     progress: Progress | None = None,
     start_frame: int = 0,
     on_frame=None,
+    audio=None,
+    right_path: str | None = None,
+    review_eye: str = "left",
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
 
@@ -141,6 +167,11 @@ def render_video(
         (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
         its errors are raised here (e.g. :class:`simulator.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
+    audio : None, or a :class:`simulator.audio.AudioSource` (the source's audio, the
+        range's part) carried into every eye file
+    right_path : the right eye's equirect file: ``video_path`` is then the left eye's (two
+        per-eye files, both decoded in step; same size and frame count, checked by the caller)
+    review_eye : the eye whose image ``on_frame`` gets when both are rendered
 
     A mono video with grains at infinity gives the same image to both eyes: it is
     rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``. Frames are
@@ -166,7 +197,7 @@ def render_video(
         raise InputError(f"{video_path}: no head orientations to render")
     op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
     rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
-    stereo = layout != "mono"
+    stereo = layout != "mono" or right_path is not None
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
     same = not stereo and (config.grains is None or config.grains.distance_m is None)
@@ -185,7 +216,9 @@ def render_video(
     try:
         with contextlib.ExitStack() as stack:
             writers = [
-                stack.enter_context(VideoWriter(p, fps, (w, h), crf=crf, preset=preset))
+                stack.enter_context(
+                    VideoWriter(p, fps, (w, h), crf=crf, preset=preset, audio=audio)
+                )
                 for p in paths[: len(eyes)]
             ]
             workers = [
@@ -199,15 +232,7 @@ def render_video(
                 frames = stack.enter_context(
                     contextlib.closing(
                         prefetch(
-                            (
-                                np.array(f)
-                                for f in iter_frames(
-                                    video_path,
-                                    layout="mono",
-                                    start=start_frame,
-                                    end=start_frame + total,
-                                )
-                            ),
+                            _decode(video_path, right_path, start_frame, start_frame + total),
                             depth=3,
                         )
                     )
@@ -218,7 +243,10 @@ def render_video(
                     t1 = time.perf_counter()
                     timings["decode_wait"] += t1 - t0
                     i = min(n, len(rots) - 1)
-                    if stereo:
+                    if right_path is not None:
+                        renderer.upload(frame[0], "left")
+                        renderer.upload(frame[1], "right")
+                    elif stereo:
                         renderer.upload(split_eye(frame, layout, "left", source=video_path), "left")
                         renderer.upload(
                             split_eye(frame, layout, "right", source=video_path), "right"
@@ -246,12 +274,14 @@ def render_video(
                     for wk, img in zip(workers, outs):
                         wk.put(img)
                     if on_frame is not None:
-                        src = (
-                            split_eye(frame, layout, eyes[0], source=video_path)
-                            if stereo
-                            else frame
-                        )
-                        workers[-1].put((src, outs[0]))
+                        k = eyes.index(review_eye) if review_eye in eyes else 0
+                        if right_path is not None:
+                            src = frame[0 if eyes[k] == "left" else 1]
+                        elif stereo:
+                            src = split_eye(frame, layout, eyes[k], source=video_path)
+                        else:
+                            src = frame
+                        workers[-1].put((src, outs[k]))
                     t0 = time.perf_counter()
                     timings["upload"] += t2 - t1
                     timings["render"] += t3 - t2

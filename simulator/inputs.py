@@ -1,0 +1,96 @@
+"""Checks of one viewing's inputs: the time range, an EPOF CSV's opacity, a right-eye file."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from simulator.epof.viewing import EpofResult
+from simulator.errors import InputError
+from simulator.video import MediaInfo, probe
+
+__all__ = ["check_right_eye", "csv_opacity", "frame_range"]
+
+
+def frame_range(
+    n_frames: int,
+    fps: float,
+    start_s: float | None = None,
+    end_s: float | None = None,
+    *,
+    video: str = "",
+) -> tuple[int, int]:
+    """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
+
+    None = the video's start / end. InputError (naming ``video``) for a range outside the
+    video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
+    duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
+    """
+    dur = n_frames / fps
+    src = f"{video}: " if video else ""
+    s = 0.0 if start_s is None else float(start_s)
+    e = dur if end_s is None else float(end_s)
+    if not (np.isfinite(s) and np.isfinite(e)):
+        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if e <= s:
+        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
+    if s < 0 or s >= dur:
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
+    if e > dur + 1e-6:
+        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
+    eps = 1e-6
+    f0 = int(np.ceil(s * fps - eps))
+    f1 = min(n_frames, int(np.ceil(e * fps - eps)))
+    if f1 <= f0:
+        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
+    return f0, f1
+
+
+def csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+    """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
+    has a row for each of them and no frame beyond the video)."""
+    fr = np.asarray(res.frame, np.int64)
+    if fr.size and (fr.min() < 0 or fr.max() >= n_video):
+        raise InputError(
+            f"{path}: EPOF CSV has frames {int(fr.min())}..{int(fr.max())}; the video has "
+            f"frames 0..{n_video - 1}: an EPOF CSV of another video?"
+        )
+    pos = {int(f): i for i, f in enumerate(fr)}
+    missing = [int(f) for f in frames if int(f) not in pos]
+    if missing:
+        raise InputError(
+            f"{path}: EPOF CSV has {fr.size} rows (frames {int(fr.min())}..{int(fr.max())}); "
+            f"the render needs frames {int(frames[0])}..{int(frames[-1])} "
+            f"({len(missing)} missing, first {missing[0]})"
+        )
+    op = np.asarray(res.opacity, float)[[pos[int(f)] for f in frames]]
+    if np.any((op < 0) | (op > 1)):
+        raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
+    return op
+
+
+def check_right_eye(info: MediaInfo, right: str, layout: str) -> None:
+    """InputError unless ``right`` is a video matching ``info`` (the left eye's file):
+    same stored size, frame rate and frame count, both one eye each (layout mono)."""
+    if layout != "mono":
+        raise InputError(
+            f"{right}: --right takes the right eye's own equirect file; --layout {layout} "
+            "is for one file holding both eyes (drop one of them)"
+        )
+    r = probe(right)
+    if not r.is_video:
+        raise InputError(f"{right}: a still image; --right needs the right eye's video")
+    r.eye_size("mono")  # 2:1, else InputError naming the file
+    if (r.width, r.height) != (info.width, info.height):
+        raise InputError(
+            f"{right}: right eye is {r.width}x{r.height}; the left eye ({info.path}) is "
+            f"{info.width}x{info.height}: the two eye files must have the same size"
+        )
+    if abs(r.fps - info.fps) > 1e-6 * info.fps:
+        raise InputError(
+            f"{right}: right eye is {r.fps:g} fps; the left eye ({info.path}) is {info.fps:g} fps"
+        )
+    if r.n_frames != info.n_frames:
+        raise InputError(
+            f"{right}: right eye has {r.n_frames} frames; the left eye ({info.path}) has "
+            f"{info.n_frames}: the two eye files must have the same frames"
+        )
