@@ -164,8 +164,8 @@ class WindowExtractor:
 
     Attributes
     ----------
-    maps_source : ``"hit"`` (loaded from the cache), ``"built"`` (built and stored) or
-        ``"uncached"``
+    maps_source : ``"memory"`` (built or loaded earlier in this process), ``"hit"``
+        (loaded from the cache), ``"built"`` (built and stored) or ``"uncached"``
 
     Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``, C-contiguous.
     """
