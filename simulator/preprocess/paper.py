@@ -413,7 +413,8 @@ def preprocess_video(
                 pending = [reducer(backend(prev_win, win), fps)]
             inflight.append((row, pending, prev_win))
             prev_win = win
-            while len(inflight) > (1 if pool is not None and fused else 0):
+            # The first row is delivered at once (start-up latency), later ones one pair late.
+            while len(inflight) > (1 if pool is not None and fused and row > first_row else 0):
                 finish()
         while inflight:
             finish()
