@@ -9,7 +9,7 @@ hash collision or a foreign folder is never used. An entry is written as a tempo
 folder beside it and renamed when complete: concurrent runs that build the same entry
 each write their own temporary folder, the first rename wins and the others remove
 theirs; a reader sees a whole entry or none. A missing, unreadable or mismatching entry
-is rebuilt (in memory); a cache folder that cannot be written is reported through
+is rebuilt and replaces it (moved aside first, so runs using it keep their copy); a cache folder that cannot be written is reported through
 :func:`warnings.warn` and the arrays are used uncached. Entries are never evicted: delete
 the folder to reclaim the space.
 """
@@ -71,9 +71,16 @@ def _store(path: Path, text: str, arrays: dict[str, NDArray]) -> None:
         try:
             os.rename(tmp, path)
         except OSError:
-            if not (path / "key.json").is_file():
+            if not path.is_dir():
                 raise
-            # Another run stored the same entry first; theirs is identical.
+            if _load(path, text) is not None:
+                return  # another run stored the same entry first; theirs is identical
+            # A damaged or foreign entry: move it aside (runs that mapped its files keep
+            # them), put ours in its place.
+            old = path.parent / f".{path.name}.old-{os.getpid()}-{threading.get_ident()}"
+            os.rename(path, old)
+            shutil.rmtree(old, ignore_errors=True)
+            os.rename(tmp, path)
     finally:
         if tmp.exists():
             shutil.rmtree(tmp, ignore_errors=True)

@@ -70,11 +70,14 @@ def test_damaged_or_foreign_entry_is_rebuilt(cdir):
     (entry,) = cdir.iterdir()
     (entry / "a.npy").write_bytes(b"\x93NUMPY garbage")
     got, how = cached_arrays(key, lambda: {"a": np.arange(100.0) + 1})
-    assert how == "built"  # rebuilt; the damaged entry stays (another run may be reading it)
+    assert how == "built"  # rebuilt, and it replaced the damaged entry
     assert np.array_equal(got["a"], np.arange(100.0) + 1)
+    got, how = cached_arrays(key, lambda: {"a": np.zeros(1)})
+    assert how == "hit" and np.array_equal(got["a"], np.arange(100.0) + 1)
     (entry / "key.json").write_text('{"format": "someone else"}')
     _, how = cached_arrays(key, lambda: {"a": np.zeros(1)})
     assert how == "built"
+    assert [p.name for p in cdir.iterdir()] == [entry.name]  # nothing left aside
 
 
 def test_concurrent_store_keeps_the_first(cdir):
