@@ -24,6 +24,12 @@ scalars:
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
 :func:`simulator.gridfile.save_grid` (atomic: the grid file appears only when complete).
 
+Pipeline: a background thread decodes frame t+1 and extracts its windows (into a recycled
+buffer) while a thread pool computes pair t; for thread-safe backends each worker runs the
+flow and the reduction of one window at a time (the flow is reduced while in cache), and
+two frame pairs are in flight so both cores stay busy across frame boundaries. Results do
+not depend on threads or chunking (bit-identical to the one-thread batch path).
+
 Streaming and checkpoints: frames are decoded one at a time (memory flat in the video's
 length; the (T, P, Y) result grows by 2 KB per frame for the default grid). Finished rows
 are saved periodically to ``GRID.npz.partial.npz`` beside the output (atomically), and on
