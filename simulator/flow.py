@@ -115,6 +115,12 @@ class FlowBackend:
             out[i] = self._pair(prev[i], nxt[i])
         return out
 
+    def pair(self, a: NDArray[np.uint8], b: NDArray[np.uint8]) -> NDArray[np.float32]:
+        """Flow of one pair, ``(h, w)`` C-contiguous uint8 each (not checked: the fast path
+        for callers that already hold such windows), ``(h, w, 2)`` float32 (a fresh array,
+        no copy into a batch). Thread-safe backends only; same values as ``__call__``."""
+        return self._pair(a, b)
+
     def _pair(self, a: NDArray[np.uint8], b: NDArray[np.uint8]) -> NDArray[np.float32]:
         raise NotImplementedError
 

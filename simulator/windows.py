@@ -6,7 +6,6 @@ perspective view with exact FOVs (:func:`simulator.geometry.perspective_map`).
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass, field
 from typing import Literal
@@ -26,6 +25,7 @@ from simulator.geometry import (
     pad_equirect,
     perspective_rays,
 )
+from simulator.mapcache import cached_arrays
 
 __all__ = ["GRID_PRESETS", "WindowExtractor", "WindowGrid", "grid_preset"]
 
@@ -148,24 +148,46 @@ def grid_preset(
 class WindowExtractor:
     """Extract every window of a :class:`WindowGrid` from equirect frames of one size, fast.
 
-    The sampling maps of all windows are built once (per grid and frame size), stacked
-    into one tall map and converted to OpenCV's fixed-point form, then every frame is a
-    single ``cv2.remap`` call (bicubic, seam wrap, pole crossing).
+    The sampling maps of all windows are built once (per grid and frame size; cached in
+    the user cache folder, :mod:`simulator.mapcache`), stacked window after window into
+    tall maps in OpenCV's fixed-point form, so that every frame is a few ``cv2.remap``
+    calls (seam wrap, pole crossing) writing each window contiguously: the
+    ``(P, Y, h, w)`` result needs no rearranging copy and can be written into a reused
+    buffer (``out=``).
 
     Parameters
     ----------
     grid : WindowGrid
     equirect_size : (W, H), pixels of one eye's equirect frame (stored pixels)
+    cache : bool, keyword-only; False: build the maps without reading or writing the
+        cache (``--no-cache``)
 
-    Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``.
+    Attributes
+    ----------
+    maps_source : ``"memory"`` (built or loaded earlier in this process), ``"hit"``
+        (loaded from the cache), ``"built"`` (built and stored) or ``"uncached"``
+
+    Call with an ``(H, W)`` or ``(H, W, C)`` frame; returns ``(P, Y, h, w[, C])``, C-contiguous.
     """
 
-    def __init__(self, grid: WindowGrid, equirect_size: tuple[int, int]):
+    def __init__(self, grid: WindowGrid, equirect_size: tuple[int, int], *, cache: bool = True):
         self.grid = grid
         self.equirect_size = _check_size(equirect_size)
-        self._m1, self._m2 = _window_maps(grid, self.equirect_size)
+        self._m1, self._m2, self.maps_source = _window_maps(grid, self.equirect_size, cache)
+        h = grid.size[1]
+        per = max(1, (_MAX_SIDE - 1) // h)  # windows per remap call (OpenCV side limit)
+        n = grid.n_windows
+        self._calls = [(a, min(n, a + per)) for a in range(0, n, per)]
 
-    def __call__(self, frame: NDArray, *, interp: Literal["cubic", "linear"] = "cubic") -> NDArray:
+    def __call__(
+        self,
+        frame: NDArray,
+        *,
+        interp: Literal["cubic", "linear"] = "cubic",
+        out: NDArray | None = None,
+    ) -> NDArray:
+        """All windows of ``frame``; ``out``: a C-contiguous ``(P, Y, h, w[, C])`` array
+        of the frame's dtype to write into (returned), e.g. a buffer reused per frame."""
         H, W = frame.shape[:2]
         if (W, H) != self.equirect_size:
             raise InputError(
@@ -173,16 +195,76 @@ class WindowExtractor:
             )
         flags = cv2.INTER_CUBIC if interp == "cubic" else cv2.INTER_LINEAR
         padded = pad_equirect(np.ascontiguousarray(frame))
-        out = cv2.remap(padded, self._m1, self._m2, flags, borderMode=cv2.BORDER_REPLICATE)
         P, Y = self.grid.shape
         w, h = self.grid.size
-        # Tiles are laid out (P*h, Y*w) (OpenCV limits each side to < 32767 pixels).
-        return np.moveaxis(out.reshape(P, h, Y, w, *out.shape[2:]), 2, 1)
+        shape = (P, Y, h, w, *padded.shape[2:])
+        if out is None:
+            out = np.empty(shape, padded.dtype)
+        elif out.shape != shape or out.dtype != padded.dtype or not out.flags.c_contiguous:
+            raise ValueError(
+                f"out must be C-contiguous {shape} {padded.dtype}; got {out.shape} {out.dtype}"
+            )
+        flat = out.reshape(P * Y * h, w, *padded.shape[2:])
+        for a, b in self._calls:
+            rows = slice(a * h, b * h)
+            cv2.remap(
+                padded,
+                self._m1[rows],
+                self._m2[rows],
+                flags,
+                dst=flat[rows],
+                borderMode=cv2.BORDER_REPLICATE,
+            )
+        return out
 
 
-@functools.lru_cache(maxsize=4)
-def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
-    """Fixed-point remap maps of all windows, tiled ``(P*h, Y*w)``.
+#: OpenCV's remap limits each side of its maps to < 32767 pixels.
+_MAX_SIDE = 32767
+#: Layout of the cached maps; bump when the map construction changes.
+_MAP_LAYOUT = "window-major-fixed-point-1"
+
+
+def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int], cache: bool = True):
+    """``(m1, m2, source)``: fixed-point remap maps of all windows, stacked window after
+    window ``(P*Y*h, w)`` (window ``k = p * Y + y``), from memory, the cache or built."""
+    key = (grid, equirect_size)
+    hit = _MEMO.get(key)
+    if hit is not None:
+        return (*hit, "memory")
+    ckey = {
+        "kind": "window-maps",
+        "layout": _MAP_LAYOUT,
+        "grid": grid.to_dict(),
+        "equirect_size": list(equirect_size),
+        "opencv": cv2.__version__,
+        "numpy": np.__version__,
+    }
+    arrays, how = cached_arrays(
+        ckey, lambda: _build_window_maps(grid, equirect_size), use_cache=cache
+    )
+    m1, m2 = arrays["m1"], arrays["m2"]
+    (P, Y), (w, h) = grid.shape, grid.size
+    if (
+        m1.shape != (P * Y * h, w, 2)
+        or m1.dtype != np.int16
+        or m2.shape != (P * Y * h, w)
+        or m2.dtype != np.uint16
+    ):
+        arrays, how = _build_window_maps(grid, equirect_size), "uncached"  # foreign entry
+        m1, m2 = arrays["m1"], arrays["m2"]
+    m1.setflags(write=False)
+    m2.setflags(write=False)
+    if len(_MEMO) >= 4:
+        _MEMO.pop(next(iter(_MEMO)))
+    _MEMO[key] = (m1, m2)
+    return m1, m2, how
+
+
+_MEMO: dict = {}
+
+
+def _build_window_maps(grid: WindowGrid, equirect_size: tuple[int, int]) -> dict:
+    """Fixed-point remap maps of all windows, ``{"m1": (P*Y*h, w, 2) int16, "m2": (P*Y*h, w) uint16}``.
 
     Windows have no roll, so a window at yaw ``psi`` samples the equirect exactly where the
     window at yaw 0 and the same pitch does, shifted by ``psi`` in longitude: the
@@ -193,10 +275,8 @@ def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
     W, H = equirect_size
     dirs, _ = perspective_rays(grid.size, grid.hfov_deg, grid.vfov_deg)
     (P, Y), (w, h) = grid.shape, grid.size
-    if max(P * h, Y * w) >= 32767:
-        raise InputError(
-            f"grid of {P}x{Y} windows at {w}x{h} is too large for one remap; use smaller windows"
-        )
+    if h >= _MAX_SIDE or w >= _MAX_SIDE:
+        raise InputError(f"windows of {w}x{h} px are too large for one remap; use smaller windows")
     R = head_rotation(np.zeros(P), grid.pitch_deg, 0.0).as_matrix()  # (P, 3, 3)
     world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (P, h, w, 3)
     lon, lat = dir_to_lonlat(world)
@@ -204,16 +284,21 @@ def _window_maps(grid: WindowGrid, equirect_size: tuple[int, int]):
     x0 -= 0.5  # array-index convention (unpadded), as equirect_remap_coords
     my0 = (y0 - 0.5 + _PAD).astype(np.float32)
     shift = np.asarray(grid.yaw_deg, np.float64) / 360.0 * W  # px per yaw column
-    mx = np.empty((P, h, Y, w), np.float32)
+    mx = np.empty((P, Y, h, w), np.float32)
     for k, s in enumerate(shift):
         # Same wrap as lon in (-pi, pi]: continuous x in (0, W], index x - 0.5 in (-0.5, W - 0.5].
         x = x0 + s
         x -= W * np.floor((x + 0.5) / W)
         x[x <= -0.5] += W
-        mx[:, :, k, :] = x + _PAD
-    my = np.broadcast_to(my0[:, :, None, :], (P, h, Y, w))
-    my = np.ascontiguousarray(my).reshape(P * h, Y * w)
-    m1, m2 = cv2.convertMaps(mx.reshape(P * h, Y * w), my, cv2.CV_16SC2)
-    m1.setflags(write=False)
-    m2.setflags(write=False)
-    return m1, m2
+        mx[:, k] = x + _PAD
+    my = np.broadcast_to(my0[:, None], (P, Y, h, w))
+    mx = mx.reshape(P * Y * h, w)
+    my = np.ascontiguousarray(my).reshape(P * Y * h, w)
+    m1 = np.empty((P * Y * h, w, 2), np.int16)
+    m2 = np.empty((P * Y * h, w), np.uint16)
+    step = max(1, (_MAX_SIDE - 1) // h) * h
+    for a in range(0, P * Y * h, step):
+        m1[a : a + step], m2[a : a + step] = cv2.convertMaps(
+            mx[a : a + step], my[a : a + step], cv2.CV_16SC2
+        )
+    return {"m1": m1, "m2": m2}

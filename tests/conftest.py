@@ -34,3 +34,17 @@ def out_dir() -> Path:
     """Folder for files tests write for a person to look at (failing frames etc.)."""
     OUT.mkdir(parents=True, exist_ok=True)
     return OUT
+
+
+@pytest.fixture(scope="session", autouse=True)
+def _map_cache_dir(tmp_path_factory) -> Path:
+    """Tests (and the CLI subprocesses they start) use a temporary map cache, never the
+    user's (:mod:`simulator.mapcache`)."""
+    d = tmp_path_factory.mktemp("vimsim-cache")
+    old = os.environ.get("VIMSIM_CACHE_DIR")
+    os.environ["VIMSIM_CACHE_DIR"] = str(d)
+    yield d
+    if old is None:
+        os.environ.pop("VIMSIM_CACHE_DIR", None)
+    else:
+        os.environ["VIMSIM_CACHE_DIR"] = old

@@ -124,6 +124,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="N",
         help="flow worker threads (default: CPU count)",
     )
+    p.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="build the window maps without reading or writing the map cache "
+        "($VIMSIM_CACHE_DIR, else $XDG_CACHE_HOME/vimsim or ~/.cache/vimsim; docs/paper_speed.md)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
 
@@ -183,6 +189,7 @@ def run(args: argparse.Namespace) -> int:
                 resume=args.resume,
                 checkpoint_every_s=args.checkpoint_every,
                 threads=args.threads,
+                cache=not args.no_cache,
                 progress=bar,
             )
     except PreprocessInterrupted as e:
