@@ -45,6 +45,7 @@ __all__ = [
     "CoarseSamplingWarning",
     "HeadPath",
     "RadiansWarning",
+    "load_all_users",
     "load_headpath",
     "plot_headpath",
     "save_headpath_csv",
@@ -720,6 +721,20 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
     pitch and a line of yaw, radians; no roll. Signs/origin undocumented (taken as ours:
     yaw + right, pitch + up). A user's lines may be shorter than the time line: the path
     ends at that user's last sample."""
+    rows = _parse_360vidstr(p)
+    n_users = (len(rows) - 1) // 2
+    if user is None:
+        if n_users == 1:
+            user = 1
+        else:
+            raise InputError(f"{p}: holds {n_users} users; choose one with --user 1..{n_users}")
+    if not 1 <= user <= n_users:
+        raise InputError(f"{p}: no user {user}; choose --user 1..{n_users}")
+    return _360vidstr_user(p, rows, user)
+
+
+def _parse_360vidstr(p: Path) -> list[NDArray]:
+    """The number rows of a 360VidStr aggregated file (2n+1 of them), read once."""
     with open(p, encoding="utf-8", errors="replace") as fh:
         lines = [ln for ln in fh.read().splitlines() if ln.strip()]
     try:
@@ -730,14 +745,11 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
         raise InputError(
             f"{p}: a 360VidStr file has 2n+1 lines (times, then pitch and yaw per user); found {len(rows)}"
         )
-    n_users = (len(rows) - 1) // 2
-    if user is None:
-        if n_users == 1:
-            user = 1
-        else:
-            raise InputError(f"{p}: holds {n_users} users; choose one with --user 1..{n_users}")
-    if not 1 <= user <= n_users:
-        raise InputError(f"{p}: no user {user}; choose --user 1..{n_users}")
+    return rows
+
+
+def _360vidstr_user(p: Path, rows: list[NDArray], user: int) -> HeadPath:
+    """User ``user`` (1-based) of the parsed rows of a 360VidStr file."""
     pitch, yaw = rows[2 * user - 1], rows[2 * user]
     n = min(len(pitch), len(yaw), len(rows[0]))
     if n < 1:
@@ -750,6 +762,24 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
     return HeadPath.from_angles_deg(
         t, np.degrees(yaw[:n]), np.degrees(pitch[:n]), 0.0, source=f"{p}:user{user}"
     )
+
+
+def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, HeadPath]:
+    """Every user of a head path file, read once: ``{user (1-based): HeadPath}``.
+
+    360VidStr aggregated files hold many users (one pair of lines each); any other format
+    holds one trace and gives ``{1: path}`` (read as :func:`load_headpath` reads it). A
+    user whose samples are bad raises InputError naming the file and the user.
+    """
+    p = check_input_file(path, "head path")
+    fmt = detect_format(p) if format == "auto" else format
+    if fmt != "360vidstr":
+        return {1: load_headpath(p, fmt)}
+    rows = _parse_360vidstr(p)
+    out = {u: _360vidstr_user(p, rows, u) for u in range(1, (len(rows) - 1) // 2 + 1)}
+    for hp in out.values():
+        _warn_if_coarse(hp)
+    return out
 
 
 _READERS = {

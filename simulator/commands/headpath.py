@@ -52,8 +52,12 @@ def _user(text: str) -> int:
     return v
 
 
-def add_reader_options(p: argparse.ArgumentParser) -> None:
-    """--format, --video, --user (shared with ``vimsim epof``)."""
+def _user_or_all(text: str) -> int | str:
+    return "all" if text == "all" else _user(text)
+
+
+def add_reader_options(p: argparse.ArgumentParser, *, allow_all: bool = False) -> None:
+    """--format, --video, --user (shared with ``vimsim epof``); ``allow_all``: ``--user all``."""
     p.add_argument(
         "--format",
         choices=_FORMATS,
@@ -68,10 +72,15 @@ def add_reader_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--user",
-        type=_user,
+        type=_user_or_all if allow_all else _user,
         default=None,
-        metavar="N",
-        help="360VidStr aggregated files hold one trace per user: which one (1-based)",
+        metavar="N|all" if allow_all else "N",
+        help="360VidStr aggregated files hold one trace per user: which one (1-based)"
+        + (
+            "; all = every user, one CSV each into the folder -o DIR (the file is read once)"
+            if allow_all
+            else ""
+        ),
     )
 
 
@@ -181,8 +190,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "write the canonical CSV in our conventions.",
     )
     c.add_argument("input", metavar="IN")
-    c.add_argument("-o", "--output", required=True, metavar="PATH.csv")
-    add_reader_options(c)
+    c.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="PATH.csv",
+        help="output CSV (a folder with --user all)",
+    )
+    add_reader_options(c, allow_all=True)
     c.set_defaults(func=run, headpath_command="convert")
 
     w = sub.add_parser(
@@ -261,6 +276,8 @@ def run(args: argparse.Namespace) -> int:
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
+        if args.headpath_command == "convert" and args.user == "all":
+            return _convert_all(args)
         hp = hp_mod.load_headpath(args.input, args.format, video=args.video, user=args.user)
         if args.headpath_command == "convert":
             hp_mod.save_headpath_csv(args.output, hp)
@@ -269,3 +286,31 @@ def run(args: argparse.Namespace) -> int:
         hp_mod.plot_headpath(args.output, hp)
         print(f"wrote {args.output}")
         return 0
+
+
+def _convert_all(args: argparse.Namespace) -> int:
+    """``convert IN --user all -o DIR``: every user of IN, read once, as DIR/<stem>_user<N>.csv."""
+    from pathlib import Path
+
+    from simulator.errors import InputError
+    from simulator.fileio import check_output_dir
+    from simulator.headpath import load_all_users, save_headpath_csv
+
+    src = Path(args.input)
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise InputError(
+            f"{out}: --user all writes one CSV per user into a folder; {out} is a file"
+        )
+    users = load_all_users(src, args.format)
+    width = len(str(max(users)))
+    targets = {u: out / f"{src.stem}_user{u:0{width}d}.csv" for u in users}
+    me = src.resolve()
+    for t in targets.values():
+        if t.resolve() == me:
+            raise InputError(f"{t}: output would replace the input {src}; choose another folder")
+    check_output_dir(out)
+    for u, hp in users.items():
+        save_headpath_csv(targets[u], hp)
+    print(f"wrote {len(users)} head paths to {out}/ ({src.stem}_user{1:0{width}d}.csv ..)")
+    return 0
