@@ -26,6 +26,7 @@ COMMANDS: dict[str, str] = {
     "synth": "synth",
     "demo": "demo",
     "analyze": "analyze",
+    "study": "study",
 }
 
 

@@ -1,0 +1,148 @@
+"""Executors of the study's task graph: a local process pool (default) and Ray (optional).
+
+Both take the same calls -- ``submit(fn, *args, num_cpus=)`` returning a handle,
+``wait(handles, timeout)`` returning the finished ones, ``result(handle)`` and
+``close()`` -- so the runner schedules one graph either way and the results are the same
+bytes. ``num_cpus`` is the task's declared CPU need: Ray schedules by it; the local pool
+runs ``workers`` tasks at a time and uses it only for the task's own thread count.
+
+Ray is imported only here, only when asked for (``pip install vimsim[ray]``).
+``ray`` starts a local Ray runtime with ``workers`` CPUs; ``ray:ADDRESS`` joins a running
+cluster (``ray start --head`` ...), whose resources then decide the parallelism. The
+address is checked (a TCP connection, 3 s) before Ray is initialised, so an unreachable
+cluster is one line, not a hang.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import multiprocessing
+import os
+import socket
+
+from simulator.errors import InputError
+
+__all__ = ["LocalExecutor", "RayExecutor", "make_executor", "parse_executor"]
+
+
+def parse_executor(text: str) -> tuple[str, str | None]:
+    """``"local"`` -> ("local", None); ``"ray"`` -> ("ray", None); ``"ray:HOST:PORT"`` ->
+    ("ray", "HOST:PORT"). InputError for anything else."""
+    if text == "local":
+        return "local", None
+    if text == "ray":
+        return "ray", None
+    if text.startswith("ray:") and len(text) > 4:
+        return "ray", text[4:]
+    raise InputError(
+        f"unknown executor {text!r}; expected local, ray or ray:ADDRESS (e.g. ray:10.0.0.5:6379)"
+    )
+
+
+def check_ray_address(address: str, *, timeout_s: float = 3.0) -> None:
+    """InputError unless ``HOST:PORT`` accepts a TCP connection (``auto`` is left to Ray)."""
+    if address == "auto":
+        return
+    host, sep, port = address.rpartition(":")
+    if not sep or not host or not port.isdigit():
+        raise InputError(f"Ray address {address!r}: expected HOST:PORT, e.g. 127.0.0.1:6379")
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout_s):
+            pass
+    except OSError as e:
+        raise InputError(
+            f"Ray address {address}: unreachable ({e.strerror or e}); start the cluster with "
+            "`ray start --head --port PORT` or check the address"
+        ) from None
+
+
+class LocalExecutor:
+    """A pool of ``workers`` processes (forked where the platform allows: no re-import)."""
+
+    name = "local"
+
+    def __init__(self, workers: int):
+        self.workers = int(workers)
+        ctx = multiprocessing.get_context(
+            "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+        )
+        self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
+
+    def submit(self, fn, *args, num_cpus: int = 1):
+        return self._pool.submit(fn, *args)
+
+    def wait(self, handles, timeout: float | None = None) -> list:
+        done, _ = cf.wait(list(handles), timeout=timeout, return_when=cf.FIRST_COMPLETED)
+        return list(done)
+
+    def result(self, handle):
+        return handle.result()
+
+    def info(self) -> dict:
+        return {"executor": "local", "workers": self.workers}
+
+    def close(self, cancel: bool = False) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=cancel)
+
+
+class RayExecutor:
+    """Tasks as Ray remote functions with declared ``num_cpus``; results via ``ray.wait``."""
+
+    name = "ray"
+
+    def __init__(self, workers: int, address: str | None = None):
+        try:
+            import ray
+        except ImportError:
+            raise InputError(
+                "--executor ray needs Ray: pip install 'vimsim[ray]' (or pip install ray)"
+            ) from None
+        os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")
+        self._ray = ray
+        self.address = address
+        if address is not None:
+            check_ray_address(address)
+        kw = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
+        if address is None:
+            ray.init(num_cpus=int(workers), **kw)
+        else:
+            ray.init(address=address, **kw)
+        self.workers = int(ray.cluster_resources().get("CPU", workers))
+        self._remote: dict = {}
+
+    def submit(self, fn, *args, num_cpus: int = 1):
+        r = self._remote.get(fn)
+        if r is None:
+            r = self._remote[fn] = self._ray.remote(fn)
+        return r.options(num_cpus=num_cpus, max_retries=0).remote(*args)
+
+    def wait(self, handles, timeout: float | None = None) -> list:
+        hs = list(handles)
+        ready, _ = self._ray.wait(hs, num_returns=1, timeout=timeout)
+        return ready
+
+    def result(self, handle):
+        return self._ray.get(handle)
+
+    def info(self) -> dict:
+        nodes = [n for n in self._ray.nodes() if n.get("Alive")]
+        return {
+            "executor": "ray" if self.address is None else f"ray:{self.address}",
+            "workers": self.workers,
+            "ray_nodes": len(nodes),
+            "ray_version": self._ray.__version__,
+        }
+
+    def close(self, cancel: bool = False) -> None:
+        self._ray.shutdown()
+
+
+def make_executor(text: str, workers: int | None):
+    """The executor named by ``--executor`` text with ``workers`` (default: CPU count)."""
+    kind, address = parse_executor(text)
+    n = int(workers or os.cpu_count() or 1)
+    if n < 1:
+        raise InputError(f"--workers must be >= 1; got {n}")
+    if kind == "local":
+        return LocalExecutor(n)
+    return RayExecutor(n, address)
