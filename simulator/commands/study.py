@@ -76,10 +76,13 @@ def run(args: argparse.Namespace) -> int:
 
     parse_executor(args.executor)  # an unknown executor is a usage error before anything
     manifest = load_manifest(args.manifest)
-    bar = tqdm(total=0, unit="task", desc="study", disable=args.no_progress, file=sys.stderr,
-               dynamic_ncols=True)  # fmt: skip
+    bars: list = []  # made on the first report: nothing is drawn before the work starts
 
     def progress(done: int, failed: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit="task", desc="study", disable=args.no_progress,
+                             file=sys.stderr, dynamic_ncols=True))  # fmt: skip
+        bar = bars[0]
         bar.total = total
         bar.n = done + failed
         bar.set_postfix_str(f"done {done}, failed {failed}", refresh=False)
@@ -96,7 +99,8 @@ def run(args: argparse.Namespace) -> int:
             progress=progress,
         )
     finally:
-        bar.close()
+        for bar in bars:
+            bar.close()
     c = s["counts"]
     for f in s["failures"]:
         print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)

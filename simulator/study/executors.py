@@ -103,8 +103,9 @@ class RayExecutor:
         if address is not None:
             check_ray_address(address)
         kw = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-        if address is None:
-            ray.init(num_cpus=int(workers), **kw)
+        if address is None:  # a runtime for this machine only: keep it on loopback
+            # address="local": a new runtime even if another cluster's address is on record
+            ray.init(address="local", num_cpus=int(workers), _node_ip_address="127.0.0.1", **kw)
         else:
             ray.init(address=address, **kw)
         self.workers = int(ray.cluster_resources().get("CPU", workers))

@@ -165,7 +165,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)")
     for a in epofs.values():
         k = max(1, len(a) // 400)
-        ax.plot(a[::k, 1], a[::k, 2], ".", color="cyan", ms=1, alpha=0.25)
+        ax.plot(a[::k, 1], a[::k, 2], ".", color="cyan", ms=2, alpha=0.5)
     for mo in moments:
         ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=9,
                     ha="center", va="center", weight="bold")  # fmt: skip
