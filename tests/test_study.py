@@ -213,8 +213,8 @@ BAD = {
                       "video 'nope' is not a [[videos]] id"),
     "glob": ('[[videos]]\nid = "clip"\npath = "clip.mp4"\n[[viewings]]\nvideo = "clip"\ntrace = "zz*.csv"\n',
              "matches no file"),
-    "duplicate": ('[[videos]]\nid = "clip"\npath = "clip.mp4"\n[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n'
-                  '[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n', "duplicate viewing id 'clip-P01'"),
+    "duplicate": (('[[videos]]\nid = "clip"\npath = "clip.mp4"\n[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n'
+                   '[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n'), "duplicate viewing id 'clip-P01'"),
     "video file": ('[[videos]]\nid = "clip"\npath = "none.mp4"\n[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n',
                    "[[videos]] #1 ('clip'): "),
     "toml": ("[[videos]\n", "not valid TOML"),

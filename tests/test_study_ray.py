@@ -11,13 +11,14 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from ray_loopback import loopback_cluster, use_loopback  # noqa: E402
+from ray_loopback import loopback_cluster, use_loopback
 
 pytest.importorskip("ray", reason="Ray is the optional extra vimsim[ray]; make test installs it")
 use_loopback()  # before ray is first imported by a test
 
-from simulator.cli import main  # noqa: E402
-from test_study import _manifest, base  # noqa: E402, F401  (the shared fixture)
+from test_study import _manifest, base  # noqa: F401  (the shared fixture)
+
+from simulator.cli import main
 
 
 def _same(a: Path, b: Path) -> None:
