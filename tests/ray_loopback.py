@@ -47,7 +47,7 @@ _WRAPPER = (
 def use_loopback() -> None:
     """This process: :data:`RAY_ENV`, and Ray's node IP lookup answering 127.0.0.1."""
     os.environ.update(RAY_ENV)
-    import ray._private.services as services
+    from ray._private import services
 
     services.node_ip_address_from_perspective = lambda *a, **k: "127.0.0.1"
 
