@@ -248,3 +248,20 @@ def test_output_is_an_input_refused(base, tmp_path, capsys):
     m = _manifest(base)
     assert main(["study", str(m), "-o", str(base / "P01.csv"), "--cache-dir", str(tmp_path)]) == 2
     assert "is a file" in capsys.readouterr().err
+
+
+def test_example_manifest_tables():
+    """examples/study.toml: its option tables validate (its media paths are placeholders)."""
+    import tomllib
+
+    from simulator.study import manifest as mf
+
+    d = tomllib.loads((EXAMPLE.parent / "study.toml").read_text())
+    assert set(d) == set(mf._TOP_KEYS)
+    ep, rd, gr = (mf._epof(EXAMPLE, d["epof"]), mf._render(EXAMPLE, d["render"]),
+                  mf._grf(EXAMPLE, d["grf"]))  # fmt: skip
+    assert rd["eye_size"] == [480, 480] and gr["inner_deg"] == 18.0 and ep["low_pct"] == 10.0
+    for t in d["videos"]:
+        assert set(t) <= set(mf._VIDEO_KEYS)
+    for t in d["viewings"]:
+        assert set(t) <= set(mf._VIEWING_KEYS)
