@@ -132,6 +132,16 @@ def test_study_outputs(ran, base, capsys):
         assert (v / name).stat().st_size > 0
     mom = _rows(v / "moments.csv")
     assert float(mom[0]["pof_dps"]) >= float(mom[-1]["pof_dps"]) > 0
+    # A thumbnail (found by seeking) is the viewport of that frame decoded from the start.
+    from PIL import Image
+
+    from simulator.geometry import extract_view
+    from simulator.video import read_frame
+
+    r = mom[0]
+    ref = extract_view(read_frame(base / "clip.mp4", int(r["frame"])), float(r["yaw_deg"]),
+                       float(r["pitch_deg"]), hfov_deg=107.0, vfov_deg=107.0, size=(192, 192))  # fmt: skip
+    np.testing.assert_array_equal(np.asarray(Image.open(v / r["thumbnail"])), ref)
 
 
 def test_study_epof_equals_vimsim_epof(ran, base, tmp_path):

@@ -28,9 +28,8 @@ from simulator import __version__
 from simulator.analyze import analyze_study, read_study, write_report
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
-from simulator.geometry import extract_view
+from simulator.geometry import extract_view, split_eye
 from simulator.gridfile import load_grid
-from simulator.video import iter_frames
 
 __all__ = [
     "provocative_moments",
@@ -102,17 +101,35 @@ def _thumbnails(video, layout: str, eye: str, moments: list[dict], hfov: float, 
     want: dict[int, list[dict]] = {}
     for mo in moments:
         want.setdefault(mo["frame"], []).append(mo)
-    if not want:
-        return
-    last = max(want)
-    for i, frame in enumerate(iter_frames(video, layout=layout, eye=eye, end=last + 1)):
-        for mo in want.get(i, []):
-            view = extract_view(np.asarray(frame), mo["yaw_deg"], mo["pitch_deg"], 0.0,
+    for i, frame in _frames_at(video, sorted(want), layout, eye):
+        for mo in want[i]:
+            view = extract_view(frame, mo["yaw_deg"], mo["pitch_deg"], 0.0,
                                 hfov_deg=hfov, vfov_deg=vfov, size=THUMB_SIZE)  # fmt: skip
             name = f"moment_{mo['rank']}.png"
             with atomic_output(folder / name) as tmp:
                 Image.fromarray(view).save(tmp, format="PNG")
             mo["thumbnail"] = name
+
+
+def _frames_at(video, frames: list[int], layout: str, eye: str):
+    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``: a seek to
+    the keyframe before each (not a decode from the start: a long video has its
+    moments anywhere), then decoding up to the frame (index = presentation time x fps)."""
+    with av.open(str(video)) as c:
+        s = c.streams.video[0]
+        fps = float(s.average_rate or s.guessed_rate)
+        t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
+        for f in frames:
+            c.seek(int((t0 + f / fps) / s.time_base), stream=s, backward=True, any_frame=False)
+            got = None
+            for fr in c.decode(s):
+                i = round((float(fr.pts * s.time_base) - t0) * fps) if fr.pts is not None else f
+                if i >= f:
+                    got = fr
+                    break
+            if got is not None:
+                rgb = got.to_ndarray(format="rgb24")
+                yield f, split_eye(rgb, layout, eye, source=str(video))
 
 
 def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Path) -> dict:
