@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 import imageio_ffmpeg
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 REAL = REPO.parent / "shared" / "data" / "real"
@@ -78,7 +79,10 @@ user = "all"
         loop += run([*VIMSIM, "headpath", "convert", str(TRACE), "--user", str(u), "-o", str(csv_)])
         loop += run([*VIMSIM, "epof", str(grid), str(csv_), "-o", str(epof)])
         ours = OUT / "warm" / "epof" / f"sandwich-loop-33_user{u:02d}.csv"
-        assert ours.read_bytes() == epof.read_bytes(), f"user {u}: study EPOF != vimsim epof"
+        # The loop goes through the canonical CSV (angles to 10 significant digits): equal
+        # to that rounding, not to the bit.
+        a, b = (np.loadtxt(p, delimiter=",", skiprows=1) for p in (ours, epof))
+        assert a.shape == b.shape and np.allclose(a, b, rtol=1e-6, atol=1e-6), f"user {u}"
     loop48 = loop / len(users) * 48
     t = s["timings_s"]
     print(
@@ -96,7 +100,7 @@ user = "all"
         f"  reference shell loop          {loop48:7.2f} s   ({loop / len(users):.2f} s/user measured on users {users}, x 48)"
     )
     print(f"  ratio loop / study            {loop48 / warm:7.1f}x")
-    print("  EPOF CSVs of users", users, "byte-identical to vimsim epof")
+    print("  EPOF of users", users, "equal to the loop's vimsim epof (rtol 1e-6: its CSV rounding)")
     return 0
 
 

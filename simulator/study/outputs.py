@@ -13,10 +13,11 @@ session flow taken from their EPOF (``DATA.csv`` there is what was analysed).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import io
+import json
 import math
 import platform
-import warnings
 from pathlib import Path
 
 import av
@@ -29,7 +30,6 @@ from simulator.analyze import analyze_study, read_study, write_report
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
 from simulator.geometry import extract_view, split_eye
-from simulator.gridfile import load_grid
 
 __all__ = [
     "provocative_moments",
@@ -132,6 +132,27 @@ def _frames_at(video, frames: list[int], layout: str, eye: str):
                 yield f, split_eye(rgb, layout, eye, source=str(video))
 
 
+@dataclasses.dataclass(frozen=True)
+class _GridMap:
+    """What the plots need of a grid file (its window matrix, not its sphere field)."""
+
+    pof_dps: np.ndarray
+    yaw_deg: np.ndarray
+    pitch_deg: np.ndarray
+    fps: float
+    hfov_deg: float
+    vfov_deg: float
+
+
+def _grid_map(path: Path) -> _GridMap:
+    """The window matrix of a cached grid (written by this study's preprocess and loaded by
+    its workers with :func:`simulator.gridfile.load_grid`); the field is not decompressed."""
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        return _GridMap(z["pof_dps"], z["yaw_deg"], z["pitch_deg"], float(meta["fps"]),
+                        float(meta["grid"]["hfov_deg"]), float(meta["grid"]["vfov_deg"]))  # fmt: skip
+
+
 def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Path) -> dict:
     import matplotlib
 
@@ -139,9 +160,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     import matplotlib.pyplot as plt
 
     folder.mkdir(parents=True, exist_ok=True)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        grid = load_grid(grid_path)
+    grid = _grid_map(grid_path)
     fps = grid.fps
     written: list[str] = []
 

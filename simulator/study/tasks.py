@@ -12,6 +12,7 @@ render).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import warnings
@@ -51,7 +52,11 @@ def _grid(path: str) -> GridFile:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            _GRIDS[key] = load_grid(path)
+            g = load_grid(path)
+        if g.field_dps is not None and g.field_dps.dtype != np.float32:
+            # Once per worker, not per viewing (compute_epof works in float32: same values).
+            g = dataclasses.replace(g, field_dps=g.field_dps.astype(np.float32))
+        _GRIDS[key] = g
     return _GRIDS[key]
 
 
