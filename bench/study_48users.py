@@ -14,6 +14,8 @@ Run: .venv/bin/python bench/study_48users.py   (goal: study <= 10 s on the 2-cor
 from __future__ import annotations
 
 import json
+import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -31,10 +33,18 @@ OUT = REPO / "bench" / "_out" / "study_48users"
 VIMSIM = [str(Path(sys.executable).with_name("vimsim"))]
 
 
-def run(argv: list[str]) -> float:
+CPU: dict[str, float] = {}
+
+
+def run(argv: list[str], name: str = "") -> float:
+    """Wall-clock seconds of a command; its CPU seconds (user + sys, children) in CPU[name]."""
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(argv, check=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    CPU[name] = CPU.get(name, 0.0) + (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return wall
 
 
 def main() -> int:
@@ -62,8 +72,9 @@ user = "all"
         cold = run([*VIMSIM, "study", str(manifest), "-o", str(OUT / "cold"), "--cache-dir",
                     str(cache), "--no-progress"])  # fmt: skip
     shutil.rmtree(OUT / "warm", ignore_errors=True)
+    load0 = os.getloadavg()[0]
     warm = run([*VIMSIM, "study", str(manifest), "-o", str(OUT / "warm"), "--cache-dir",
-                str(cache), "--no-progress"])  # fmt: skip
+                str(cache), "--no-progress"], "study")  # fmt: skip
     s = json.loads((OUT / "warm" / "study.json").read_text())
     assert s["counts"] == {"viewings": 48, "ok": 48, "failed": 0, "resumed": 0, "renders": 0}, s[
         "counts"
@@ -76,8 +87,10 @@ user = "all"
     for u in users:
         csv_ = OUT / f"u{u}.csv"
         epof = OUT / f"u{u}_epof.csv"
-        loop += run([*VIMSIM, "headpath", "convert", str(TRACE), "--user", str(u), "-o", str(csv_)])
-        loop += run([*VIMSIM, "epof", str(grid), str(csv_), "-o", str(epof)])
+        loop += run(
+            [*VIMSIM, "headpath", "convert", str(TRACE), "--user", str(u), "-o", str(csv_)], "loop"
+        )
+        loop += run([*VIMSIM, "epof", str(grid), str(csv_), "-o", str(epof)], "loop")
         ours = OUT / "warm" / "epof" / f"sandwich-loop-33_user{u:02d}.csv"
         # The loop goes through the canonical CSV (angles to 10 significant digits): equal
         # to that rounding, not to the bit.
@@ -99,7 +112,15 @@ user = "all"
     print(
         f"  reference shell loop          {loop48:7.2f} s   ({loop / len(users):.2f} s/user measured on users {users}, x 48)"
     )
-    print(f"  ratio loop / study            {loop48 / warm:7.1f}x")
+    print(
+        f"  ratio loop / study            {loop48 / warm:7.1f}x wall, "
+        f"{CPU['loop'] / len(users) * 48 / CPU['study']:.1f}x CPU"
+    )
+    print(
+        f"  CPU (user + sys, all processes): study {CPU['study']:.1f} s, i.e. >= {CPU['study'] / 2:.1f} s "
+        f"wall on 2 free cores; loop {CPU['loop'] / len(users) * 48:.1f} s; load average "
+        f"{load0:.1f} before the study, {os.getloadavg()[0]:.1f} at the end (2 cores)"
+    )
     print("  EPOF of users", users, "equal to the loop's vimsim epof (rtol 1e-6: its CSV rounding)")
     return 0
 

@@ -6,7 +6,7 @@ the Ray overhead against the local executor at 2 workers (goal <= 10 %). Each is
 ``vimsim study`` process (Ray's start-up included) and, beside it, the task phase alone
 (``timings_s.tasks`` of study.json). The grid is made once before (cached), every run
 recomputes all viewings (``--no-resume``) into a fresh folder; viewings.csv of all runs
-must be identical. Clip: synthetic ``coaster`` scene, 3 s at 30 fps, 512x256; eyes 320x320,
+must be identical. Clip: synthetic ``coaster`` scene, 4 s at 30 fps, 1024x512; eyes 480x480,
 one llvmpipe thread per render task (its declared CPU).
 
 Run: .venv/bin/python bench/study_scaling.py [--rounds N]
@@ -36,9 +36,9 @@ def setup() -> Path:
     OUT.mkdir(parents=True, exist_ok=True)
     clip = OUT / "coaster.mp4"
     if not clip.is_file():
-        synthesize(SynthConfig("coaster", seconds=3.0, fps=30, size=(512, 256)), clip)
+        synthesize(SynthConfig("coaster", seconds=4.0, fps=30, size=(1024, 512)), clip)
     for i in range(8):
-        save_headpath_csv(OUT / f"P{i + 1:02d}.csv", synth("look-around", 3.5, rate_hz=60, seed=i))
+        save_headpath_csv(OUT / f"P{i + 1:02d}.csv", synth("look-around", 4.5, rate_hz=60, seed=i))
     m = OUT / "study.toml"
     m.write_text("""[[videos]]
 id = "coaster"
@@ -52,7 +52,7 @@ participant = "{stem}"
 render = true
 
 [render]
-eye_size = "320x320"
+eye_size = "480x480"
 cpus = 1
 """)
     return m
@@ -77,9 +77,11 @@ def main() -> int:
     ap.add_argument("--rounds", type=int, default=1)
     args = ap.parse_args()
     m = setup()
+    shutil.rmtree(OUT / "cache", ignore_errors=True)  # the clip may have changed
     study(m, "warmup", "local", 2)  # makes the cached grid
     ref = (OUT / "warmup" / "viewings.csv").read_bytes()
     res: dict[tuple[str, int], list[tuple[float, float]]] = {}
+    load0 = os.getloadavg()[0]
     for _ in range(args.rounds):
         for ex in ("local", "ray"):
             for w in (1, 2):
@@ -89,7 +91,9 @@ def main() -> int:
     med = {k: (statistics.median(a for a, _ in v), statistics.median(b for _, b in v))
            for k, v in res.items()}  # fmt: skip
     print(
-        f"render-heavy study: 8 viewings rendered (320x320 per eye, 90 frames), median of {args.rounds} round(s)"
+        f"render-heavy study: 8 viewings rendered (480x480 per eye, 120 frames), median of "
+        f"{args.rounds} round(s); load average {load0:.1f} before, {os.getloadavg()[0]:.1f} "
+        "after (2 cores)"
     )
     for (ex, w), (wall, tasks) in sorted(med.items()):
         print(f"  {ex:5s} {w} worker(s): {wall:6.2f} s whole process, {tasks:6.2f} s tasks")
