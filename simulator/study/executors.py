@@ -57,15 +57,24 @@ def check_ray_address(address: str, *, timeout_s: float = 3.0) -> None:
 
 
 class LocalExecutor:
-    """A pool of ``workers`` processes (forked where the platform allows: no re-import)."""
+    """A pool of ``workers`` processes.
+
+    Workers come from a fork server where the platform has one (a fresh single-threaded
+    process that has imported the task module once, then forks each worker): no
+    re-import per worker, and none of the caller's threads (decoders, encoders, a test
+    runner's) are forked with a lock held, which can deadlock a plain ``fork``.
+    Elsewhere ``spawn``.
+    """
 
     name = "local"
 
     def __init__(self, workers: int):
         self.workers = int(workers)
-        ctx = multiprocessing.get_context(
-            "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-        )
+        if "forkserver" in multiprocessing.get_all_start_methods():
+            ctx = multiprocessing.get_context("forkserver")
+            ctx.set_forkserver_preload(["simulator.study.tasks"])
+        else:
+            ctx = multiprocessing.get_context("spawn")
         self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
 
     def submit(self, fn, *args, num_cpus: int = 1):
