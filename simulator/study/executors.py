@@ -72,7 +72,15 @@ class LocalExecutor:
         self.workers = int(workers)
         if "forkserver" in multiprocessing.get_all_start_methods():
             ctx = multiprocessing.get_context("forkserver")
-            ctx.set_forkserver_preload(["simulator.study.tasks"])
+            # What every task needs, imported once in the server (no GL context is made there).
+            ctx.set_forkserver_preload(
+                [
+                    "simulator.study.tasks",
+                    "simulator.sphere",
+                    "simulator.preprocess",
+                    "simulator.render",
+                ]
+            )
         else:
             ctx = multiprocessing.get_context("spawn")
         self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
