@@ -275,3 +275,20 @@ def test_example_manifest_tables():
         assert set(t) <= set(mf._VIDEO_KEYS)
     for t in d["viewings"]:
         assert set(t) <= set(mf._VIEWING_KEYS)
+
+
+def test_provocative_moments_separation():
+    """Largest entries first; a smaller peak within 2 s and 90 deg of a larger one is
+    skipped, one far in time or across the yaw seam (wrap-around) is kept."""
+    from simulator.study.outputs import provocative_moments
+
+    yaw = np.arange(-172.5, 180, 15.0)  # 24 columns
+    m = np.zeros((100, 24))
+    m[50, 0] = 10.0  # yaw -172.5 at 5.0 s
+    m[52, 1] = 9.0  # 0.2 s and 15 deg away: suppressed
+    m[51, 23] = 8.5  # 172.5 = 15 deg across the seam: suppressed
+    m[51, 12] = 8.0  # 7.5 deg: 180 deg away: kept
+    m[80, 0] = 7.0  # 3 s later: kept
+    got = provocative_moments(m, yaw, fps=10.0, n=3)
+    assert [(g["frame"], g["yaw_deg"]) for g in got] == [(50, -172.5), (51, 7.5), (80, -172.5)]
+    assert [g["pof_dps"] for g in got] == [10.0, 8.0, 7.0]
