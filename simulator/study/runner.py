@@ -127,21 +127,23 @@ def run_study(
     """
     from simulator.study import outputs
 
-    t_start = time.perf_counter()
+    t_start, c_start = time.perf_counter(), time.process_time()
     # Absolute: workers (Ray's especially) need not share the driver's working directory.
     out = Path(outdir).absolute()
     cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
     _check_outputs(manifest, out, cache)
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
-        return _run(manifest, out, cache, ex, resume, progress, t_start, outputs)
+        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), outputs)
     except BaseException:
         ex.close(cancel=True)
         raise
 
 
-def _run(manifest, out, cache, ex, resume, progress, t_start, outputs) -> dict:
+def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
+    t_start, c_start = start
     timings: dict[str, float] = {}
+    cpu_tasks = 0.0
     check_output_dir(out)
     (cache / "grids").mkdir(parents=True, exist_ok=True)
     for sub in ("epof", "state"):
@@ -232,6 +234,9 @@ def _run(manifest, out, cache, ex, resume, progress, t_start, outputs) -> dict:
             kind, vid, payload = pending.pop(h)
             try:
                 res = ex.result(h)
+                cpu_tasks += sum(
+                    r.get("cpu_s", 0.0) for r in (res if isinstance(res, list) else [res])
+                )
             except Exception as e:  # noqa: BLE001 -- a worker died: its tasks fail, the rest go on
                 res = None
                 line = (
@@ -279,6 +284,10 @@ def _run(manifest, out, cache, ex, resume, progress, t_start, outputs) -> dict:
     report = outputs.write_study_outputs(manifest, out, grids, table)
     timings["outputs"] = time.perf_counter() - t0
     timings["total"] = time.perf_counter() - t_start
+    # CPU seconds: this process, and the tasks as measured in their workers (worker
+    # start-up and imports not included).
+    timings["cpu_driver"] = time.process_time() - c_start
+    timings["cpu_tasks"] = cpu_tasks
     failures = [
         {"viewing": r["viewing"], "status": r["status"]} for r in table if r["status"] != "ok"
     ]
