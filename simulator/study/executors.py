@@ -18,6 +18,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing
 import os
+import signal
 import socket
 
 from simulator.errors import InputError
@@ -56,6 +57,29 @@ def check_ray_address(address: str, *, timeout_s: float = 3.0) -> None:
         ) from None
 
 
+_IN_TASK = [False]
+
+
+def _on_sigint(signum, frame) -> None:
+    """A pool worker's Ctrl-C: interrupt the task it runs (a paper-mode preprocess then
+    saves its checkpoint); while idle, nothing (the driver shuts the pool down), so no
+    worker prints a traceback."""
+    if _IN_TASK[0]:
+        raise KeyboardInterrupt
+
+
+def _worker_init() -> None:
+    signal.signal(signal.SIGINT, _on_sigint)
+
+
+def _run_task(fn, args):
+    _IN_TASK[0] = True
+    try:
+        return fn(*args)
+    finally:
+        _IN_TASK[0] = False
+
+
 class LocalExecutor:
     """A pool of ``workers`` processes.
 
@@ -83,10 +107,12 @@ class LocalExecutor:
             )
         else:
             ctx = multiprocessing.get_context("spawn")
-        self._pool = cf.ProcessPoolExecutor(max_workers=self.workers, mp_context=ctx)
+        self._pool = cf.ProcessPoolExecutor(
+            max_workers=self.workers, mp_context=ctx, initializer=_worker_init
+        )
 
     def submit(self, fn, *args, num_cpus: int = 1):
-        return self._pool.submit(fn, *args)
+        return self._pool.submit(_run_task, fn, args)
 
     def wait(self, handles, timeout: float | None = None) -> list:
         done, _ = cf.wait(list(handles), timeout=timeout, return_when=cf.FIRST_COMPLETED)
