@@ -196,14 +196,20 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
     T = m.shape[0]
-    im = ax.imshow(m.T, origin="lower", aspect="auto", cmap="magma",
-                   extent=(0, T / fps, grid.yaw_deg[0] - step / 2, grid.yaw_deg[-1] + step / 2))  # fmt: skip
-    fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)")
+    lo_yaw, hi_yaw = grid.yaw_deg[0] - step / 2, grid.yaw_deg[-1] + step / 2
+    # Colour scale to the 99.5th percentile: a scene cut's single frame would flatten the rest.
+    vmax = max(float(np.percentile(m, 99.5)), 1e-6)
+    im = ax.imshow(m.T, origin="lower", aspect="auto", cmap="magma", vmin=0, vmax=vmax,
+                   extent=(0, T / fps, lo_yaw, hi_yaw), interpolation="nearest")  # fmt: skip
+    fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)", extend="max")
     for a in epofs.values():
-        k = max(1, len(a) // 400)
-        ax.plot(a[::k, 1], a[::k, 2], ".", color="cyan", ms=2, alpha=0.5)
+        k = max(1, len(a) // 300)
+        y = (a[::k, 2] - lo_yaw) % 360.0 + lo_yaw  # the map's yaw range (wraps at the seam)
+        ax.plot(a[::k, 1], y, ".", color="cyan", ms=1, alpha=0.3)
+    ax.set_ylim(lo_yaw, hi_yaw)
     for mo in moments:
-        ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=9,
+        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="none", mec="white", ms=13, mew=1.2)
+        ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=8,
                     ha="center", va="center", weight="bold")  # fmt: skip
     ax.set_xlabel("time (s)")
     ax.set_ylabel("yaw (deg, + right)")
