@@ -31,7 +31,7 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	# CPU build of torch from this machine's disk (optional neural-flow backend).
 	$(PY) -m pip install -q torch==2.13.0 || echo "note: torch==2.13.0 not installable here; torch tests will be skipped"
-	$(PY) -m pip install -q -e '.[dev]'
+	$(PY) -m pip install -q -e '.[dev,ray]'
 	touch $(STAMP)
 
 setup: sysdeps $(STAMP)

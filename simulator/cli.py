@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "demo": "demo",
     "analyze": "analyze",
     "export": "export",
+    "study": "study",
 }
 
 
@@ -61,7 +62,10 @@ def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     from simulator.fileio import check_not_input, check_output_file
 
     out = getattr(args, "output", None)
-    if args.command in FOLDER_OUTPUTS:
+    folder = args.command in FOLDER_OUTPUTS or (
+        args.command == "headpath" and getattr(args, "user", None) == "all"
+    )
+    if folder:
         if out is not None:
             if str(out).strip() == "":
                 raise InputError("output folder name is empty; give a folder, e.g. -o out")

@@ -29,8 +29,12 @@ def _user(text: str) -> int:
     return v
 
 
-def add_reader_options(p: argparse.ArgumentParser) -> None:
-    """--format, --video, --user (shared with ``vimsim epof``)."""
+def _user_or_all(text: str) -> int | str:
+    return "all" if text == "all" else _user(text)
+
+
+def add_reader_options(p: argparse.ArgumentParser, *, allow_all: bool = False) -> None:
+    """--format, --video, --user (shared with ``vimsim epof``); ``allow_all``: ``--user all``."""
     p.add_argument(
         "--format",
         choices=("auto", *HEADPATH_FORMATS),
@@ -45,10 +49,15 @@ def add_reader_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--user",
-        type=_user,
+        type=_user_or_all if allow_all else _user,
         default=None,
-        metavar="N",
-        help="360VidStr aggregated files hold one trace per user: which one (1-based)",
+        metavar="N|all" if allow_all else "N",
+        help="360VidStr aggregated files hold one trace per user: which one (1-based)"
+        + (
+            "; all = every user, one CSV each into the folder -o DIR (the file is read once)"
+            if allow_all
+            else ""
+        ),
     )
 
 
@@ -166,7 +175,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "write the canonical CSV in our conventions.",
     )
     c.add_argument("input", metavar="IN")
-    c.add_argument("-o", "--output", required=True, metavar="PATH.csv")
+    c.add_argument(
+        "-o",
+        "--output",
+        required=True,
+        metavar="PATH.csv",
+        help="output CSV (a folder with --user all)",
+    )
     c.add_argument(
         "--columns",
         metavar="MAP",
@@ -189,7 +204,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="--columns: count time from the first row (for clock timestamps)",
     )
-    add_reader_options(c)
+    add_reader_options(c, allow_all=True)
     c.set_defaults(func=run, headpath_command="convert")
 
     w = sub.add_parser(
@@ -249,6 +264,8 @@ def run(args: argparse.Namespace) -> int:
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
+        if args.headpath_command == "convert" and args.user == "all":
+            return _convert_all(args)
         if args.headpath_command == "convert" and args.columns:
             from simulator.readers import load_columns
 
@@ -268,3 +285,30 @@ def run(args: argparse.Namespace) -> int:
         hp_mod.plot_headpath(args.output, hp)
         print(f"wrote {args.output}")
         return 0
+
+
+def _convert_all(args: argparse.Namespace) -> int:
+    """``convert IN --user all -o DIR``: every user of IN, read once, as DIR/<stem>_user<N>.csv."""
+    from pathlib import Path
+
+    from simulator.errors import InputError
+    from simulator.fileio import check_not_input, check_output_dir
+    from simulator.headpath import save_headpath_csv
+    from simulator.readers import load_all_users
+
+    src = Path(args.input)
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise InputError(
+            f"{out}: --user all writes one CSV per user into a folder; {out} is a file"
+        )
+    users = load_all_users(src, args.format)
+    width = len(str(max(users)))
+    targets = {u: out / f"{src.stem}_user{u:0{width}d}.csv" for u in users}
+    for t in targets.values():
+        check_not_input(t, [src])  # one line, exit 2: an output would replace the input
+    check_output_dir(out)
+    for u, hp in users.items():
+        save_headpath_csv(targets[u], hp)
+    print(f"wrote {len(users)} head paths to {out}/ ({src.stem}_user{1:0{width}d}.csv ..)")
+    return 0

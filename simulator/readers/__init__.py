@@ -20,11 +20,12 @@ from simulator.readers.columns import load_columns, parse_column_map
 from simulator.readers.common import _first_line, _warn_if_coarse
 from simulator.readers.corbillon import _read_corbillon, _read_corbillon_euler
 from simulator.readers.salient360 import _read_salient360_dyn, _read_salient360_static
-from simulator.readers.vidstr360 import _read_360vidstr
+from simulator.readers.vidstr360 import _360vidstr_user, _parse_360vidstr, _read_360vidstr
 
 __all__ = [
     "FORMATS",
     "detect_format",
+    "load_all_users",
     "load_columns",
     "load_headpath",
     "load_keyframes",
@@ -126,3 +127,21 @@ def load_keyframes(path: str | os.PathLike) -> HeadPath:
             f"{p}: keyframes must be a JSON list or a CSV with header {','.join(CANONICAL_COLUMNS)}"
         )
     return load_headpath(p, fmt)
+
+
+def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, HeadPath]:
+    """Every user of a head path file, read once: ``{user (1-based): HeadPath}``.
+
+    360VidStr aggregated files hold many users (one pair of lines each); any other format
+    holds one trace and gives ``{1: path}`` (read as :func:`load_headpath` reads it). A
+    user whose samples are bad raises InputError naming the file and the user.
+    """
+    p = check_input_file(path, "head path")
+    fmt = detect_format(p) if format == "auto" else format
+    if fmt != "360vidstr":
+        return {1: load_headpath(p, fmt)}
+    rows = _parse_360vidstr(p)
+    out = {u: _360vidstr_user(p, rows, u) for u in range(1, (len(rows) - 1) // 2 + 1)}
+    for hp in out.values():
+        _warn_if_coarse(hp)
+    return out

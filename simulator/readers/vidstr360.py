@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from simulator.errors import InputError
 from simulator.headpath import HeadPath
@@ -16,6 +17,20 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
     pitch and a line of yaw, radians; no roll. Signs/origin undocumented (taken as ours:
     yaw + right, pitch + up). A user's lines may be shorter than the time line: the path
     ends at that user's last sample."""
+    rows = _parse_360vidstr(p)
+    n_users = (len(rows) - 1) // 2
+    if user is None:
+        if n_users == 1:
+            user = 1
+        else:
+            raise InputError(f"{p}: holds {n_users} users; choose one with --user 1..{n_users}")
+    if not 1 <= user <= n_users:
+        raise InputError(f"{p}: no user {user}; choose --user 1..{n_users}")
+    return _360vidstr_user(p, rows, user)
+
+
+def _parse_360vidstr(p: Path) -> list[NDArray]:
+    """The number rows of a 360VidStr aggregated file (2n+1 of them), read once."""
     with open(p, encoding="utf-8", errors="replace") as fh:
         lines = [ln for ln in fh.read().splitlines() if ln.strip()]
     try:
@@ -26,14 +41,11 @@ def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
         raise InputError(
             f"{p}: a 360VidStr file has 2n+1 lines (times, then pitch and yaw per user); found {len(rows)}"
         )
-    n_users = (len(rows) - 1) // 2
-    if user is None:
-        if n_users == 1:
-            user = 1
-        else:
-            raise InputError(f"{p}: holds {n_users} users; choose one with --user 1..{n_users}")
-    if not 1 <= user <= n_users:
-        raise InputError(f"{p}: no user {user}; choose --user 1..{n_users}")
+    return rows
+
+
+def _360vidstr_user(p: Path, rows: list[NDArray], user: int) -> HeadPath:
+    """User ``user`` (1-based) of the parsed rows of a 360VidStr file."""
     pitch, yaw = rows[2 * user - 1], rows[2 * user]
     n = min(len(pitch), len(yaw), len(rows[0]))
     if n < 1:

@@ -1,0 +1,117 @@
+"""``vimsim study STUDY.toml -o OUTDIR``: every viewing of a study, locally or on a Ray cluster."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+__all__ = ["register", "run"]
+
+
+def _workers(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected an integer >= 1, e.g. 2; got {text!r}"
+        ) from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, e.g. 2; got {text!r}")
+    return v
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``study`` parser."""
+    p = subparsers.add_parser(
+        "study",
+        help="a whole study (videos x viewings): preprocess, EPOF, renders, plots, analysis",
+        description="Run every viewing of a study manifest (TOML: [[videos]], [[viewings]], "
+        "optional [questionnaires], [epof], [render], [grf]; see docs/study.md and "
+        "examples/study.toml). Each video is preprocessed once (grids cached by content hash "
+        "and options), every viewing's EPOF and opacity computed, the viewings with render = "
+        "true rendered. Writes OUTDIR/viewings.csv, OUTDIR/epof/<viewing>.csv, "
+        "OUTDIR/render/<viewing>/, OUTDIR/videos/<video>/ (plots, provocative moments), "
+        "OUTDIR/analysis/ (with questionnaires) and, last, OUTDIR/study.json. Exit status 3 "
+        "when some viewings failed (their status says why), 2 for a bad manifest.",
+    )
+    p.add_argument("manifest", metavar="STUDY.toml", help="the study manifest")
+    p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
+    p.add_argument(
+        "--executor",
+        default="local",
+        metavar="local|ray|ray:ADDRESS",
+        help="local: a process pool (default); ray: a local Ray runtime; ray:HOST:PORT: join "
+        "a running Ray cluster (needs pip install 'vimsim[ray]')",
+    )
+    p.add_argument(
+        "--workers",
+        type=_workers,
+        default=None,
+        metavar="N",
+        help="parallel tasks (default: CPU count; on a joined cluster its CPUs decide)",
+    )
+    p.add_argument(
+        "--resume",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="skip viewings whose inputs and options are unchanged since the last run on "
+        "OUTDIR (default; --no-resume recomputes every viewing)",
+    )
+    p.add_argument(
+        "--cache-dir",
+        default=None,
+        metavar="DIR",
+        help="grid cache (default: $VIMSIM_CACHE, else $XDG_CACHE_HOME/vimsim or ~/.cache/vimsim)",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
+    from tqdm import tqdm
+
+    from simulator.study import load_manifest, run_study
+    from simulator.study.executors import parse_executor
+
+    parse_executor(args.executor)  # an unknown executor is a usage error before anything
+    manifest = load_manifest(args.manifest)
+    bars: list = []  # made on the first report: nothing is drawn before the work starts
+
+    def progress(done: int, failed: int, total: int) -> None:
+        if not bars:
+            bars.append(tqdm(total=total, unit="task", desc="study", disable=args.no_progress,
+                             file=sys.stderr, dynamic_ncols=True))  # fmt: skip
+        bar = bars[0]
+        bar.total = total
+        bar.n = done + failed
+        bar.set_postfix_str(f"done {done}, failed {failed}", refresh=False)
+        bar.refresh()
+
+    try:
+        s = run_study(
+            manifest,
+            args.output,
+            executor=args.executor,
+            workers=args.workers,
+            cache_dir=args.cache_dir,
+            resume=args.resume,
+            progress=progress,
+        )
+    finally:
+        for bar in bars:
+            bar.close()
+    c = s["counts"]
+    for f in s["failures"]:
+        print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)
+    an = s["outputs"].get("analysis")
+    if an and an.get("error"):
+        print(f"vimsim study: analysis not made: {an['error']}", file=sys.stderr)
+    for vid, vo in s["outputs"]["videos"].items():
+        if "error" in vo:
+            print(f"vimsim study: video {vid}: {vo['error']}", file=sys.stderr)
+    print(
+        f"vimsim study: {c['ok']} of {c['viewings']} viewings ok ({c['resumed']} unchanged), "
+        f"{c['failed']} failed, {s['timings_s']['total']:.1f} s -> {args.output}/study.json"
+    )
+    return 3 if c["failed"] or (an and an.get("error")) else 0

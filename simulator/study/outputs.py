@@ -1,0 +1,317 @@
+"""The study's summary outputs: viewings.csv, per-video plots and provocative moments, the analysis.
+
+Per video (``OUTDIR/videos/<video>/``): ``epof_viewers.png`` (EPOF over time of every
+viewer, faint, with the median and the 10-90 % band across viewers), ``provocative.png``
+(the time x yaw map of the flow of the windows on the horizon row -- pitch nearest 0 --
+of the grid, deg/s, with the viewers' yaw as dots and the most provocative moments
+numbered), ``moments.csv`` (rank, time, frame, yaw, pitch, POF) and ``moment_<k>.png`` (the
+viewport of each moment, the grid's window FOV). With ``[questionnaires]``:
+``OUTDIR/analysis/`` holds the ``vimsim analyze`` report of the study, each participant's
+session flow taken from their EPOF (``DATA.csv`` there is what was analysed).
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import io
+import json
+import math
+import platform
+from pathlib import Path
+
+import av
+import cv2
+import numpy as np
+import scipy
+
+from simulator import __version__
+from simulator.analyze.data import read_study
+from simulator.analyze.report import analyze_study, write_report
+from simulator.errors import InputError
+from simulator.fileio import atomic_output
+from simulator.geometry import extract_view, split_eye
+
+__all__ = [
+    "provocative_moments",
+    "versions",
+    "write_study_outputs",
+    "write_viewings_csv",
+]
+
+#: Moments listed per video, and how far apart (seconds, or degrees of yaw) they must be.
+N_MOMENTS = 5
+MOMENT_SEP_S = 2.0
+MOMENT_SEP_DEG = 90.0
+THUMB_SIZE = (192, 192)
+
+
+def _cell(v) -> str:
+    if isinstance(v, float):
+        return f"{round(v, 9) + 0.0:.10g}" if math.isfinite(v) else ""
+    return str(v)
+
+
+def write_viewings_csv(path, rows: list[dict], columns) -> None:
+    """One row per viewing, in manifest order; floats as the EPOF CSV writes them."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(columns)
+    for r in rows:
+        w.writerow([_cell(r.get(c, "")) for c in columns])
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(buf.getvalue())
+
+
+def _load_epof(path: Path) -> np.ndarray:
+    """(T, 7) array of an EPOF CSV (frame, time_s, yaw, pitch, roll, epof_dps, opacity),
+    without its ``#`` settings lines and its header."""
+    lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
+    return np.loadtxt(lines[1:], delimiter=",", ndmin=2)[:, :7]
+
+
+def provocative_moments(pof_ty, yaw_deg, fps: float, *, n: int = N_MOMENTS,
+                        sep_s: float = MOMENT_SEP_S, sep_deg: float = MOMENT_SEP_DEG) -> list[dict]:  # fmt: skip
+    """The ``n`` largest entries of a (T, Y) time x yaw flow map (deg/s), each at least
+    ``sep_s`` seconds or ``sep_deg`` degrees of yaw (wrapped) from every larger one."""
+    m = np.asarray(pof_ty, np.float64)
+    order = np.argsort(m, axis=None)[::-1]
+    picked: list[tuple[int, int]] = []
+    for flat in order:
+        t, y = divmod(int(flat), m.shape[1])
+        ok = True
+        for t2, y2 in picked:
+            dyaw = abs((yaw_deg[y] - yaw_deg[y2] + 180.0) % 360.0 - 180.0)
+            if abs(t - t2) / fps < sep_s and dyaw < sep_deg:
+                ok = False
+                break
+        if ok:
+            picked.append((t, y))
+            if len(picked) == n:
+                break
+    return [
+        {"rank": k + 1, "frame": t, "time_s": t / fps, "yaw_deg": float(yaw_deg[y]),
+         "pof_dps": float(m[t, y])}
+        for k, (t, y) in enumerate(picked)
+    ]  # fmt: skip
+
+
+def _thumbnails(video, layout: str, eye: str, moments: list[dict], hfov: float, vfov: float,
+                folder: Path) -> None:  # fmt: skip
+    """``moment_<rank>.png``: the viewport of each moment (one decoding pass)."""
+    from PIL import Image
+
+    want: dict[int, list[dict]] = {}
+    for mo in moments:
+        want.setdefault(mo["frame"], []).append(mo)
+    for i, frame in _frames_at(video, sorted(want), layout, eye):
+        for mo in want[i]:
+            view = extract_view(frame, mo["yaw_deg"], mo["pitch_deg"], 0.0,
+                                hfov_deg=hfov, vfov_deg=vfov, size=THUMB_SIZE)  # fmt: skip
+            name = f"moment_{mo['rank']}.png"
+            with atomic_output(folder / name) as tmp:
+                Image.fromarray(view).save(tmp, format="PNG")
+            mo["thumbnail"] = name
+
+
+def _frames_at(video, frames: list[int], layout: str, eye: str):
+    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``: a seek to
+    the keyframe before each (not a decode from the start: a long video has its
+    moments anywhere), then decoding up to the frame (index = presentation time x fps)."""
+    with av.open(str(video)) as c:
+        s = c.streams.video[0]
+        fps = float(s.average_rate or s.guessed_rate)
+        t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
+        for f in frames:
+            c.seek(int((t0 + f / fps) / s.time_base), stream=s, backward=True, any_frame=False)
+            got = None
+            for fr in c.decode(s):
+                i = round((float(fr.pts * s.time_base) - t0) * fps) if fr.pts is not None else f
+                if i >= f:
+                    got = fr
+                    break
+            if got is not None:
+                rgb = got.to_ndarray(format="rgb24")
+                yield f, split_eye(rgb, layout, eye, source=str(video))
+
+
+@dataclasses.dataclass(frozen=True)
+class _GridMap:
+    """What the plots need of a grid file (its window matrix, not its sphere field)."""
+
+    pof_dps: np.ndarray
+    yaw_deg: np.ndarray
+    pitch_deg: np.ndarray
+    fps: float
+    hfov_deg: float
+    vfov_deg: float
+
+
+def _grid_map(path: Path) -> _GridMap:
+    """The window matrix of a cached grid (written by this study's preprocess and loaded by
+    its workers with :func:`simulator.gridfile.load_grid`); the field is not decompressed."""
+    with np.load(path, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        return _GridMap(z["pof_dps"], z["yaw_deg"], z["pitch_deg"], float(meta["fps"]),
+                        float(meta["grid"]["hfov_deg"]), float(meta["grid"]["vfov_deg"]))  # fmt: skip
+
+
+def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Path) -> dict:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    folder.mkdir(parents=True, exist_ok=True)
+    grid = _grid_map(grid_path)
+    fps = grid.fps
+    written: list[str] = []
+
+    # EPOF across viewers.
+    fig, ax = plt.subplots(figsize=(10, 3.8), dpi=110)
+    if epofs:
+        n = min(len(a) for a in epofs.values())
+        stack = np.stack([a[:n, 5] for a in epofs.values()])
+        t = next(iter(epofs.values()))[:n, 1]
+        for row in stack:
+            ax.plot(t, row, color="0.3", lw=0.5, alpha=0.15)
+        lo, med, hi = np.percentile(stack, [10, 50, 90], axis=0)
+        ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.3, lw=0, label="10-90% of viewers")
+        ax.plot(t, med, color="tab:blue", lw=1.4, label="median")
+        ax.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("EPOF (deg/s)")
+    ax.set_title(f"{v.id}: EPOF across {len(epofs)} viewers")
+    fig.tight_layout()
+    with atomic_output(folder / "epof_viewers.png") as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+    written.append("epof_viewers.png")
+
+    # Time x yaw map on the horizon row, moments, thumbnails.
+    p0 = int(np.argmin(np.abs(grid.pitch_deg)))
+    pitch0 = float(grid.pitch_deg[p0])
+    m = np.asarray(grid.pof_dps[:, p0, :], np.float64)
+    moments = provocative_moments(m, grid.yaw_deg, fps)
+    for mo in moments:
+        mo["pitch_deg"] = pitch0
+    _thumbnails(v.path, v.layout, v.eye, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
+    step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
+    T = m.shape[0]
+    lo_yaw, hi_yaw = grid.yaw_deg[0] - step / 2, grid.yaw_deg[-1] + step / 2
+    # Colour scale to the 99.5th percentile: a scene cut's single frame would flatten the rest.
+    vmax = max(float(np.percentile(m, 99.5)), 1e-6)
+    im = ax.imshow(m.T, origin="lower", aspect="auto", cmap="magma", vmin=0, vmax=vmax,
+                   extent=(0, T / fps, lo_yaw, hi_yaw), interpolation="nearest")  # fmt: skip
+    fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)", extend="max")
+    for a in epofs.values():
+        k = max(1, len(a) // 300)
+        y = (a[::k, 2] - lo_yaw) % 360.0 + lo_yaw  # the map's yaw range (wraps at the seam)
+        ax.plot(a[::k, 1], y, ".", color="cyan", ms=1, alpha=0.3)
+    ax.set_ylim(lo_yaw, hi_yaw)
+    for mo in moments:
+        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="none", mec="white", ms=13, mew=1.2)
+        ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=8,
+                    ha="center", va="center", weight="bold")  # fmt: skip
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("yaw (deg, + right)")
+    ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots)")
+    fig.tight_layout()
+    with atomic_output(folder / "provocative.png") as tmp:
+        fig.savefig(tmp)
+    plt.close(fig)
+    written.append("provocative.png")
+    cols = ("rank", "time_s", "frame", "yaw_deg", "pitch_deg", "pof_dps", "thumbnail")
+    buf = io.StringIO()
+    wr = csv.writer(buf, lineterminator="\n")
+    wr.writerow(cols)
+    for mo in moments:
+        wr.writerow([_cell(mo.get(c, "")) for c in cols])
+    with atomic_output(folder / "moments.csv") as tmp:
+        Path(tmp).write_text(buf.getvalue())
+    written += ["moments.csv", *(mo["thumbnail"] for mo in moments if "thumbnail" in mo)]
+    return {"files": written, "moments": moments}
+
+
+def _analysis(manifest, out: Path, table: list[dict]) -> dict:
+    """The ``vimsim analyze`` report of the study into ``OUTDIR/analysis/``."""
+    q = manifest.questionnaires
+    folder = out / "analysis"
+    folder.mkdir(exist_ok=True)
+    text = Path(q["path"]).read_text(encoding="utf-8-sig")
+    lines = [ln for ln in text.splitlines() if ln.strip() and not ln.lstrip().startswith("#")]
+    reader = csv.reader(lines)
+    header = [c.strip().lower() for c in next(reader)]
+    key = "participant" if "participant" in header else "id"
+    skip = {key, "id", "participant", "condition", "flow", "epof_csv"}
+    extra = [c for c in header if c not in skip]
+    ok: dict[str, list[dict]] = {}
+    for r in table:
+        if r["status"] == "ok":
+            ok.setdefault(r["participant"], []).append(r)
+    rows, seen = [], set()
+    for cells in reader:
+        rec = dict(zip(header, (c.strip() for c in cells)))
+        pid = rec.get(key, "")
+        seen.add(pid)
+        vs = ok.get(pid, [])
+        cond = rec.get("condition") or (
+            vs[0]["condition"] if len({x["condition"] for x in vs}) == 1 else ""
+        )
+        flow = epof_csv = ""
+        if len(vs) == 1:
+            epof_csv = f"../epof/{vs[0]['viewing']}.csv"
+        elif vs:  # several viewings: session flow over all their frames
+            e = np.concatenate([_load_epof(out / "epof" / f"{x['viewing']}.csv")[:, 5] for x in vs])
+            flow = _cell(
+                float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
+            )
+        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["id", "condition", *extra, "flow", "epof_csv"])
+    w.writerows(rows)
+    data = folder / "DATA.csv"
+    with atomic_output(data) as tmp:
+        Path(tmp).write_text(buf.getvalue())
+    info = {"dir": str(folder), "data": str(data),
+            "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
+    try:
+        study = read_study(data, flow_stat=q["flow_stat"])
+        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"])
+        info["files"] = [p.name for p in write_report(an, folder)]
+        info["problems"] = list(study.problems)
+        info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]
+        info["comparisons"] = an.comparisons
+        info["error"] = None
+    except InputError as e:
+        info["error"] = str(e)
+    return info
+
+
+def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list[dict]) -> dict:
+    """Per-video plots, moments and thumbnails; the analysis. Returns what was written
+    (and the one-line error of any part that could not be made)."""
+    report: dict = {"videos": {}}
+    for v in manifest.videos:
+        mine = [r for r in table if r["video"] == v.id and r["status"] == "ok"]
+        epofs = {r["viewing"]: _load_epof(out / "epof" / f"{r['viewing']}.csv") for r in mine}
+        try:
+            if not grids[v.id].is_file():
+                raise InputError(f"video {v.id}: no grid (its preprocessing failed)")
+            report["videos"][v.id] = _video_outputs(v, grids[v.id], epofs, out / "videos" / v.id)
+        except InputError as e:
+            report["videos"][v.id] = {"error": str(e)}
+    if manifest.questionnaires:
+        report["analysis"] = _analysis(manifest, out, table)
+    return report
+
+
+def versions(ex_info: dict) -> dict:
+    """Versions of what computed the study."""
+    v = {"vimsim": __version__, "python": platform.python_version(), "numpy": np.__version__,
+         "scipy": scipy.__version__, "opencv": cv2.__version__, "av": av.__version__}  # fmt: skip
+    if "ray_version" in ex_info:
+        v["ray"] = ex_info["ray_version"]
+    return v

@@ -1,0 +1,275 @@
+"""The study's task functions: what a worker runs (preprocess a video, EPOF of viewings, render one).
+
+Each is a top-level function taking plain values (paths as strings, option dicts), so
+the local process pool and Ray ship them the same way; inputs are passed by path (a
+shared filesystem on a cluster) and outputs are written by the worker, each to a
+temporary name renamed when complete (:func:`simulator.fileio.atomic_output`). A task
+never raises for a bad input: the viewing's result carries the one-line error as its
+``status``. Per worker process, loaded grids, parsed multi-user trace files and the GL
+context are kept for the next task (the context is created in the worker, on its first
+render).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from simulator.epof.viewing import compute_epof, write_epof_csv
+from simulator.errors import InputError
+from simulator.fileio import atomic_output, json_text
+from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
+from simulator.gridfile import GridFile, load_grid
+from simulator.headpath import HeadPath
+from simulator.preprocess.paper import preprocess_video
+from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
+from simulator.readers import load_all_users, load_headpath
+from simulator.render.eye import RenderConfig
+from simulator.render.gl import create_context
+from simulator.viewing import render_viewing
+from simulator.windows import grid_preset
+
+__all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
+
+# Per worker process: kept between tasks (a pool or Ray worker runs many tasks).
+_GRIDS: dict[tuple, GridFile] = {}
+_TRACES: dict[tuple, dict[int, HeadPath]] = {}
+_GL: list = []
+
+
+def _error_line(e: BaseException) -> str:
+    """One line for a failed step: the InputError's message, or the internal error's type."""
+    text = " ".join(str(e).split())
+    return text if isinstance(e, InputError) else f"internal error: {type(e).__name__}: {text}"
+
+
+def _file_key(path: str) -> tuple:
+    st = os.stat(path)
+    return (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
+
+
+def _grid(path: str) -> GridFile:
+    key = _file_key(path)
+    if key not in _GRIDS:
+        _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            g = load_grid(path)
+        if g.field_dps is not None and g.field_dps.dtype != np.float32:
+            # Once per worker, not per viewing (compute_epof works in float32: same values).
+            g = dataclasses.replace(g, field_dps=g.field_dps.astype(np.float32))
+        _GRIDS[key] = g
+    return _GRIDS[key]
+
+
+def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
+    """The head path of one viewing; a multi-user file is parsed once per worker."""
+    if user is None:
+        return load_headpath(path, fmt)
+    key = (*_file_key(path), fmt)
+    if key not in _TRACES:
+        if len(_TRACES) > 8:
+            _TRACES.clear()
+        _TRACES[key] = load_all_users(path, fmt)
+    users = _TRACES[key]
+    if user not in users:
+        if len(users) == 1 and user == 1:
+            return users[1]
+        raise InputError(f"{path}: no user {user}; the file holds {len(users)}")
+    return users[user]
+
+
+def preprocess_task(video: dict, output: str, threads: int) -> dict:
+    """Make the grid file ``output`` of ``video`` (a :class:`VideoSpec` as a dict; paths as
+    strings). Paper mode resumes its own checkpoint beside ``output`` after an
+    interruption. Returns ``{"ok": bool, "error": str, "seconds": float, "cpu_s": float}``."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    try:
+        grid = grid_preset(
+            video["grid"],
+            hfov_deg=video["hfov_deg"],
+            vfov_deg=video["vfov_deg"],
+            size=(video["window_size"], video["window_size"]),
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            if video["method"] == "sphere":
+                preprocess_sphere(
+                    video["path"],
+                    output,
+                    grid=grid,
+                    config=SphereConfig(cell_deg=video["cell_deg"]),
+                    flow=video["flow"],
+                    layout=video["layout"],
+                    eye=video["eye"],
+                    progress=False,
+                )
+            else:
+                preprocess_video(
+                    video["path"],
+                    output,
+                    grid=grid,
+                    flow=video["flow"],
+                    layout=video["layout"],
+                    eye=video["eye"],
+                    resume=True,
+                    threads=threads,
+                    progress=False,
+                )
+    except Exception as e:  # noqa: BLE001 -- one line per failed video, the study goes on
+        line = _error_line(e)
+        return {"ok": False, "error": line, "seconds": time.perf_counter() - t0,
+                "cpu_s": time.process_time() - c0}  # fmt: skip
+    return {"ok": True, "error": "", "seconds": time.perf_counter() - t0,
+            "cpu_s": time.process_time() - c0}  # fmt: skip
+
+
+def viewing_stats(epof_dps, opacity) -> dict:
+    """The numbers of a viewing's row in ``viewings.csv`` (deg/s; opacity 0..1)."""
+    e = np.asarray(epof_dps, np.float64)
+    o = np.asarray(opacity, np.float64)
+    return {
+        "frames": int(e.size),
+        "epof_mean_dps": float(np.mean(e)),
+        "epof_median_dps": float(np.median(e)),
+        "epof_p90_dps": float(np.percentile(e, 90)),
+        "epof_max_dps": float(np.max(e)),
+        "opacity_mean": float(np.mean(o)),
+        "share_opacity_ge_0_5": float(np.mean(o >= 0.5)),
+    }
+
+
+def _rule(opts: dict) -> OpacityRule:
+    """The opacity rule of the ``[epof]`` table, with ``vimsim epof``'s defaults (the eased
+    comfort rule; ``opacity_rule = "paper"``: the paper's unsmoothed rule)."""
+    if opts.get("opacity_rule", "comfort") == "paper":
+        if opts["smooth_s"] or opts.get("ease_in_s") or opts.get("ease_out_s"):
+            raise InputError(
+                "[epof] opacity_rule = 'paper' is unsmoothed: drop smooth/ease_in/ease_out"
+            )
+        return OpacityRule(opts["low_pct"], opts["high_pct"], opts["opacity_source"])
+    ease_in, ease_out = opts.get("ease_in_s"), opts.get("ease_out_s")
+    return OpacityRule(
+        opts["low_pct"],
+        opts["high_pct"],
+        opts["opacity_source"],
+        opts["smooth_s"],
+        COMFORT_EASE_IN_S if ease_in is None else ease_in,
+        COMFORT_EASE_OUT_S if ease_out is None else ease_out,
+    )
+
+
+def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> list[dict]:
+    """EPOF and opacity of each viewing in ``items`` (``id``, ``trace``, ``format``,
+    ``user``) on the grid ``grid_path``; writes ``epof_dir/<id>.csv``. Returns one dict per
+    item: ``id``, ``status`` (``"ok"`` or the one-line error), the stats of
+    :func:`viewing_stats`, ``warnings`` (lines), ``seconds`` and ``cpu_s`` (this process's
+    CPU time; the first item's includes loading the grid)."""
+    out = []
+    c_setup = time.process_time()
+    try:
+        grid = _grid(grid_path)
+        rule = _rule(opts)
+    except Exception as e:  # noqa: BLE001
+        line = _error_line(e)
+        return [{"id": it["id"], "status": line, "warnings": [], "seconds": 0.0} for it in items]
+    c_setup = time.process_time() - c_setup
+    for it in items:
+        t0, c0 = time.perf_counter(), time.process_time()
+        rec: dict = {"id": it["id"], "warnings": []}
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                hp = _trace(it["trace"], it["format"], it["user"])
+                res = compute_epof(
+                    grid,
+                    hp,
+                    hfov_deg=opts["hfov_deg"],
+                    vfov_deg=opts["vfov_deg"],
+                    top_k=opts["top_k"],
+                    rule=rule,
+                    hold=opts["hold_last"],
+                    method=opts["method"],
+                )
+            write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
+            rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
+            rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
+        except Exception as e:  # noqa: BLE001
+            rec["status"] = _error_line(e)
+        rec["seconds"] = time.perf_counter() - t0
+        rec["cpu_s"] = time.process_time() - c0 + (c_setup if not out else 0.0)
+        out.append(rec)
+    return out
+
+
+def _context():
+    """This worker's GL context, created on its first render (never in the driver)."""
+    if not _GL:
+        _GL.append(create_context())
+    return _GL[0]
+
+
+def render_task(
+    video: dict, grid_path: str, item: dict, opts: dict, grf: dict, outdir: str
+) -> dict:
+    """Render one viewing into ``outdir`` (:func:`simulator.render.render_viewing`:
+    ``left.mp4``, ``right.mp4``, ``epof.csv``, ``summary.json`` last). ``opts["cpus"]``
+    llvmpipe threads unless ``LP_NUM_THREADS`` is set. Returns ``id``, ``status``,
+    ``seconds``, ``frames_per_s``."""
+    t0, c0 = time.perf_counter(), time.process_time()
+    rec = {"id": item["id"], "status": "ok", "frames_per_s": None}
+    try:
+        # Before Mesa loads (the first context of this process): one thread per declared CPU.
+        os.environ.setdefault("LP_NUM_THREADS", str(int(opts.get("cpus", 1))))
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            hp = _trace(item["trace"], item["format"], item["user"])
+            grid = _grid(grid_path)
+        g = None
+        if opts["grf"] == "on":
+            g = GrfConfig(
+                grain_deg=grf["grain_deg"],
+                density=grf["density"],
+                inner_deg=grf["inner_deg"],
+                outer_deg=grf["outer_deg"],
+                seed=grf["seed"],
+                distance_m=grf["distance_m"],
+            )
+        config = RenderConfig(
+            eye_size=tuple(opts["eye_size"]),
+            hfov_deg=opts["hfov_deg"],
+            vfov_deg=opts["vfov_deg"],
+            grf=g,
+        )
+        s = render_viewing(
+            video["path"],
+            hp,
+            outdir,
+            grid=grid,
+            config=config,
+            opacity=opts["opacity"],
+            layout=video["layout"],
+            hold=opts["hold_last"],
+            preset=opts["preset"],
+            crf=opts["crf"],
+            progress=False,
+            ctx=_context(),
+        )
+        rec["frames_per_s"] = s.get("frames_per_s")
+    except Exception as e:  # noqa: BLE001
+        rec["status"] = _error_line(e)
+    rec["seconds"] = time.perf_counter() - t0
+    rec["cpu_s"] = time.process_time() - c0  # all threads: llvmpipe and the encoders too
+    return rec
+
+
+def write_json(path, obj) -> None:
+    """``obj`` as standard JSON into ``path``, atomically."""
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(json_text(obj) + "\n")
