@@ -299,3 +299,22 @@ def test_provocative_moments_separation():
     got = provocative_moments(m, yaw, fps=10.0, n=3)
     assert [(g["frame"], g["yaw_deg"]) for g in got] == [(50, -172.5), (51, 7.5), (80, -172.5)]
     assert [g["pof_dps"] for g in got] == [10.0, 8.0, 7.0]
+
+
+def test_render_mitigation_from_the_manifest(base, tmp_path, capsys):
+    """[render] mitigation = "vignette" (and its parameters) reaches the viewing's render."""
+    m = _manifest(base, extra='mitigation = "vignette"\naperture_min = 50\nfeather = 5')
+    out = tmp_path / "o"
+    rc = main(["study", str(m), "-o", str(out), "--cache-dir", str(base / "cache"),
+               "--workers", "1", "--no-progress"])  # fmt: skip
+    assert rc == 3  # the short trace still fails
+    s = json.loads((out / "render" / "render-P01" / "summary.json").read_text())
+    assert s["mitigation"]["kind"] == "vignette"
+    assert s["mitigation"]["vignette"]["aperture_min_deg"] == 50.0
+    assert s["mitigation"]["vignette"]["feather_deg"] == 5.0
+    bad = base / "bad_mitigation.toml"
+    bad.write_text(_manifest(tmp_path, extra='mitigation = "tunnel"').read_text())
+    capsys.readouterr()
+    assert main(["study", str(bad), "-o", str(tmp_path / "b"), "--cache-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "mitigation" in err[0] and "bad_mitigation.toml" in err[0], err

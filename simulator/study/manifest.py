@@ -19,9 +19,11 @@ from pathlib import Path
 
 import tomllib
 
+from simulator.choices import MITIGATIONS
 from simulator.errors import InputError
 from simulator.fileio import check_input_file
 from simulator.headsets import resolve_fov
+from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.readers import FORMATS, detect_format
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
@@ -43,7 +45,8 @@ _EPOF_KEYS = (
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
 )  # fmt: skip
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
-                "preset", "crf", "cpus")  # fmt: skip
+                "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
+                "vignette_color")  # fmt: skip
 _GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
@@ -387,6 +390,11 @@ def _render(m: Path, t) -> dict:
         "preset": e.get("preset", (str,), "veryfast", choices=_PRESETS),
         "crf": e.number("crf", 18, lo=0, hi=51, integer=True),
         "cpus": e.number("cpus", 1, lo=1, hi=256, integer=True),
+        # As vimsim render --mitigation (docs/mitigation.md); checked when the task builds it.
+        "mitigation": e.get("mitigation", (str,), "grf", choices=MITIGATIONS),
+        "aperture_min_deg": e.number("aperture_min", APERTURE_MIN_DEG, lo=0.0),
+        "feather_deg": e.number("feather", FEATHER_DEG, lo=0.0),
+        "vignette_color": e.get("vignette_color", (str,), "0,0,0"),
     }
 
 

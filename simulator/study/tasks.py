@@ -26,6 +26,7 @@ from simulator.fileio import atomic_output, json_text
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.gridfile import GridFile, load_grid
 from simulator.headpath import HeadPath
+from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.readers import load_all_users, load_headpath
@@ -231,8 +232,14 @@ def render_task(
             warnings.simplefilter("ignore")
             hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
+        mitigation = Mitigation(
+            opts.get("mitigation", "grf"),
+            aperture_min_deg=opts.get("aperture_min_deg", APERTURE_MIN_DEG),
+            feather_deg=opts.get("feather_deg", FEATHER_DEG),
+            color=parse_color(opts.get("vignette_color", "0,0,0")),
+        )
         g = None
-        if opts["grf"] == "on":
+        if opts["grf"] == "on" and mitigation.grains:
             g = GrfConfig(
                 grain_deg=grf["grain_deg"],
                 density=grf["density"],
@@ -246,6 +253,7 @@ def render_task(
             hfov_deg=opts["hfov_deg"],
             vfov_deg=opts["vfov_deg"],
             grf=g,
+            mitigation=mitigation,
         )
         s = render_viewing(
             video["path"],
