@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from simulator.cells import CellGrid, Frustum, _weights_band
 from simulator.errors import InputError
 from simulator.geometry import head_rotation
+from simulator.lazyfield import LazyField
 
 __all__ = ["ViewportQuery", "viewport_epof"]
 
@@ -45,8 +46,9 @@ def viewport_epof(
 
     Parameters
     ----------
-    field_dps : ndarray, shape (T, n_lat, n_lon)
-        Per-frame fields (deg/s), layout of the module docstring.
+    field_dps : ndarray or LazyField, shape (T, n_lat, n_lon)
+        Per-frame fields (deg/s), layout of the module docstring; a grid file's
+        :class:`~simulator.lazyfield.LazyField` is integrated chunk by chunk.
     cell_deg : float, degrees
     yaw_deg, pitch_deg, roll_deg : array_like, shape (T,) or scalars, degrees
         Head orientation at each frame (yaw + right, pitch + up, roll + right ear down).
@@ -59,7 +61,7 @@ def viewport_epof(
     -------
     ndarray, shape (T,), float64
     """
-    f = np.asarray(field_dps)
+    f = field_dps if isinstance(field_dps, LazyField) else np.asarray(field_dps)
     cells = CellGrid(cell_deg)
     if f.ndim != 3 or f.shape[1:] != cells.shape:
         raise InputError(
@@ -71,7 +73,13 @@ def viewport_epof(
         np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg)
     )
     q = _query(cells.cell_deg, fr, float(step_deg))
-    return q.many(f, yaw, pitch, roll)
+    if not isinstance(f, LazyField):
+        return q.many(f, yaw, pitch, roll)
+    out = np.empty(T)  # a grid file's field: chunk by chunk (memory flat in T)
+    for i0, c in f.chunks():
+        i1 = i0 + len(c)
+        out[i0:i1] = q.many(c, yaw[i0:i1], pitch[i0:i1], roll[i0:i1])
+    return out
 
 
 @functools.lru_cache(maxsize=8)
