@@ -22,7 +22,7 @@ from simulator.errors import InputError
 __all__ = ["CHUNK_BYTES", "LazyField", "field_chunks", "take_rows"]
 
 #: Bytes of float32 rows read at a time (a chunk is at least one row).
-CHUNK_BYTES = 8 << 20
+CHUNK_BYTES = 2 << 20
 
 
 class _Member:

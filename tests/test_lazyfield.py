@@ -131,3 +131,33 @@ def test_load_refuses_bad_lazy_fields(tmp_path):
         load_grid(p)
     assert str(p) in str(e.value) and "\n" not in str(e.value)
     assert json.loads(str(np.load(_save(tmp_path / "ok.npz", _field(T=2)))["meta"]))["field"]
+
+
+def test_viewport_query_cache_is_bounded_in_bytes():
+    """A head path visits a new weight bin almost every frame: the cache stays under its
+    byte bound, and evicted bins give the same EPOF when recomputed."""
+    from simulator.epof.exact import ViewportQuery
+
+    fr = Frustum.symmetric(107.0)
+    f = _field(T=1)[0].astype(np.float32)
+    q = ViewportQuery(CELL, fr, cache_bytes=200_000)
+    fresh = ViewportQuery(CELL, fr, cache_bytes=1 << 30)
+    rng = np.random.default_rng(5)
+    angles = rng.uniform([-180, -80, -40], [180, 80, 40], (200, 3))
+    got = [q(f, *a) for a in angles]
+    assert 0 < q._bytes <= 200_000 and len(q._bins) < 200
+    assert q._bytes == sum(sum(x.nbytes for x in (b[0], b[1], b[3], b[4])) for b in q._bins.values())
+    assert got == [fresh(f, *a) for a in angles] == [q(f, *a) for a in angles]
+
+
+def test_opacity_fit_keeps_its_inputs():
+    """The percentile fit works on one copy it partitions in place: inputs unchanged."""
+    from simulator.grf import OpacityRule
+
+    e = np.random.default_rng(1).random(101) * 40
+    e[7] = np.nan
+    keep = e.copy()
+    lo, hi = OpacityRule(source="viewing").fit(None, e)
+    assert np.array_equal(e, keep, equal_nan=True)
+    ok = keep[np.isfinite(keep)]
+    assert (lo, hi) == (float(np.percentile(ok, 10)), float(np.percentile(ok, 90)))

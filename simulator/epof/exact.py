@@ -104,10 +104,19 @@ class ViewportQuery:
     frustum : Frustum
     step_deg : float, degrees; must divide ``cell_deg``
     cache_size : int, number of bins kept
+    cache_bytes : int, bytes of weights kept at most (the oldest bins go first): a head
+        path visits a new bin almost every frame, so a count alone would let the cache
+        grow with the video's length (about 28 KB a bin for 4 deg cells; 8 MiB keeps ~300)
     """
 
     def __init__(
-        self, cell_deg: float, frustum: Frustum, *, step_deg: float = 0.5, cache_size: int = 8192
+        self,
+        cell_deg: float,
+        frustum: Frustum,
+        *,
+        step_deg: float = 0.5,
+        cache_size: int = 8192,
+        cache_bytes: int = 8 << 20,
     ):
         self.cells = CellGrid(cell_deg)
         self.frustum = frustum
@@ -128,6 +137,8 @@ class ViewportQuery:
         )
         self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(c)
         self._cache_size = int(cache_size)
+        self._cache_bytes = int(cache_bytes)
+        self._bytes = 0
 
     def _bin(self, key: tuple[int, int, int]) -> tuple:
         b = self._bins.get(key)
@@ -149,9 +160,14 @@ class ViewportQuery:
         # Index into a field row-doubled to (n_lat, 2 n_lon): no modulo at query time.
         base = (rows * (2 * self._n_lon) + cols).astype(np.intp)
         b = (base, w, float(w.sum()), (rows * self._n_lon).astype(np.intp), cols.astype(np.intp))
-        if len(self._bins) >= self._cache_size:
-            self._bins.pop(next(iter(self._bins)))
+        size = sum(a.nbytes for a in (base, w, b[3], b[4]))
+        while self._bins and (
+            len(self._bins) >= self._cache_size or self._bytes + size > self._cache_bytes
+        ):
+            old = self._bins.pop(next(iter(self._bins)))
+            self._bytes -= sum(a.nbytes for a in (old[0], old[1], old[3], old[4]))
         self._bins[key] = b
+        self._bytes += size
         return b
 
     def _key(
