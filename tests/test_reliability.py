@@ -685,3 +685,35 @@ def test_signal_demo(base, tiny_demo, tmp_path, sig):
     after = _check_signalled(rc, err, sig, d, before, lines=None)
     assert "o/summary.json" not in after
     assert json.loads((o / ".vimsim-manifest.json").read_text())["state"] == "incomplete"
+
+
+# ------------------------------------------- messages never echo a file's content
+@pytest.mark.parametrize(
+    "name,text,extra,shown,hidden",
+    [
+        ("unknown-format", "SECRET-A,SECRET-B maybe\n1,2\n", [], "3 fields", ["SECRET"]),
+        ("canonical-cell", "time_s,yaw_deg,pitch_deg,roll_deg\n0,1,2,0\n0.1,777777,oops,0\n",
+         [], "'oops'", ["777777"]),
+        ("salient360-missing", "unityTs,cam_pitch,cam_yaw,cam_roll,SECRETCOL\n1,2,3,4,5\n",
+         [], "did you mean 'unityTs'", ["SECRETCOL"]),
+        ("salient360-cell",
+         "unityTS,cam_pitch,cam_yaw,cam_roll,sphere_yaw,SECRETCOL\n1,2,3,4,5,6\n2,oops,3,4,5,424242\n",
+         [], "'oops'", ["SECRETCOL", "424242"]),
+        ("keyframes-key", '[{"time_s": 0, "yaw_deg": 1, "pitch_deg": 2, "SECRETKEY": 3, "ZZZKEY": 4}]',
+         [], "'SECRETKEY'", ["ZZZKEY"]),
+        ("columns-mapping", "t,yaw,SECRETCOL\n0,1,2\n1,2,3\n",
+         ["--columns", "time=t,yaw=yaw,pitch=pich"], "'pich'", ["SECRETCOL"]),
+    ],
+)  # fmt: skip
+def test_headpath_errors_quote_only_the_failing_field(
+    tmp_path, capsys, name, text, extra, shown, hidden
+):
+    """A head path's format errors name the file, the line/column and the one field that
+    failed, never the rest of the line or the header (issue 13, security)."""
+    p = tmp_path / ("in.json" if text.startswith("[") else "in.csv")
+    p.write_text(text)
+    assert main(["headpath", "convert", str(p), "-o", str(tmp_path / "o.csv"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(p) in err and shown in err, err
+    assert not [h for h in hidden if h in err], err
+    assert not (tmp_path / "o.csv").exists()
