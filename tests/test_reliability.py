@@ -565,7 +565,8 @@ def test_sphere_field_streamed_equals_in_memory(base):
 # ------------------------------------------------- signals during analyze and demo
 #: The child: ``python -m simulator ARGS`` with one step made slow (a slow disk), so the
 #: signal lands at a known point: ``save`` = inside a plot's temporary file (after the
-#: folder was prepared), ``analysis`` = while the statistics are computed (before it).
+#: folder was prepared), ``video`` = inside the first video's temporary file (demo's
+#: clip), ``analysis`` = while the statistics are computed (before the folder is touched).
 #: It touches ``$READY`` when it gets there. ``demo`` runs at the tiny test size.
 _SLOW_CHILD = """
 import dataclasses, os, sys, time
@@ -574,7 +575,14 @@ where = sys.argv[1]
 def _wait():
     Path(os.environ["READY"]).touch()
     time.sleep(60)
-if where == "save":
+if where == "video":
+    from simulator.video import VideoWriter
+    _orig = VideoWriter.write
+    def _slow(self, *a, **k):
+        _orig(self, *a, **k)
+        _wait()
+    VideoWriter.write = _slow
+elif where == "save":
     from matplotlib.figure import Figure
     _orig = Figure.savefig
     def _slow(self, *a, **k):
@@ -669,7 +677,7 @@ def tiny_demo(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["sigint", "sigterm"])
 def test_signal_demo(base, tiny_demo, tmp_path, sig):
-    """demo (tiny size) signalled while writing a plot, over a previous complete demo:
+    """demo (tiny size) signalled while writing its clip, over a previous complete demo:
     exit 130/143, the signal line last, no traceback, no temporary file, foreign files
     intact, no summary.json (the marker) beside the files written so far, the manifest
     incomplete."""
@@ -681,7 +689,7 @@ def test_signal_demo(base, tiny_demo, tmp_path, sig):
     before = _snapshot(d)
     assert "o/summary.json" in before
     argv = ["demo", "-o", str(o), "--seconds", "0.5", "--no-progress"]
-    rc, err = _signal_slow_child(argv, "save", sig, tmp_path / "ready", timeout=120.0)
+    rc, err = _signal_slow_child(argv, "video", sig, tmp_path / "ready", timeout=120.0)
     after = _check_signalled(rc, err, sig, d, before, lines=None)
     assert "o/summary.json" not in after
     assert json.loads((o / ".vimsim-manifest.json").read_text())["state"] == "incomplete"
