@@ -191,14 +191,17 @@ def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
     removed and the target is left untouched. Refused (InputError) before anything is
     written: an output that is the same file as an input of this run, a directory, a
     missing or read-only folder. Temporaries of the same target left by dead processes
-    are removed first.
+    are removed first. An OSError that names no file (a failed ``write()``: a full disk)
+    is given the target's name, so its one-line message says which output failed.
     """
     out = PendingOutput(path)
     try:
         yield out.tmp
         out.commit()
-    except BaseException:
+    except BaseException as e:
         out.discard()
+        if isinstance(e, OSError) and e.filename is None:
+            e.filename = str(path)  # a failed write() (a full disk) names no file: the target
         raise
 
 

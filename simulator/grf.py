@@ -316,13 +316,16 @@ class OpacityRule:
         if self.source == "grid":
             if grid is None:
                 raise InputError("opacity source 'grid' needs the grid file")
-            vals = np.asarray(grid.pof_dps, np.float64).ravel()
+            vals = np.array(grid.pof_dps, np.float64).ravel()  # our own copy
         else:
-            vals = np.asarray(epof_dps, np.float64).ravel()
-        vals = vals[np.isfinite(vals)]
+            vals = np.array(epof_dps, np.float64).ravel()
+        finite = np.isfinite(vals)
+        if not finite.all():
+            vals = vals[finite]
         if vals.size == 0:
             raise InputError("no finite flow values to take opacity percentiles from")
-        lo, hi = np.percentile(vals, [self.low_pct, self.high_pct])
+        # One working copy (long videos): partitioned in place, the same values selected.
+        lo, hi = np.percentile(vals, [self.low_pct, self.high_pct], overwrite_input=True)
         return float(lo), float(hi)
 
     def __call__(self, epof_dps, thresholds_dps: tuple[float, float], *, fps: float | None = None):

@@ -38,6 +38,7 @@ from numpy.typing import NDArray
 from simulator.cells import CellGrid
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
+from simulator.lazyfield import LazyField
 from simulator.windows import WindowGrid
 
 __all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
@@ -57,7 +58,7 @@ class GridFile:
     pitch_deg: NDArray[np.float64]
     meta: dict
     path: str = ""
-    field_dps: NDArray | None = field(default=None, repr=False)
+    field_dps: NDArray | LazyField | None = field(default=None, repr=False)  # lazy when loaded
 
     @property
     def grid(self) -> WindowGrid:
@@ -308,7 +309,10 @@ def load_grid(path: str | os.PathLike) -> GridFile:
                 raise InputError(
                     f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing"
                 )
-            arrs = {k: z[k] for k in names}
+            # The field stays in the file: read lazily, chunk by chunk (memory flat in T).
+            arrs = {k: z[k] for k in names if k != "field_dps"}
+        if "field_dps" in names:
+            arrs["field_dps"] = LazyField(p)
     except InputError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, MemoryError) as e:
@@ -368,8 +372,8 @@ def load_grid(path: str | os.PathLike) -> GridFile:
                 f"{p}: {k} has negative values ({float(a.min()):.3g}); flow magnitudes are >= 0"
             )
     if "field_dps" in arrs:
-        f = arrs["field_dps"]
-        if f.ndim != 3 or not np.all(np.isfinite(f)) or (f.size and f.min() < 0):
+        finite, lo = arrs["field_dps"].scan()
+        if not finite or lo < 0:
             raise InputError(f"{p}: field_dps must be (T, n_lat, n_lon), finite and >= 0")
     try:
         WindowGrid.from_dict(meta["grid"])
@@ -423,8 +427,10 @@ def cells_from_meta(meta: dict, *, source: str = "grid") -> CellGrid:
     return CellGrid(float(fm["cell_deg"]))
 
 
-def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
-    """``(field_dps (T, n_lat, n_lon) float32, cells)`` of a loaded grid file.
+def require_field(grid_file) -> tuple[NDArray[np.float32] | LazyField, CellGrid]:
+    """``(field_dps (T, n_lat, n_lon), cells)`` of a loaded grid file: the grid file's
+    :class:`~simulator.lazyfield.LazyField` (read chunk by chunk; its chunks are float32)
+    or, for a field given in memory, a float32 array.
 
     Raises InputError (one line, with the command that makes one) if the grid has no
     field, e.g. a paper-mode grid.
@@ -436,11 +442,14 @@ def require_field(grid_file) -> tuple[NDArray[np.float32], CellGrid]:
             f"{src}: grid has no sphere-mode field (made in paper mode?); make one with `{MAKE_FIELD_HINT}`"
         )
     cells = cells_from_meta(grid_file.meta, source=src)
-    f = np.asarray(f)
-    if f.ndim != 3 or f.shape[1:] != cells.shape:
+    if not isinstance(f, LazyField):
+        f = np.asarray(f)
+    if f.ndim != 3 or tuple(f.shape[1:]) != cells.shape:
         raise InputError(
-            f"{src}: field_dps has shape {f.shape}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells"
+            f"{src}: field_dps has shape {tuple(f.shape)}; expected (T, {cells.shape[0]}, {cells.shape[1]}) for {cells.cell_deg} deg cells"
         )
+    if isinstance(f, LazyField):
+        return f.with_dtype(np.float32), cells  # validated (finite, >= 0) by load_grid
     if not np.all(np.isfinite(f)):
         raise InputError(f"{src}: field_dps has non-finite values")
     return f.astype(np.float32, copy=False), cells

@@ -41,6 +41,7 @@ from simulator.choices import MITIGATIONS
 from simulator.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.grf import GrainField, GrfConfig, cutout_alpha
+from simulator.lazyfield import LazyField, field_chunks
 
 __all__ = ["Mitigation", "VisibleFlow", "cell_opacity", "parse_color", "visible_flow"]
 
@@ -156,17 +157,23 @@ def cell_opacity(field_dps: NDArray, thresholds_dps: tuple[float, float]) -> NDA
     """Per-cell grain opacity of local-grf: the EPOF opacity rule (clamped linear ramp
     between the ``(lo, hi)`` thresholds, deg/s) applied to each cell's flow.
 
-    field_dps : ndarray, shape (T, n_lat, n_lon), deg/s. Returns float32, same shape.
+    field_dps : ndarray or LazyField, shape (T, n_lat, n_lon), deg/s (a lazy field is
+    read chunk by chunk). Returns float32, same shape.
     """
     lo, hi = (float(v) for v in thresholds_dps)
-    f = np.asarray(field_dps, np.float64)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         raise InputError("local-grf needs the opacity thresholds of a grid (--grid GRID.npz)")
-    if hi > lo:
-        op = np.clip((f - lo) / (hi - lo), 0.0, 1.0)
-    else:
-        op = (f > lo).astype(np.float64)
-    return op.astype(np.float32)
+    if not isinstance(field_dps, LazyField):
+        field_dps = np.asarray(field_dps)
+    out = np.empty(tuple(field_dps.shape), np.float32)
+    for i0, c in field_chunks(field_dps):
+        f = np.asarray(c, np.float64)
+        if hi > lo:
+            op = np.clip((f - lo) / (hi - lo), 0.0, 1.0)
+        else:
+            op = (f > lo).astype(np.float64)
+        out[i0 : i0 + len(f)] = op
+    return out
 
 
 @dataclass(frozen=True)

@@ -17,6 +17,7 @@ from simulator.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import OpacityRule
 from simulator.gridfile import require_field
 from simulator.headpath import HeadPath
+from simulator.lazyfield import take_rows
 from simulator.mitigation import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
 from simulator.progress import Progress
@@ -181,7 +182,7 @@ def render_viewing(
     if grid is not None and (getattr(grid, "field_dps", None) is not None or mit.local):
         field_dps, cells = require_field(grid)  # local-grf on a paper-mode grid: the hint
         start = int(grid.meta.get("start_frame", 0) or 0)
-        field_dps = field_dps[np.clip(frames - start, 0, len(field_dps) - 1)]
+        field_dps = take_rows(field_dps, np.clip(frames - start, 0, len(field_dps) - 1))
     cell_op = None
     if mit.local and grf is not None:
         cell_op = cell_opacity(field_dps, thresholds)

@@ -80,7 +80,8 @@ def test_errors_name_the_column(tmp_path, capsys):
         == 2
     )
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "'elev'" in err and "t, yaw, pitch" in err
+    assert err.count("\n") == 1 and "'elev'" in err and "among its 3 columns" in err
+    assert "t, yaw, pitch" not in err  # the header is not echoed (issue 13)
     assert (
         main(
             [

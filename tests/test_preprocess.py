@@ -3,6 +3,7 @@ against analytic truth, checkpoint/resume (Ctrl-C and kill -9), real clips, bad 
 
 from __future__ import annotations
 
+import errno
 import json
 import subprocess
 import sys
@@ -204,6 +205,60 @@ def test_kill9_keeps_periodic_checkpoint(tmp_path, videos, ref_long):
         assert json.loads(str(z["meta"]))["done"] == 5
     g = load_grid(preprocess_video(videos["long"], out, grid=TINY, progress=False, resume=True))
     assert np.array_equal(g.pof_dps, ref.pof_dps) and np.array_equal(g.pof_px, ref.pof_px)
+
+
+def _full_disk_at(monkeypatch, name: str, fail_call: int, seen: dict):
+    """``np.<name>`` fails as a full disk does from its ``fail_call``-th call on: it writes
+    a few bytes of the temporary file, then ENOSPC. ``seen["ckpt"]`` records the
+    checkpoint's bytes at the failing call (what must survive)."""
+    real = getattr(np, name)
+    calls = {"n": 0}
+
+    def full(fh, *a, **k):
+        calls["n"] += 1
+        if calls["n"] < fail_call:
+            return real(fh, *a, **k)
+        ck = seen["path"]
+        seen["ckpt"] = ck.read_bytes() if ck.exists() else None
+        fh.write(b"PK\x03\x04partial")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(np, name, full)
+    return calls
+
+
+@pytest.mark.parametrize("where", ["checkpoint", "grid"])
+def test_full_disk_keeps_checkpoint_resumable(
+    tmp_path, videos, ref_long, monkeypatch, capsys, where
+):
+    """ENOSPC while paper-mode preprocess writes its 4th checkpoint, or the final grid:
+    exit 1 with one line naming the file and the OS error, no temporary file, the last
+    checkpoint byte-for-byte intact, and --resume (space freed) gives the grid of an
+    uninterrupted run."""
+    out = tmp_path / "g.npz"
+    ck = checkpoint_path(out)
+    seen = {"path": ck}
+    argv = [videos["long"], "-o", out, "--grid", "paper-198", "--window-size", 32,
+            "--checkpoint-every", 1e-6]  # fmt: skip
+    with monkeypatch.context() as m:
+        if where == "checkpoint":
+            calls = _full_disk_at(m, "savez", 4, seen)
+        else:
+            calls = _full_disk_at(m, "savez_compressed", 1, seen)
+        assert _cli(*argv) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "No space left on device" in err and "Traceback" not in err
+    assert (ck.name if where == "checkpoint" else out.name) in err
+    assert calls["n"] == (4 if where == "checkpoint" else 1)  # it failed where we said
+    assert seen["ckpt"] is not None and ck.read_bytes() == seen["ckpt"]  # intact
+    assert sorted(p.name for p in tmp_path.iterdir()) == [ck.name]  # no temporary, no grid
+    with np.load(ck, allow_pickle=False) as z:
+        done = json.loads(str(z["meta"]))["done"]
+    assert done == (4 if where == "checkpoint" else 8)
+    assert _cli(*argv, "--resume") == 0
+    g = load_grid(out)
+    assert np.array_equal(g.pof_dps, ref_long.pof_dps) and np.array_equal(g.pof_px, ref_long.pof_px)
+    assert not ck.exists()
 
 
 def test_real_kill9_subprocess(tmp_path, videos):

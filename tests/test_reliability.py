@@ -560,3 +560,168 @@ def test_sphere_field_streamed_equals_in_memory(base):
     assert g.field_dps.dtype == np.float16 and np.array_equal(g.field_dps, f.astype(np.float16))
     assert np.array_equal(g.pof_dps, d) and np.array_equal(g.pof_px, x)
     assert not [p for p in base.iterdir() if p.name.startswith(("tmp", "."))]
+
+
+# ------------------------------------------------- signals during analyze and demo
+#: The child: ``python -m simulator ARGS`` with one step made slow (a slow disk), so the
+#: signal lands at a known point: ``save`` = inside a plot's temporary file (after the
+#: folder was prepared), ``video`` = inside the first video's temporary file (demo's
+#: clip), ``analysis`` = while the statistics are computed (before the folder is touched).
+#: It touches ``$READY`` when it gets there. ``demo`` runs at the tiny test size.
+_SLOW_CHILD = """
+import dataclasses, os, sys, time
+from pathlib import Path
+where = sys.argv[1]
+def _wait():
+    Path(os.environ["READY"]).touch()
+    time.sleep(60)
+if where == "video":
+    from simulator.video import VideoWriter
+    _orig = VideoWriter.write
+    def _slow(self, *a, **k):
+        _orig(self, *a, **k)
+        _wait()
+    VideoWriter.write = _slow
+elif where == "save":
+    from matplotlib.figure import Figure
+    _orig = Figure.savefig
+    def _slow(self, *a, **k):
+        _orig(self, *a, **k)
+        _wait()
+    Figure.savefig = _slow
+else:
+    import simulator.analyze as an
+    _orig = an.analyze_study
+    def _slow(*a, **k):
+        _wait()
+        return _orig(*a, **k)
+    an.analyze_study = _slow
+import simulator.demo as dm
+_D = dm.DemoConfig
+dm.DemoConfig = lambda **k: dataclasses.replace(
+    _D(**k), fps=10.0, eye_size=(128, 64), window=32, render_size=(64, 64))
+from simulator.cli import main
+sys.exit(main(sys.argv[2:]))
+"""
+
+
+def _signal_slow_child(argv, where, sig, ready: Path, timeout=60.0):
+    """Run the slowed child, wait until it reaches its slow step, send ``sig``;
+    (status, stderr)."""
+    env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg", READY=str(ready))
+    p = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, where, *argv], env=env, cwd=REPO,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
+    t0 = time.monotonic()
+    while time.monotonic() - t0 < timeout and p.poll() is None and not ready.exists():
+        time.sleep(0.02)
+    p.send_signal(sig)
+    _out, err = p.communicate(timeout=timeout)
+    ready.unlink(missing_ok=True)
+    return p.returncode, err.decode()
+
+
+def _check_signalled(rc, err, sig, d: Path, before: dict, lines: int | None = 1):
+    assert rc == 128 + sig, err
+    name = "SIGTERM" if sig == signal.SIGTERM else "SIGINT"
+    assert "Traceback" not in err and err.strip().splitlines()[-1].endswith(
+        f"({name}); temporary files removed"
+    ), err
+    if lines is not None:
+        assert err.count("\n") == lines, err
+    after = _snapshot(d)
+    assert not [n for n in after if ".tmp-" in n], after  # no temporary file left
+    assert {k: v for k, v in before.items() if not k.startswith("o/")} == {
+        k: v for k, v in after.items() if not k.startswith("o/")
+    }  # every input intact
+    assert after.get("o/mine.txt") == before["o/mine.txt"]  # a foreign file is never touched
+    return after
+
+
+@pytest.mark.parametrize(
+    "sig,where", [(signal.SIGINT, "analysis"), (signal.SIGTERM, "save")],
+    ids=["sigint-before", "sigterm-writing"],
+)  # fmt: skip
+def test_signal_analyze(base, tmp_path, sig, where):
+    """analyze over a previous complete run. Signalled before it writes: exit 130/143, one
+    line, the previous run kept whole. Signalled while writing a plot: no temporary file,
+    inputs and foreign files intact, and the folder does not look complete (no report.md,
+    the manifest incomplete); a re-run completes it."""
+    d = tmp_path / "c"
+    shutil.copytree(base, d)
+    o = d / "o"
+    argv = ["analyze", str(d / "DATA.csv"), "-o", str(o)]
+    assert main(argv) == 0  # a previous complete run
+    (o / "mine.txt").write_text("keep")
+    before = _snapshot(d)
+    assert "o/report.md" in before and "o/boxplots.png" in before
+    rc, err = _signal_slow_child(argv, where, sig, tmp_path / "ready")
+    after = _check_signalled(rc, err, sig, d, before)
+    if where == "analysis":
+        assert after == before  # the previous complete outputs are not destroyed
+        return
+    assert "o/report.md" not in after
+    assert json.loads((o / ".vimsim-manifest.json").read_text())["state"] == "incomplete"
+    assert main(argv) == 0 and (o / "report.md").is_file()
+
+
+@pytest.fixture(scope="module")
+def tiny_demo(tmp_path_factory) -> Path:
+    """A complete demo folder at the tiny test size (made once)."""
+    from simulator.demo import DemoConfig, run_demo
+
+    o = tmp_path_factory.mktemp("demo") / "o"
+    tiny = DemoConfig(seconds=0.5, fps=10.0, eye_size=(128, 64), window=32, render_size=(64, 64))
+    run_demo(o, tiny, progress=False)
+    return o
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["sigint", "sigterm"])
+def test_signal_demo(base, tiny_demo, tmp_path, sig):
+    """demo (tiny size) signalled while writing its clip, over a previous complete demo:
+    exit 130/143, the signal line last, no traceback, no temporary file, foreign files
+    intact, no summary.json (the marker) beside the files written so far, the manifest
+    incomplete."""
+    d = tmp_path / "c"
+    shutil.copytree(base, d)
+    o = d / "o"
+    shutil.copytree(tiny_demo, o)  # a previous complete run
+    (o / "mine.txt").write_text("keep")
+    before = _snapshot(d)
+    assert "o/summary.json" in before
+    argv = ["demo", "-o", str(o), "--seconds", "0.5", "--no-progress"]
+    rc, err = _signal_slow_child(argv, "video", sig, tmp_path / "ready", timeout=120.0)
+    after = _check_signalled(rc, err, sig, d, before, lines=None)
+    assert "o/summary.json" not in after
+    assert json.loads((o / ".vimsim-manifest.json").read_text())["state"] == "incomplete"
+
+
+# ------------------------------------------- messages never echo a file's content
+@pytest.mark.parametrize(
+    "name,text,extra,shown,hidden",
+    [
+        ("unknown-format", "SECRET-A,SECRET-B maybe\n1,2\n", [], "3 fields", ["SECRET"]),
+        ("canonical-cell", "time_s,yaw_deg,pitch_deg,roll_deg\n0,1,2,0\n0.1,777777,oops,0\n",
+         [], "'oops'", ["777777"]),
+        ("salient360-missing", "unityTs,cam_pitch,cam_yaw,cam_roll,SECRETCOL\n1,2,3,4,5\n",
+         [], "did you mean 'unityTs'", ["SECRETCOL"]),
+        ("salient360-cell",
+         "unityTS,cam_pitch,cam_yaw,cam_roll,sphere_yaw,SECRETCOL\n1,2,3,4,5,6\n2,oops,3,4,5,424242\n",
+         [], "'oops'", ["SECRETCOL", "424242"]),
+        ("keyframes-key", '[{"time_s": 0, "yaw_deg": 1, "pitch_deg": 2, "SECRETKEY": 3, "ZZZKEY": 4}]',
+         [], "'SECRETKEY'", ["ZZZKEY"]),
+        ("columns-mapping", "t,yaw,SECRETCOL\n0,1,2\n1,2,3\n",
+         ["--columns", "time=t,yaw=yaw,pitch=pich"], "'pich'", ["SECRETCOL"]),
+    ],
+)  # fmt: skip
+def test_headpath_errors_quote_only_the_failing_field(
+    tmp_path, capsys, name, text, extra, shown, hidden
+):
+    """A head path's format errors name the file, the line/column and the one field that
+    failed, never the rest of the line or the header (issue 13, security)."""
+    p = tmp_path / ("in.json" if text.startswith("[") else "in.csv")
+    p.write_text(text)
+    assert main(["headpath", "convert", str(p), "-o", str(tmp_path / "o.csv"), *extra]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(p) in err and shown in err, err
+    assert not [h for h in hidden if h in err], err
+    assert not (tmp_path / "o.csv").exists()

@@ -25,6 +25,7 @@ from numpy.typing import NDArray
 from simulator.cells import CellGrid, Frustum, _weights_band
 from simulator.errors import InputError
 from simulator.geometry import head_rotation
+from simulator.lazyfield import LazyField
 
 __all__ = ["ViewportQuery", "viewport_epof"]
 
@@ -45,8 +46,9 @@ def viewport_epof(
 
     Parameters
     ----------
-    field_dps : ndarray, shape (T, n_lat, n_lon)
-        Per-frame fields (deg/s), layout of the module docstring.
+    field_dps : ndarray or LazyField, shape (T, n_lat, n_lon)
+        Per-frame fields (deg/s), layout of the module docstring; a grid file's
+        :class:`~simulator.lazyfield.LazyField` is integrated chunk by chunk.
     cell_deg : float, degrees
     yaw_deg, pitch_deg, roll_deg : array_like, shape (T,) or scalars, degrees
         Head orientation at each frame (yaw + right, pitch + up, roll + right ear down).
@@ -59,7 +61,7 @@ def viewport_epof(
     -------
     ndarray, shape (T,), float64
     """
-    f = np.asarray(field_dps)
+    f = field_dps if isinstance(field_dps, LazyField) else np.asarray(field_dps)
     cells = CellGrid(cell_deg)
     if f.ndim != 3 or f.shape[1:] != cells.shape:
         raise InputError(
@@ -71,7 +73,13 @@ def viewport_epof(
         np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg)
     )
     q = _query(cells.cell_deg, fr, float(step_deg))
-    return q.many(f, yaw, pitch, roll)
+    if not isinstance(f, LazyField):
+        return q.many(f, yaw, pitch, roll)
+    out = np.empty(T)  # a grid file's field: chunk by chunk (memory flat in T)
+    for i0, c in f.chunks():
+        i1 = i0 + len(c)
+        out[i0:i1] = q.many(c, yaw[i0:i1], pitch[i0:i1], roll[i0:i1])
+    return out
 
 
 @functools.lru_cache(maxsize=8)
@@ -96,10 +104,19 @@ class ViewportQuery:
     frustum : Frustum
     step_deg : float, degrees; must divide ``cell_deg``
     cache_size : int, number of bins kept
+    cache_bytes : int, bytes of weights kept at most (the oldest bins go first): a head
+        path visits a new bin almost every frame, so a count alone would let the cache
+        grow with the video's length (about 28 KB a bin for 4 deg cells; 8 MiB keeps ~300)
     """
 
     def __init__(
-        self, cell_deg: float, frustum: Frustum, *, step_deg: float = 0.5, cache_size: int = 8192
+        self,
+        cell_deg: float,
+        frustum: Frustum,
+        *,
+        step_deg: float = 0.5,
+        cache_size: int = 8192,
+        cache_bytes: int = 8 << 20,
     ):
         self.cells = CellGrid(cell_deg)
         self.frustum = frustum
@@ -120,6 +137,8 @@ class ViewportQuery:
         )
         self._radius = math.atan(math.hypot(max(tl, tr), max(td, tu))) + math.radians(c)
         self._cache_size = int(cache_size)
+        self._cache_bytes = int(cache_bytes)
+        self._bytes = 0
 
     def _bin(self, key: tuple[int, int, int]) -> tuple:
         b = self._bins.get(key)
@@ -141,9 +160,14 @@ class ViewportQuery:
         # Index into a field row-doubled to (n_lat, 2 n_lon): no modulo at query time.
         base = (rows * (2 * self._n_lon) + cols).astype(np.intp)
         b = (base, w, float(w.sum()), (rows * self._n_lon).astype(np.intp), cols.astype(np.intp))
-        if len(self._bins) >= self._cache_size:
-            self._bins.pop(next(iter(self._bins)))
+        size = sum(a.nbytes for a in (base, w, b[3], b[4]))
+        while self._bins and (
+            len(self._bins) >= self._cache_size or self._bytes + size > self._cache_bytes
+        ):
+            old = self._bins.pop(next(iter(self._bins)))
+            self._bytes -= sum(a.nbytes for a in (old[0], old[1], old[3], old[4]))
         self._bins[key] = b
+        self._bytes += size
         return b
 
     def _key(

@@ -26,6 +26,7 @@ from simulator.fileio import atomic_output, check_input_file
 from simulator.grf import OpacityRule
 from simulator.gridfile import GridFile, require_field
 from simulator.headpath import HeadPath
+from simulator.lazyfield import take_rows
 
 __all__ = [
     "EPOF_COLUMNS",
@@ -149,7 +150,7 @@ def compute_epof(
     if sphere:
         field, cells = require_field(grid)
         if frames_sel is not None:
-            field = field[rows]
+            field = take_rows(field, rows)  # lazy: nothing read yet
         h, v = _fov(grid, hfov_deg, vfov_deg)
         fr = frustum or Frustum.symmetric(h, v)
         e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)

@@ -182,8 +182,8 @@ def export_unity(
     h, v = _viewport_fov(g, hfov_deg, vfov_deg)
     if sphere:
         field, cells = require_field(g)
-        stored = np.asarray(g.field_dps).dtype
-        values = field  # float32, what vimsim epof integrates
+        stored = np.dtype(g.field_dps.dtype)
+        values = np.asarray(field, np.float32)  # float32, what vimsim epof integrates
         default_dtype = "float16" if stored == np.float16 else "float32"
     else:
         values = np.asarray(g.pof_dps, np.float32)

@@ -62,8 +62,10 @@ def detect_format(path: str | os.PathLike) -> str:
         return "360vidstr"
     except ValueError:
         pass
-    raise InputError(
-        f"{p}: cannot tell the head path format from its first line {head[:80]!r}; expected a "
+    n = len(head.replace(",", " ").split())
+    raise InputError(  # the line itself is not quoted: messages never echo file content
+        f"{p}: cannot tell the head path format from its first line ({n} fields, not a "
+        f"known header); expected a "
         f"CSV with header {','.join(CANONICAL_COLUMNS)} (or pass --format, one of {', '.join(FORMATS)})"
     )
 

@@ -14,8 +14,10 @@ from simulator.readers.common import (
     _check_increasing,
     _check_pitch,
     _columns,
+    _hint,
     _parse_table,
     _quats_to_rotation,
+    _value,
     _warn_if_milliseconds,
     _warn_if_radians,
 )
@@ -80,8 +82,13 @@ def _read_keyframes_json(p: Path) -> HeadPath:
         unknown = sorted(set(kf) - set(CANONICAL_COLUMNS))
         missing = [c for c in CANONICAL_COLUMNS[:3] if c not in kf]
         if unknown or missing:
+            what = (
+                f"unknown key {_value(unknown[0])}{_hint(unknown[0], list(CANONICAL_COLUMNS))}"
+                if unknown
+                else f"no {missing[0]}"
+            )
             raise InputError(
-                f"{p}: keyframe {k} has keys {sorted(kf)}; expected {', '.join(CANONICAL_COLUMNS)} (roll_deg optional)"
+                f"{p}: keyframe {k}: {what}; expected {', '.join(CANONICAL_COLUMNS)} (roll_deg optional)"
             )
         try:
             rows.append(

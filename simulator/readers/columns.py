@@ -23,7 +23,7 @@ import numpy as np
 from simulator.errors import InputError
 from simulator.fileio import check_input_file
 from simulator.headpath import HeadPath
-from simulator.readers.common import _check_increasing, _dedupe_times
+from simulator.readers.common import _check_increasing, _dedupe_times, _hint, _value
 
 __all__ = ["COLUMN_KEYS", "load_columns", "parse_column_map"]
 
@@ -96,9 +96,9 @@ def load_columns(
     cols = _split(head, delim)
     unknown = [c for c, _ in cmap.values() if c not in cols]
     if unknown:
-        shown = ", ".join(cols[:40]) + (" ..." if len(cols) > 40 else "")
         raise InputError(
-            f"{p}: no column {', '.join(map(repr, unknown))}; the file's columns: {shown}"
+            f"{p}: no column {', '.join(map(repr, unknown))} among its {len(cols)} columns"
+            f"{_hint(unknown[0], cols)}"
         )
     if len(lines) < 2:
         raise InputError(f"{p}: head path file has a header but no data rows")
@@ -117,7 +117,7 @@ def load_columns(
                 data[r, j] = float(f[i])
             except ValueError:
                 raise InputError(
-                    f"{p}: line {k}, column {cmap[key][0]!r} ({key}): non-numeric value {f[i][:30]!r}"
+                    f"{p}: line {k}, column {cmap[key][0]!r} ({key}): non-numeric value {_value(f[i])}"
                 ) from None
         line_no.append(k)
     bad = ~np.isfinite(data)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import difflib
 import math
 import warnings
 from pathlib import Path
@@ -19,6 +20,20 @@ from simulator.headpath import (
     MillisecondsWarning,
     RadiansWarning,
 )
+
+
+def _value(v: str) -> str:
+    """One field of a file as a message quotes it: stripped, at most 30 characters."""
+    v = v.strip()
+    return repr(v[:30] + ("..." if len(v) > 30 else ""))
+
+
+def _hint(missing: str, found: list[str]) -> str:
+    """``"; did you mean 'x'?"`` for the closest of ``found`` (a typo), else ``""``. Only
+    that one name is quoted: messages never echo a file's content beyond the field
+    that failed."""
+    m = difflib.get_close_matches(missing, [f.strip() for f in found], n=1, cutoff=0.6)
+    return f"; did you mean {_value(m[0])}?" if m else ""
 
 
 def _first_line(p: Path) -> str:
@@ -75,8 +90,19 @@ def _parse_table(
         try:
             data[k] = [float(v) for v in vals]
         except ValueError:
-            raise InputError(f"{p}: line {ln}: non-numeric value in {text[:60]!r}") from None
+            j = next(j for j, v in enumerate(vals) if not _is_float(v))
+            raise InputError(
+                f"{p}: line {ln}, column {_value(cols[j])}: non-numeric value {_value(vals[j])}"
+            ) from None
     return cols, data, [ln for ln, _ in rows[1:]]
+
+
+def _is_float(v: str) -> bool:
+    try:
+        float(v)
+    except ValueError:
+        return False
+    return True
 
 
 def _check_finite(

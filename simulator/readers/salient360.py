@@ -14,7 +14,10 @@ from simulator.readers.common import (
     _check_finite,
     _check_increasing,
     _dedupe_times,
+    _hint,
+    _is_float,
     _quats_to_rotation,
+    _value,
 )
 
 
@@ -40,7 +43,8 @@ def _read_salient360_dyn(p: Path) -> HeadPath:
     missing = [c for c in need if c not in cols]
     if missing:
         raise InputError(
-            f"{p}: Salient360 raw video file lacks columns {missing}; found {cols[:12]}..."
+            f"{p}: Salient360 raw video file lacks columns {missing} ({len(cols)} columns "
+            f"found{_hint(missing[0], cols)})"
         )
     if len(lines) < 2:
         raise InputError(f"{p}: head path file has a header but no data rows")
@@ -54,7 +58,10 @@ def _read_salient360_dyn(p: Path) -> HeadPath:
         try:
             data[k] = [float(f[i]) for i in idx]
         except ValueError:
-            raise InputError(f"{p}: line {k + 2}: non-numeric head pose in {ln[:60]!r}") from None
+            j = next(j for j, i in enumerate(idx) if not _is_float(f[i]))
+            raise InputError(
+                f"{p}: line {k + 2}, column {need[j]}: non-numeric value {_value(f[idx[j]])}"
+            ) from None
     line_no = list(range(2, len(lines) + 1))
     _check_finite(p, list(need), data, line_no)
     keep = _dedupe_times(data[:, 0])

@@ -12,7 +12,6 @@ render).
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import time
 import warnings
@@ -61,9 +60,8 @@ def _grid(path: str) -> GridFile:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             g = load_grid(path)
-        if g.field_dps is not None and g.field_dps.dtype != np.float32:
-            # Once per worker, not per viewing (compute_epof works in float32: same values).
-            g = dataclasses.replace(g, field_dps=g.field_dps.astype(np.float32))
+        # The sphere-mode field stays lazy (simulator.lazyfield): each viewing reads it
+        # chunk by chunk, so a worker's memory does not grow with the video's length.
         _GRIDS[key] = g
     return _GRIDS[key]
 
