@@ -1,10 +1,12 @@
-// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 1).
+// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 2).
 // Written by `vimsim export GRID.npz -o DIR --format unity`; docs/unity.md in vimsim.
 // Plain C# (C# 6, .NET Framework 4.x / .NET Standard 2.0 profile): no UnityEngine here.
 //
 //   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin
 //   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s
-//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1
+//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1 (the paper's rule)
+//   var ease = e.CreateEasing();                      // once; then per video frame:
+//   float shown = ease.Step(opacity);                 // the exported rule (default: comfort)
 //
 // Conventions, exactly as `vimsim epof`: angles in degrees; yaw + turns right (toward +lon),
 // pitch + looks up, roll + tilts the head right ear down, applied yaw, then pitch, then roll
@@ -40,7 +42,7 @@ namespace Vimsim
     public sealed class VimsimEpof
     {
         /// <summary>The binary format version this runtime reads.</summary>
-        public const int FormatVersion = 1;
+        public const int FormatVersion = 2;
         /// <summary>File name of the data inside an export folder.</summary>
         public const string DataFileName = "vimsim_epof.bin";
         /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
@@ -60,8 +62,12 @@ namespace Vimsim
         /// <summary>Opacity 0 at or below this EPOF (deg/s), 1 at or above OpacityHighDps.</summary>
         public double OpacityLowDps { get; private set; }
         public double OpacityHighDps { get; private set; }
-        /// <summary>Time constant (s) of the opacity easing; 0 = none (see CreateEasing).</summary>
+        /// <summary>Time constant (s) of the opacity's exponential smoothing; 0 = none (see CreateEasing).</summary>
         public double SmoothingS { get; private set; }
+        /// <summary>Ease-in time (s): a full 0 -> 1 opacity change takes at least this long; 0 = no limit.</summary>
+        public double EaseInS { get; private set; }
+        /// <summary>Ease-out time (s): a full 1 -> 0 opacity change takes at least this long; 0 = no limit.</summary>
+        public double EaseOutS { get; private set; }
         /// <summary>Content hash of the source video ("sha256:...", as in the grid file).</summary>
         public string SourceVideoHash { get; private set; }
         /// <summary>The JSON header, verbatim.</summary>
@@ -159,6 +165,10 @@ namespace Vimsim
             OpacityLowDps = op.Num("low_dps");
             OpacityHighDps = op.Num("high_dps");
             SmoothingS = op.Num("smoothing_s");
+            EaseInS = op.Num("ease_in_s");
+            EaseOutS = op.Num("ease_out_s");
+            if (!(SmoothingS >= 0 && EaseInS >= 0 && EaseOutS >= 0) || double.IsInfinity(SmoothingS + EaseInS + EaseOutS))
+                throw new VimsimLoadException(src, "header opacity times (smoothing_s, ease_in_s, ease_out_s) must be seconds >= 0");
             var video = hd.Obj("video");
             SourceVideoHash = video.Has("content_hash") ? video.Str("content_hash") : "";
 
@@ -291,10 +301,12 @@ namespace Vimsim
             return e > lo ? 1f : 0f; // constant flow: a step at the threshold
         }
 
-        /// <summary>A stateful opacity easing with the exported time constant (SmoothingS; 0 = passthrough).</summary>
+        /// <summary>A stateful opacity easing with the exported rule (SmoothingS, EaseInS, EaseOutS;
+        /// all 0 = passthrough): feed it Opacity(Epof(...)) once per video frame (Step) or per
+        /// render frame (Update) for vimsim epof's opacity column.</summary>
         public OpacityEasing CreateEasing()
         {
-            return new OpacityEasing(SmoothingS, Fps);
+            return new OpacityEasing(SmoothingS, Fps, EaseInS, EaseOutS);
         }
 
         /// <summary>Number of cached sphere-mode weight bins (0 in paper mode).</summary>
@@ -381,45 +393,66 @@ namespace Vimsim
     }
 
     /// <summary>
-    /// Causal exponential easing of the GRF opacity, as `vimsim epof --smooth S`: per video frame
-    /// v += a (x - v) with a = 1 - exp(-1 / (fps S)), starting at the first value. Step() advances
-    /// one video frame; Update() advances any time step (render frames). S = 0: passthrough.
+    /// The opacity easing of `vimsim epof` (simulator.grf.OpacityRule), causal, starting at the
+    /// first value: per video frame an exponential smoothing v += a (x - v), a = 1 - exp(-1 /
+    /// (fps S)) (S = smoothing time constant, 0 = off), then a slew-rate limit on the eased
+    /// value e: it rises by at most 1 / (fps easeIn) and falls by at most 1 / (fps easeOut) per
+    /// frame (0 = no limit). Step() advances one video frame; Update() advances any time step
+    /// dt (render frames: a = 1 - exp(-dt / S), limits dt / easeIn, dt / easeOut).
     /// </summary>
     public sealed class OpacityEasing
     {
-        readonly double tau, aFrame;
-        double value;
+        readonly double tau, aFrame, easeIn, easeOut, upFrame, downFrame;
+        double smooth, value;
         bool started;
 
-        public OpacityEasing(double timeConstantS, double fps)
+        /// <summary>Exponential smoothing only (time constant S seconds, 0 = passthrough).</summary>
+        public OpacityEasing(double timeConstantS, double fps) : this(timeConstantS, fps, 0.0, 0.0) { }
+
+        public OpacityEasing(double timeConstantS, double fps, double easeInS, double easeOutS)
         {
             if (!(timeConstantS >= 0) || double.IsInfinity(timeConstantS))
                 throw new ArgumentOutOfRangeException("timeConstantS", "time constant must be seconds >= 0");
+            if (!(easeInS >= 0) || double.IsInfinity(easeInS))
+                throw new ArgumentOutOfRangeException("easeInS", "ease-in time must be seconds >= 0");
+            if (!(easeOutS >= 0) || double.IsInfinity(easeOutS))
+                throw new ArgumentOutOfRangeException("easeOutS", "ease-out time must be seconds >= 0");
             if (!(fps > 0)) throw new ArgumentOutOfRangeException("fps", "fps must be > 0");
             tau = timeConstantS;
+            easeIn = easeInS;
+            easeOut = easeOutS;
             aFrame = tau > 0 ? 1.0 - Math.Exp(-1.0 / (fps * tau)) : 1.0;
+            upFrame = easeIn > 0 ? 1.0 / (fps * easeIn) : double.PositiveInfinity;
+            downFrame = easeOut > 0 ? 1.0 / (fps * easeOut) : double.PositiveInfinity;
         }
 
+        /// <summary>The eased opacity after the last Step / Update (0 before the first).</summary>
         public float Value { get { return (float)value; } }
 
-        public void Reset() { started = false; value = 0; }
+        /// <summary>Forget the history: the next call starts at its opacity (e.g. after a seek).</summary>
+        public void Reset() { started = false; value = 0; smooth = 0; }
 
         /// <summary>Advance one video frame (1 / fps seconds) towards opacity; returns the eased value.</summary>
         public float Step(float opacity)
         {
-            return Advance(opacity, aFrame);
+            return Advance(opacity, aFrame, upFrame, downFrame);
         }
 
         /// <summary>Advance dtS seconds towards opacity; returns the eased value.</summary>
         public float Update(float opacity, double dtS)
         {
-            return Advance(opacity, tau > 0 ? 1.0 - Math.Exp(-Math.Max(0.0, dtS) / tau) : 1.0);
+            double dt = Math.Max(0.0, dtS);
+            return Advance(opacity, tau > 0 ? 1.0 - Math.Exp(-dt / tau) : 1.0,
+                           easeIn > 0 ? dt / easeIn : double.PositiveInfinity,
+                           easeOut > 0 ? dt / easeOut : double.PositiveInfinity);
         }
 
-        float Advance(double x, double a)
+        float Advance(double x, double a, double up, double down)
         {
-            if (!started) { value = x; started = true; }
-            value = value + a * (x - value);
+            if (!started) { smooth = x; value = x; started = true; }
+            smooth = smooth + a * (x - smooth);
+            double d = smooth - value;
+            value = value + (d > 0 ? Math.Min(d, up) : Math.Max(d, -down));
             return (float)value;
         }
     }
