@@ -74,7 +74,8 @@ namespace Vimsim
         public string HeaderJson { get; private set; }
         public string SourcePath { get; private set; }
 
-        float[] data;     // FrameCount x rowLength, deg/s
+        float[] data;     // paper mode: FrameCount x rowLength, deg/s
+        double[] prefix;  // sphere mode: per frame and cell row, the running sums P[0..NLon] (P[0] = 0)
         int rowLength;
         PaperModel paper;
         SphereModel sphere;
@@ -229,6 +230,19 @@ namespace Vimsim
                 sphere = new SphereModel(f.Num("cell_deg"), f.Num("query_step_deg"), HfovDeg, VfovDeg, (int)f.Num("cache_bins"));
                 if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
                     throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")");
+                // Running sums along each cell row (double: exact to ~1e-12 relative): a run of
+                // interior cells costs two reads, a cell P[j + 1] - P[j].
+                int nl = shape[2], rows = shape[0] * shape[1];
+                prefix = new double[(long)rows * (nl + 1)];
+                for (int r = 0; r < rows; r++)
+                {
+                    double acc = 0;
+                    int src0 = r * nl, dst = r * (nl + 1);
+                    prefix[dst] = 0;
+                    for (int j = 0; j < nl; j++) { acc += data[src0 + j]; prefix[dst + j + 1] = acc; }
+                }
+                rowLength = shape[1] * (nl + 1);
+                data = null;
             }
             else throw new VimsimLoadException(src, "mode '" + Mode + "'; expected paper or sphere");
         }
@@ -290,7 +304,7 @@ namespace Vimsim
                 throw new ArgumentOutOfRangeException("yawDeg", "orientation must be finite degrees");
             int off = row * rowLength;
             return paper != null ? paper.Query(data, off, yawDeg, pitchDeg, rollDeg, scratch)
-                                 : sphere.Query(data, off, yawDeg, pitchDeg, rollDeg);
+                                 : sphere.Query(prefix, off, yawDeg, pitchDeg, rollDeg);
         }
 
         /// <summary>GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to OpacityHighDps, clamped.</summary>
@@ -755,7 +769,8 @@ namespace Vimsim
         int[] scratchR = new int[0], scratchC = new int[0];
         readonly double[] nw = new double[12], hk = new double[4], phik = new double[4], hRow = new double[4], nySl = new double[4];
         int[] cand = new int[16], inner = new int[16], tmp = new int[16];
-        readonly int[] arc = new int[4];
+        readonly int[] arc = new int[4], arcS0 = new int[8], arcLen = new int[8];
+        int nInner, cutMask;
         int[] runRowS = new int[64], runJ0S = new int[64], runJ1S = new int[64];
         double[] runSaS = new double[64];
 
@@ -807,7 +822,9 @@ namespace Vimsim
 
         public int CachedBins { get { return bins.Count; } }
 
-        public double Query(float[] field, int off, double yaw, double pitch, double roll)
+        /// <summary>EPOF of one orientation from one frame's running sums P (off: the frame's
+        /// first; per cell row NLon + 1 values, P[0] = 0, cell j = P[j + 1] - P[j]).</summary>
+        public double Query(double[] P, int off, double yaw, double pitch, double roll)
         {
             if (pitch > 90.0 || pitch < -90.0)
             {   // the same rotation with pitch in [-90, 90]
@@ -844,14 +861,7 @@ namespace Vimsim
             {   // columns j0 + shift .. j1 + shift, wrapping at nLon: one or two contiguous pieces
                 int o = off + rr[q], a = r0[q] + shift, e = r1[q] + shift;
                 if (a >= nLon) { a -= nLon; e -= nLon; }
-                double t = 0;
-                if (e <= nLon) for (int j = a; j < e; j++) t += field[o + j];
-                else
-                {
-                    int j = a;
-                    for (; j < nLon; j++) t += field[o + j];
-                    for (j = 0; j < e - nLon; j++) t += field[o + j];
-                }
+                double t = e <= nLon ? P[o + e] - P[o + a] : (P[o + nLon] - P[o + a]) + P[o + e - nLon];
                 s += t * rs[q];
             }
             int[] rb = b.rowBase, cols = b.cols;
@@ -860,7 +870,8 @@ namespace Vimsim
             {
                 int col = cols[q] + shift;
                 if (col >= nLon) col -= nLon;
-                s += field[off + rb[q] + col] * w[q];
+                int o = off + rb[q] + col;
+                s += (P[o + 1] - P[o]) * w[q];
             }
             return s / b.wsum;
         }
@@ -871,8 +882,8 @@ namespace Vimsim
         /// along the normal), kept where w > max(w) 1e-7, rows as simulator.sphere's band. Per
         /// row, d_k(lon) = rho_k cos(lon - phi_k) + ny_k sin(lat) and hw_k <= H_k, so the columns
         /// with d_k > -H_k for every plane (all others weigh exactly 0) and those with d_k >= H_k
-        /// for every plane (weight exactly A_c) are arcs found analytically, with a column of
-        /// margin; only the columns in between get the formula.
+        /// for every plane (weight exactly A_c) are arcs found analytically (with AcosSlack of
+        /// margin); only the columns in between get the formula.
         /// </summary>
         Bin Compute(double yawDeg, double pitchDeg, double rollDeg)
         {
@@ -896,25 +907,13 @@ namespace Vimsim
             int[] sr = scratchR, sc = scratchC;
             double hn = halfN;
             int nLon = NLon;
-            double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2], nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
-            double nx2 = nw[6], ny2 = nw[7], nz2 = nw[8], nx3 = nw[9], ny3 = nw[10], nz3 = nw[11];
             for (int i = i0; i < i1; i++)
             {
                 double cl = rowCl[i], sl = rowSl[i], he = rowHalfE[i], sa = rowSa[i];
-                int rowBase = i * nLon;
-                for (int k = 0; k < 4; k++)
-                {
-                    double ny = nw[3 * k + 1];
-                    hRow[k] = he * hk[k] + halfN * (Math.Abs(ny) * cl + Math.Abs(sl) * hk[k]) + 1e-9;
-                    nySl[k] = ny * sl;
-                }
-                int nc = 1, ni = 1;
-                cand[0] = 0; cand[1] = nLon; inner[0] = 0; inner[1] = nLon;
-                for (int k = 0; k < 4 && nc > 0; k++)
-                    nc = Intersect(ref cand, nc, cl * hk[k], phik[k], -hRow[k] - nySl[k], 1);
+                int rowBase = i * (nLon + 1); // into the running sums
+                int nc = RowArcs(cl, sl, he);
                 if (nc == 0) continue;
-                for (int k = 0; k < 4 && ni > 0; k++)
-                    ni = Intersect(ref inner, ni, cl * hk[k], phik[k], hRow[k] - nySl[k], -1);
+                int ni = nInner, cut = cutMask;
                 for (int q = 0; q < ni; q++)
                 {   // interior runs: coverage exactly 1, weight = the row's cell area
                     if (nRun == runRowS.Length) GrowRuns();
@@ -923,8 +922,22 @@ namespace Vimsim
                     nRun++;
                     if (sa > wmax) wmax = sa;
                 }
+                // Per plane that cuts this row (the others weigh 1 on every candidate): d = n .
+                // centre = ax so + az co + s and the half extent hw = |ex co - ez so| + |c - gx so -
+                // gz co| + 1e-9 (simulator.sphere's |n . east_half| + |n . north_half| + 1e-9),
+                // so = sin lon, co = cos lon; coverage clip(0.5 + 0.5 d / hw, 0, 1), 1 for d >= H.
+                bool cut0 = (cut & 1) != 0, cut1 = (cut & 2) != 0, cut2 = (cut & 4) != 0, cut3 = (cut & 8) != 0;
                 double h0 = hRow[0], h1 = hRow[1], h2 = hRow[2], h3 = hRow[3];
                 double s0 = nySl[0], s1 = nySl[1], s2 = nySl[2], s3 = nySl[3];
+                double hs = hn * sl, hc = hn * cl;
+                double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2];
+                double ax0 = cl * nx0, az0 = cl * nz0, ex0 = he * nx0, ez0 = he * nz0, c0 = hc * ny0, gx0 = hs * nx0, gz0 = hs * nz0;
+                double nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
+                double ax1 = cl * nx1, az1 = cl * nz1, ex1 = he * nx1, ez1 = he * nz1, c1 = hc * ny1, gx1 = hs * nx1, gz1 = hs * nz1;
+                double nx2 = nw[6], ny2 = nw[7], nz2 = nw[8];
+                double ax2 = cl * nx2, az2 = cl * nz2, ex2 = he * nx2, ez2 = he * nz2, c2 = hc * ny2, gx2 = hs * nx2, gz2 = hs * nz2;
+                double nx3 = nw[9], ny3 = nw[10], nz3 = nw[11];
+                double ax3 = cl * nx3, az3 = cl * nz3, ex3 = he * nx3, ez3 = he * nz3, c3 = hc * ny3, gx3 = hs * nx3, gz3 = hs * nz3;
                 int iq = 0;
                 for (int q = 0; q < nc; q++)
                 {
@@ -939,40 +952,39 @@ namespace Vimsim
                             pe = inner[2 * iq];
                         }
                         for (int j = cur; j < pe; j++)
-                        {   // per plane clip(0.5 + 0.5 d / hw, 0, 1), hw = |n . east_half| +
-                            // |n . north_half| + 1e-9 (simulator.sphere); H >= hw settles most planes
-                            double so = cs[j], co = cc[j], cov = 1.0, u, d0, hw;
-                            u = nx0 * so + nz0 * co; d0 = cl * u + s0; // n . centre
-                            if (d0 < h0)
+                        {
+                            double so = cs[j], co = cc[j], cov = 1.0, d, hw, t;
+                            if (cut0 && (d = ax0 * so + az0 * co + s0) < h0)
                             {
-                                if (d0 <= -h0) continue;
-                                hw = Math.Abs(he * (nx0 * co - nz0 * so)) + Math.Abs(hn * (ny0 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h0) continue;
+                                t = ex0 * co - ez0 * so; hw = t < 0 ? -t : t;
+                                t = c0 - gx0 * so - gz0 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx1 * so + nz1 * co; d0 = cl * u + s1; // n . centre
-                            if (d0 < h1)
+                            if (cut1 && (d = ax1 * so + az1 * co + s1) < h1)
                             {
-                                if (d0 <= -h1) continue;
-                                hw = Math.Abs(he * (nx1 * co - nz1 * so)) + Math.Abs(hn * (ny1 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h1) continue;
+                                t = ex1 * co - ez1 * so; hw = t < 0 ? -t : t;
+                                t = c1 - gx1 * so - gz1 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx2 * so + nz2 * co; d0 = cl * u + s2; // n . centre
-                            if (d0 < h2)
+                            if (cut2 && (d = ax2 * so + az2 * co + s2) < h2)
                             {
-                                if (d0 <= -h2) continue;
-                                hw = Math.Abs(he * (nx2 * co - nz2 * so)) + Math.Abs(hn * (ny2 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h2) continue;
+                                t = ex2 * co - ez2 * so; hw = t < 0 ? -t : t;
+                                t = c2 - gx2 * so - gz2 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx3 * so + nz3 * co; d0 = cl * u + s3; // n . centre
-                            if (d0 < h3)
+                            if (cut3 && (d = ax3 * so + az3 * co + s3) < h3)
                             {
-                                if (d0 <= -h3) continue;
-                                hw = Math.Abs(he * (nx3 * co - nz3 * so)) + Math.Abs(hn * (ny3 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h3) continue;
+                                t = ex3 * co - ez3 * so; hw = t < 0 ? -t : t;
+                                t = c3 - gx3 * so - gz3 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
                             double w = cov * sa;
                             if (w < minBoundary) minBoundary = w;
@@ -1034,6 +1046,8 @@ namespace Vimsim
         }
 
         /// <summary>acos(x), x in [-1, 1], within 6.8e-5 rad (Abramowitz and Stegun 4.4.45).</summary>
+        const double AcosSlack = 1e-4; // rad, > AcosApprox's error
+
         static double AcosApprox(double x)
         {
             double ax = x < 0 ? -x : x;
@@ -1042,37 +1056,138 @@ namespace Vimsim
         }
 
         /// <summary>
-        /// Intersect the sorted column ranges set[0..2n) (pairs [start, end)) with the columns j
-        /// whose centre longitude lon_j satisfies rho cos(lon_j - phi) >= b, grown (margin 1) or
-        /// shrunk (margin -1) by a column on each side; returns the new number of ranges.
+        /// One row's arcs (cos lat cl, sin lat sl, the cells' east half extent he): per plane k
+        /// the bound H_k of the half extent (hRow) and ny_k sin lat (nySl), the columns where
+        /// d_k > -H_k (cand arc, grown by AcosSlack) and where d_k >= H_k (inner arc, shrunk);
+        /// cand = the intersection of the 4 cand arcs (returned count of ranges), inner (count
+        /// nInner) that of the inner arcs, cutMask bit k set where plane k's inner arc does not
+        /// hold every candidate column. All in one method: Mono inlines almost nothing.
         /// </summary>
-        int Intersect(ref int[] set, int n, double rho, double phi, double b, int margin)
+        int RowArcs(double cl, double sl, double he)
         {
-            if (n == 0) return 0;
-            if (rho < 1e-12)
+            int nLon = NLon;
+            double asl = sl < 0 ? -sl : sl, hn = halfN, ic = invC;
+            int[] cs0 = arcS0, clen = arcLen; // [k] cand, [4 + k] inner
+            for (int k = 0; k < 4; k++)
             {
-                if (margin > 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) return n; // constant in lon
-                return 0;
+                double ny = nw[3 * k + 1], h = hk[k], phi = phik[k];
+                double H = he * h + hn * ((ny < 0 ? -ny : ny) * cl + asl * h) + 1e-9, nys = ny * sl;
+                hRow[k] = H; nySl[k] = nys;
+                double rho = cl * h, bc = -H - nys, bi = H - nys, inv = rho < 1e-12 ? 0.0 : 1.0 / rho;
+                for (int m = 0; m < 2; m++)
+                {   // m = 0: rho cos(lon - phi) >= bc grown; m = 1: >= bi shrunk
+                    int len, s0 = 0;
+                    double b = m == 0 ? bc : bi;
+                    if (rho < 1e-12) // constant in lon
+                        len = (m == 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) ? nLon : 0;
+                    else
+                    {
+                        double x = b * inv;
+                        if (x <= -1.0) len = m == 0 || x < -1.0 - 1e-12 ? nLon : 0;
+                        else if (x >= 1.0 && m == 1) len = 0;
+                        else
+                        {
+                            if (x > 1.0) x = 1.0;
+                            // acos(x) within 6.8e-5 rad (Abramowitz and Stegun 4.4.45); grown /
+                            // shrunk by AcosSlack the arc holds / lies within the exact one, so
+                            // no column with any weight is missed and every interior one is so.
+                            double ax = x < 0 ? -x : x;
+                            double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+                            double al = (x < 0 ? Math.PI - r : r) + (m == 0 ? AcosSlack : -AcosSlack);
+                            double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
+                            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
+                            if (a0 < fa) a0++;
+                            if (fb < 0 && a1 > fb) a1--;
+                            len = a1 - a0 + 1;
+                            if (len <= 0) len = 0;
+                            else if (len >= nLon) len = nLon;
+                            else
+                            {
+                                while (a0 < 0) a0 += nLon;
+                                while (a0 >= nLon) a0 -= nLon;
+                                s0 = a0;
+                            }
+                        }
+                    }
+                    cs0[4 * m + k] = s0; clen[4 * m + k] = len;
+                }
             }
+            int nc = 1;
+            cand[0] = 0; cand[1] = nLon;
+            for (int k = 0; k < 4 && nc > 0; k++) nc = Intersect(ref cand, nc, cs0[k], clen[k]);
+            if (nc == 0) return 0;
+            int ni = 1, cut = 0;
+            inner[0] = 0; inner[1] = nLon;
+            for (int k = 0; k < 4; k++)
+            {
+                if (!Within(cand, nc, cs0[4 + k], clen[4 + k])) cut |= 1 << k;
+                ni = Intersect(ref inner, ni, cs0[4 + k], clen[4 + k]);
+            }
+            nInner = ni; cutMask = cut;
+            return nc;
+        }
+
+        /// <summary>
+        /// The columns j whose centre longitude lon_j satisfies rho cos(lon_j - phi) >= b, the arc
+        /// grown (margin 1) or shrunk (margin -1) by AcosSlack on each side, as len columns from
+        /// column s0 (wrapping at NLon): len 0 = none, NLon = the whole row.
+        /// </summary>
+        int Arc(double rho, double phi, double b, int margin, out int s0)
+        {
+            s0 = 0;
+            if (rho < 1e-12) // constant in lon
+                return (margin > 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) ? NLon : 0;
             double x = b / rho;
-            if (x <= -1.0) return margin > 0 || x < -1.0 - 1e-12 ? n : 0;
+            if (x <= -1.0) return margin > 0 || x < -1.0 - 1e-12 ? NLon : 0;
             if (x >= 1.0)
             {
                 if (margin < 0) return 0;
                 x = 1.0;
             }
-            double al = AcosApprox(x); // within 7e-5 rad: the column of margin absorbs it
+            // AcosApprox is within 6.8e-5 rad: grown / shrunk by AcosSlack the arc holds / lies
+            // within the exact one, so no column with any weight is missed and every interior
+            // column is truly interior.
+            double al = AcosApprox(x) + margin * AcosSlack;
             double fa = (phi - al + Math.PI) * invC - 0.5, fb = (phi + al + Math.PI) * invC - 0.5;
-            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (fa, fb > -1: phi >= -pi)
+            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
             if (a0 < fa) a0++;
             if (fb < 0 && a1 > fb) a1--;
-            a0 -= margin; a1 += margin;
             if (a1 < a0) return 0;
-            if (a1 - a0 + 1 >= NLon) return n;
-            int s0 = a0;
-            while (s0 < 0) s0 += NLon;
-            while (s0 >= NLon) s0 -= NLon;
-            int end = s0 + a1 - a0 + 1;
+            int len = a1 - a0 + 1;
+            if (len >= NLon) return NLon;
+            while (a0 < 0) a0 += NLon;
+            while (a0 >= NLon) a0 -= NLon;
+            s0 = a0;
+            return len;
+        }
+
+        /// <summary>Whether the sorted column ranges set[0..2n) all lie in the arc (s0, len) of Arc.</summary>
+        bool Within(int[] set, int n, int s0, int len)
+        {
+            if (len >= NLon) return true;
+            for (int q = 0; q < n; q++)
+            {
+                int o = set[2 * q] - s0;
+                if (o < 0) o += NLon;
+                if (o + set[2 * q + 1] - set[2 * q] > len) return false;
+            }
+            return true;
+        }
+
+        /// <summary>Intersect the sorted column ranges set[0..2n) (pairs [start, end)) with the
+        /// arc (s0, len) of Arc; returns the new number of ranges.</summary>
+        int Intersect(ref int[] set, int n, int s0, int len)
+        {
+            if (n == 0 || len == 0) return 0;
+            if (len >= NLon) return n;
+            if (n == 1 && s0 + len <= NLon)
+            {   // one range and an arc that does not wrap: [max, min)
+                int lo = set[0] > s0 ? set[0] : s0, hi = set[1] < s0 + len ? set[1] : s0 + len;
+                if (lo >= hi) return 0;
+                set[0] = lo; set[1] = hi;
+                return 1;
+            }
+            int end = s0 + len;
             // The arc as sorted ranges in [0, NLon): [0, end - NLon) then [s0, NLon) if it wraps.
             int m;
             if (end > NLon) { arc[0] = 0; arc[1] = end - NLon; arc[2] = s0; arc[3] = NLon; m = 2; }
