@@ -1112,17 +1112,47 @@ namespace Vimsim
                     cs0[4 * m + k] = s0; clen[4 * m + k] = len;
                 }
             }
-            int nc = 1;
-            cand[0] = 0; cand[1] = nLon;
-            for (int k = 0; k < 4 && nc > 0; k++) nc = Intersect(ref cand, nc, cs0[k], clen[k]);
-            if (nc == 0) return 0;
-            int ni = 1, cut = 0;
-            inner[0] = 0; inner[1] = nLon;
+            // Intersections; the usual case inline: one range [lo, hi) and arcs that do not wrap
+            // (Compute's viewport faces longitude 0 +- a cell: arcs wrap only near the poles).
+            int nc = 1, lo = 0, hi = nLon;
+            bool one = true;
             for (int k = 0; k < 4; k++)
             {
-                if (!Within(cand, nc, cs0[4 + k], clen[4 + k])) cut |= 1 << k;
-                ni = Intersect(ref inner, ni, cs0[4 + k], clen[4 + k]);
+                int len = clen[k], s0 = cs0[k];
+                if (len >= nLon) continue;
+                if (len == 0) return 0;
+                if (one && s0 + len <= nLon)
+                {
+                    if (s0 > lo) lo = s0;
+                    if (s0 + len < hi) hi = s0 + len;
+                    if (lo >= hi) return 0;
+                    continue;
+                }
+                if (one) { cand[0] = lo; cand[1] = hi; one = false; }
+                nc = Intersect(ref cand, nc, s0, len);
+                if (nc == 0) return 0;
             }
+            if (one) { cand[0] = lo; cand[1] = hi; }
+            int ni = 1, cut = 0, clo = lo, chi = hi;
+            bool candOne = one;
+            lo = 0; hi = nLon; one = true;
+            for (int k = 0; k < 4; k++)
+            {
+                int len = clen[4 + k], s0 = cs0[4 + k];
+                if (len >= nLon) continue; // holds every column: does not cut
+                if (candOne && s0 + len <= nLon) { if (clo < s0 || chi > s0 + len) cut |= 1 << k; }
+                else if (!Within(cand, nc, s0, len)) cut |= 1 << k;
+                if (one && len > 0 && s0 + len <= nLon)
+                {
+                    if (s0 > lo) lo = s0;
+                    if (s0 + len < hi) hi = s0 + len;
+                    if (lo >= hi) { ni = 0; one = false; }
+                    continue;
+                }
+                if (one) { inner[0] = lo; inner[1] = hi; one = false; }
+                ni = Intersect(ref inner, ni, s0, len);
+            }
+            if (one) { inner[0] = lo; inner[1] = hi; }
             nInner = ni; cutMask = cut;
             return nc;
         }
