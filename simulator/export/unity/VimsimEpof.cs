@@ -1074,42 +1074,62 @@ namespace Vimsim
                 double H = he * h + hn * ((ny < 0 ? -ny : ny) * cl + asl * h) + 1e-9, nys = ny * sl;
                 hRow[k] = H; nySl[k] = nys;
                 double rho = cl * h, bc = -H - nys, bi = H - nys, inv = rho < 1e-12 ? 0.0 : 1.0 / rho;
-                for (int m = 0; m < 2; m++)
-                {   // m = 0: rho cos(lon - phi) >= bc grown; m = 1: >= bi shrunk
+                // acos(x) within 6.8e-5 rad (Abramowitz and Stegun 4.4.45); grown / shrunk by
+                // AcosSlack the arc holds / lies within the exact one, so no column with any
+                // weight is missed and every interior one is truly interior.
+                {   // cand: rho cos(lon - phi) >= bc, grown
                     int len, s0 = 0;
-                    double b = m == 0 ? bc : bi;
-                    if (rho < 1e-12) // constant in lon
-                        len = (m == 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) ? nLon : 0;
+                    double x = bc * inv;
+                    if (rho < 1e-12) len = 0 > bc - 1e-12 ? nLon : 0; // constant in lon
+                    else if (x <= -1.0) len = nLon;
                     else
                     {
-                        double x = b * inv;
-                        if (x <= -1.0) len = m == 0 || x < -1.0 - 1e-12 ? nLon : 0;
-                        else if (x >= 1.0 && m == 1) len = 0;
+                        if (x > 1.0) x = 1.0;
+                        double ax = x < 0 ? -x : x;
+                        double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+                        double al = (x < 0 ? Math.PI - r : r) + AcosSlack;
+                        double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
+                        int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
+                        if (a0 < fa) a0++;
+                        if (fb < 0 && a1 > fb) a1--;
+                        len = a1 - a0 + 1;
+                        if (len <= 0) len = 0;
+                        else if (len >= nLon) len = nLon;
                         else
                         {
-                            if (x > 1.0) x = 1.0;
-                            // acos(x) within 6.8e-5 rad (Abramowitz and Stegun 4.4.45); grown /
-                            // shrunk by AcosSlack the arc holds / lies within the exact one, so
-                            // no column with any weight is missed and every interior one is so.
-                            double ax = x < 0 ? -x : x;
-                            double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
-                            double al = (x < 0 ? Math.PI - r : r) + (m == 0 ? AcosSlack : -AcosSlack);
-                            double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
-                            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
-                            if (a0 < fa) a0++;
-                            if (fb < 0 && a1 > fb) a1--;
-                            len = a1 - a0 + 1;
-                            if (len <= 0) len = 0;
-                            else if (len >= nLon) len = nLon;
-                            else
-                            {
-                                while (a0 < 0) a0 += nLon;
-                                while (a0 >= nLon) a0 -= nLon;
-                                s0 = a0;
-                            }
+                            while (a0 < 0) a0 += nLon;
+                            while (a0 >= nLon) a0 -= nLon;
+                            s0 = a0;
                         }
                     }
-                    cs0[4 * m + k] = s0; clen[4 * m + k] = len;
+                    cs0[0 + k] = s0; clen[0 + k] = len;
+                }
+                {   // inner: rho cos(lon - phi) >= bi, shrunk
+                    int len, s0 = 0;
+                    double x = bi * inv;
+                    if (rho < 1e-12) len = 0 >= bi + 1e-12 ? nLon : 0; // constant in lon
+                    else if (x <= -1.0) len = x < -1.0 - 1e-12 ? nLon : 0;
+                    else if (x >= 1.0) len = 0;
+                    else
+                    {
+                        double ax = x < 0 ? -x : x;
+                        double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+                        double al = (x < 0 ? Math.PI - r : r) - AcosSlack;
+                        double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
+                        int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
+                        if (a0 < fa) a0++;
+                        if (fb < 0 && a1 > fb) a1--;
+                        len = a1 - a0 + 1;
+                        if (len <= 0) len = 0;
+                        else if (len >= nLon) len = nLon;
+                        else
+                        {
+                            while (a0 < 0) a0 += nLon;
+                            while (a0 >= nLon) a0 -= nLon;
+                            s0 = a0;
+                        }
+                    }
+                    cs0[4 + k] = s0; clen[4 + k] = len;
                 }
             }
             // Intersections; the usual case inline: one range [lo, hi) and arcs that do not wrap
