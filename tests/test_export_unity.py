@@ -156,11 +156,11 @@ def _reference(tmp_path: Path, grid: Path, seed: int, *extra) -> tuple:
     yaw, pitch, roll = _poses(g.n_frames, seed)
     hp = _headpath_csv(tmp_path / f"path{seed}.csv", times, yaw, pitch, roll)
     out = tmp_path / f"epof{seed}.csv"
-    # The export's rule is the percentile rule with optional exponential smoothing: compare
-    # with vimsim epof's same rule (its default adds ease-in/ease-out, not exported).
+    # Opacity() is the per-call percentile rule: compare with vimsim epof's paper rule unless
+    # the caller asks for a rule (the eased ones are checked through OpacityEasing).
     rule = (
-        ["--ease-in", "0", "--ease-out", "0"]
-        if "--smooth" in extra
+        []
+        if any(a in extra for a in ("--smooth", "--ease-in", "--ease-out", "--opacity-rule"))
         else ["--opacity-rule", "paper"]
     )
     assert main(["epof", str(grid), str(hp), "-o", str(out), *extra, *rule]) == 0
@@ -254,9 +254,10 @@ def test_sphere_mode_agrees_with_vimsim_epof(tmp_path, harness):
 def test_easing_matches_vimsim_epof_smooth(tmp_path, harness):
     """OpacityEasing.Step per video frame = vimsim epof --smooth S's opacity column."""
     grid = _sphere_grid(tmp_path / "s.npz", T=200, start_frame=0)
-    ref, _, _ = _reference(tmp_path, grid, 2, "--smooth", "0.4")
+    no_ease = ["--ease-in", "0", "--ease-out", "0"]
+    ref, _, _ = _reference(tmp_path, grid, 2, "--smooth", "0.4", *no_ease)
     raw, _, _ = _reference(tmp_path, grid, 2)
-    assert main(["export", str(grid), "-o", str(tmp_path / "x"), "--smooth", "0.4"]) == 0
+    assert main(["export", str(grid), "-o", str(tmp_path / "x"), "--smooth", "0.4", *no_ease]) == 0
     assert read_export(tmp_path / "x")[0]["opacity"]["smoothing_s"] == 0.4
     inp = tmp_path / "in.bin"
     inp.write_bytes(struct.pack("<i", len(raw.opacity)) + raw.opacity.astype("<f4").tobytes())
@@ -264,6 +265,60 @@ def test_easing_matches_vimsim_epof_smooth(tmp_path, harness):
     eased = np.fromfile(tmp_path / "out.bin", "<f4")
     assert np.abs(eased - ref.opacity).max() <= 1e-5
     assert np.abs(eased - raw.opacity).max() > 0.05  # the easing does something
+
+
+@pytest.mark.parametrize("mode", ["sphere", "paper"])
+def test_default_comfort_opacity_matches_vimsim_epof(tmp_path, harness, mode):
+    """Both with their defaults, vimsim export and vimsim epof use the comfort rule (ease-in
+    0.4 s, ease-out 1.5 s). OpacityEasing.Step fed vimsim epof's unlimited (paper-rule)
+    opacity per video frame reproduces its default opacity column within 1e-5; the runtime
+    alone (Step, and Update with dt = 1 / fps, of Opacity(Epof)) within 1e-4 (its EPOF
+    agrees within 1e-4 relative). A custom rule (smoothing and both easings) travels in the
+    header the same way."""
+    T = 240
+    grid = (
+        _sphere_grid(tmp_path / "g.npz", T=T, start_frame=0)
+        if mode == "sphere"
+        else _paper_grid(tmp_path / "g.npz", T=T)
+    )
+    g = load_grid(grid)
+    times = np.arange(T) / g.fps
+    yaw, pitch, roll = _poses(T, 21)
+    # Head turns of different speeds: stretches where the opacity changes faster than the
+    # ease limits allow, in both directions.
+    yaw = np.where(np.arange(T) % 60 < 30, yaw, yaw * 0.05)
+    hp = _headpath_csv(tmp_path / "p.csv", times, yaw, pitch, roll)
+    q = _write_queries(tmp_path / "q", times, *(np.float32(a) for a in (yaw, pitch, roll)))
+    raw_csv = tmp_path / "raw.csv"
+    assert main(["epof", str(grid), str(hp), "-o", str(raw_csv), "--opacity-rule", "paper"]) == 0
+    raw = read_epof_csv(raw_csv).opacity
+    inp = tmp_path / "in.bin"
+    inp.write_bytes(struct.pack("<i", T) + raw.astype("<f4").tobytes())
+    custom = ["--smooth", "0.1", "--ease-in", "0.2", "--ease-out", "0.7"]
+    for name, opts in (("default", []), ("custom", custom)):
+        assert main(["epof", str(grid), str(hp), "-o", str(tmp_path / f"{name}.csv"), *opts]) == 0
+        assert main(["export", str(grid), "-o", str(tmp_path / name), *opts]) == 0
+        ref = read_epof_csv(tmp_path / f"{name}.csv")
+        want = (0.4, 1.5, 0.0) if name == "default" else (0.2, 0.7, 0.1)
+        r = ref.meta["settings"]["opacity_rule"]
+        assert (r["ease_in_s"], r["ease_out_s"], r["smoothing_s"]) == want
+        op = read_export(tmp_path / name)[0]["opacity"]
+        assert (op["ease_in_s"], op["ease_out_s"], op["smoothing_s"]) == want
+        assert op["name"] == "eased"
+        _mono(harness, "ease", tmp_path / name, inp, tmp_path / f"{name}.ease", ";",
+              "play", tmp_path / name, q, tmp_path / f"{name}.play")  # fmt: skip
+        eased = np.fromfile(tmp_path / f"{name}.ease", "<f4")
+        assert np.abs(eased - ref.opacity).max() <= 1e-5
+        play = np.fromfile(tmp_path / f"{name}.play", "<f4").reshape(T, 2)
+        assert np.abs(play[:, 0] - ref.opacity).max() <= 1e-4
+        assert np.abs(play[:, 1] - ref.opacity).max() <= 1e-4
+        assert np.abs(eased - raw).max() > 0.1  # the rule does something
+    # The easing is exercised: the default column rises by at most 1 / (fps 0.4) and falls
+    # by at most 1 / (fps 1.5) per frame while the unlimited one jumps.
+    eased = read_epof_csv(tmp_path / "default.csv").opacity
+    assert np.diff(eased).max() <= 1 / (g.fps * 0.4) + 1e-9 < np.diff(raw).max()
+    assert np.diff(eased).min() >= -1 / (g.fps * 1.5) - 1e-9 > np.diff(raw).min()
+    assert np.ptp(eased) > 0.3
 
 
 def test_unity_euler_conversion(tmp_path, harness):
@@ -381,6 +436,17 @@ def test_cli_bad_input_one_line_exit_2(tmp_path, capsys):
     assert rc == 2 and "not written by vimsim export" in err
     assert (tmp_path / "w" / "VimsimEpof.cs").read_text() == "// my own code\n"
     assert not (tmp_path / "w" / DATA_FILE).exists()  # nothing half written
+    # Opacity options as vimsim epof's: a viewing's percentiles cannot be exported; the paper
+    # rule with easing is a contradiction. One line, exit 2, nothing written.
+    for opts, what in (
+        (["--opacity-source", "viewing"], "cannot be exported"),
+        (["--opacity-rule", "paper", "--ease-in", "1"], "--ease-in"),
+    ):
+        rc, err = _run(["export", str(grid), "-o", str(tmp_path / "o"), *opts], capsys)
+        assert rc == 2 and err.count("\n") == 1 and what in err, err
+        assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+    assert main(["export", str(grid), "-o", str(tmp_path / "o"), "--opacity-rule", "paper"]) == 0
+    assert read_export(tmp_path / "o")[0]["opacity"]["name"] == "paper"
     # A second export into the same folder replaces its own files.
     assert main(["export", str(grid), "-o", str(tmp_path / "v")]) == 0
     assert main(["export", str(grid), "-o", str(tmp_path / "v"), "--dtype", "float16"]) == 0
@@ -398,7 +464,12 @@ def test_csharp_loader_errors_name_file_and_problem(tmp_path, harness):
         "truncated.bin": (good[:-7], "truncated"),
         "short.bin": (good[:11], "truncated"),
         "header.bin": (good[: 16 + 40], "truncated"),
-        "v2.bin": (good[:8] + struct.pack("<I", 2) + good[12:], "version 2"),
+        "future.bin": (
+            good[:8] + struct.pack("<I", VERSION + 1) + good[12:],
+            f"version {VERSION + 1}",
+        ),
+        # Version 1 (before the header had ease-in / ease-out): refused, not read without them.
+        "v1.bin": (good[:8] + struct.pack("<I", 1) + good[12:], "version 1"),
         "notours.bin": (b"PK\x03\x04" + good[4:], "not a vimsim export"),
     }
     for name, (blob, problem) in cases.items():

@@ -4,8 +4,8 @@ for a game engine, with its runtime (Unity: ``VimsimEpof.cs``)."""
 from __future__ import annotations
 
 import argparse
-import math
 
+from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, fov_from_args
 
 __all__ = ["register", "run"]
@@ -13,28 +13,6 @@ __all__ = ["register", "run"]
 _FORMATS = ("unity",)
 _METHODS = ("auto", "paper", "sphere")  # = simulator.export.unity.METHODS (light import)
 _DTYPES = ("auto", "float16", "float32")  # = simulator.export.unity.DTYPES
-
-
-def _pct(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (0.0 <= v <= 100.0):
-        raise argparse.ArgumentTypeError(
-            f"expected a percentile in [0, 100], e.g. 10; got {text!r}"
-        )
-    return v
-
-
-def _seconds(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        v = math.nan
-    if not (0.0 <= v < math.inf):
-        raise argparse.ArgumentTypeError(f"expected seconds >= 0, e.g. 0.5; got {text!r}")
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -71,30 +49,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default): the precision vimsim epof uses (float32 POFs, the field's stored dtype)",
     )
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
-    p.add_argument(
-        "--low-pct", type=_pct, default=10.0, metavar="P", help="opacity 0 at this percentile (10)"
-    )
-    p.add_argument(
-        "--high-pct", type=_pct, default=90.0, metavar="P", help="opacity 1 at this percentile (90)"
-    )
-    p.add_argument(
-        "--smooth",
-        type=_seconds,
-        default=0.0,
-        metavar="S",
-        help="time constant (s) of the runtime's opacity easing, as vimsim epof --smooth "
-        "(default 0 = none)",
-    )
+    add_opacity_arguments(p)  # the same rule options (and defaults: comfort) as vimsim epof
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Export; InputError -> exit 2 with nothing written."""
     from simulator.export.unity import export_unity
-    from simulator.grf import OpacityRule
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
-    rule = OpacityRule(args.low_pct, args.high_pct, "grid", args.smooth)
+    rule = rule_from_args(args)
     res = export_unity(
         args.grid,
         args.output,
@@ -112,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
         f"{res.file_bytes / 1024:.0f} KiB; grid file {res.grid_bytes / 1024:.0f} KiB{rounding}), "
         f"{', '.join(f.name for f in res.files[1:])}; viewport {h['viewport']['hfov_deg']:g} x "
         f"{h['viewport']['vfov_deg']:g} deg, opacity 0 at {h['opacity']['low_dps']:.3g}, 1 at "
-        f"{h['opacity']['high_dps']:.3g} deg/s"
+        f"{h['opacity']['high_dps']:.3g} deg/s ({h['opacity']['name']} rule: ease-in "
+        f"{h['opacity']['ease_in_s']:g} s, ease-out {h['opacity']['ease_out_s']:g} s, smoothing "
+        f"{h['opacity']['smoothing_s']:g} s)"
     )
     return 0

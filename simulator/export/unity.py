@@ -60,7 +60,8 @@ __all__ = [
 ]
 
 FORMAT = "vimsim-epof"
-VERSION = 1
+#: 2: the opacity rule gained ease-in / ease-out (``opacity.ease_in_s``, ``ease_out_s``).
+VERSION = 2
 MAGIC = b"VIMSIMEP"
 #: The data file inside an export folder.
 DATA_FILE = "vimsim_epof.bin"
@@ -156,8 +157,10 @@ def export_unity(
     dtype : ``"float16"``, ``"float32"`` or ``"auto"`` (the precision ``vimsim epof`` uses:
         float32 for the POF matrix, the stored dtype of a field)
     hfov_deg, vfov_deg : float, degrees; viewport FOV, default the grid's window FOV
-    rule : OpacityRule (default ``OpacityRule()``, 10th/90th percentiles); its thresholds are
-        taken from the grid's flow (``source="grid"``)
+    rule : OpacityRule (default ``OpacityRule()``, the paper's 10th/90th percentiles, no
+        easing; the CLI's default is :func:`simulator.grf.comfort_rule`, as ``vimsim epof``);
+        its thresholds are taken from the grid's flow (``source="grid"``); its smoothing and
+        ease-in / ease-out times go into the header for the runtime's ``OpacityEasing``
     cache_bins : sphere mode: weight bins the runtime keeps (~16 kB each for 4 deg cells)
 
     Returns
@@ -235,6 +238,12 @@ def export_unity(
         "opacity": {
             "rule": "linear",
             "formula": "clamp((epof - low_dps) / (high_dps - low_dps), 0, 1); if high_dps <= low_dps: 1 where epof > low_dps else 0",
+            "name": "paper" if rule.is_paper else "eased",
+            "easing": "per video frame, starting at the first value: v += a (x - v), a = 1 - exp(-1 / (fps smoothing_s)) "
+            "(smoothing_s > 0); then the change is limited to at most +1 / (fps ease_in_s) and at least "
+            "-1 / (fps ease_out_s) (each > 0; 0 = no limit)",
+            "ease_in_s": float(rule.ease_in_s),
+            "ease_out_s": float(rule.ease_out_s),
             "low_pct": float(rule.low_pct),
             "high_pct": float(rule.high_pct),
             "source": "grid: every window of every frame of pof_dps",

@@ -4,6 +4,8 @@
 //                            QUERIES: int32 n, n x (float64 t, float32 yaw, pitch, roll);
 //                            OUT: n x (float32 epof, float32 opacity, int32 frame)
 //   ease BIN IN OUT          IN: int32 n, n float32 opacities (one per video frame); OUT: n float32
+//   play BIN QUERIES OUT     the QUERIES in order, one per video frame: OUT n x float32 (Step of
+//                            Opacity(Epof), Update of the same with dt = 1 / fps) from CreateEasing
 //   table BIN OUT            OUT: the paper-mode overlap table, float32
 //   unity IN OUT             IN: int32 n, n x float32 (x, y, z, offset); OUT: n x float32 (yaw, pitch, roll)
 //   load BIN                 prints "ok MODE" or "VimsimLoadException|FILE|PROBLEM" (exit 3)
@@ -37,6 +39,7 @@ static class EpofHarness
                 for (int i = 1; i + 2 < a.Length; i += 3) Query(a[i], a[i + 1], a[i + 2]);
                 return 0;
             case "ease": return Ease(a[1], a[2], a[3]);
+            case "play": return Play(a[1], a[2], a[3]);
             case "table": return Table(a[1], a[2]);
             case "unity": return Unity(a[1], a[2]);
             case "load": return LoadOnly(a[1]);
@@ -89,6 +92,22 @@ static class EpofHarness
             int n = br.ReadInt32();
             for (int i = 0; i < n; i++) bw.Write(ez.Step(br.ReadSingle()));
         }
+        return 0;
+    }
+
+    static int Play(string bin, string qpath, string outPath)
+    {
+        var e = VimsimEpof.Load(bin);
+        OpacityEasing step = e.CreateEasing(), upd = e.CreateEasing();
+        double[] t; float[] y, p, r;
+        ReadQueries(qpath, out t, out y, out p, out r);
+        using (var bw = new BinaryWriter(File.Create(outPath)))
+            for (int i = 0; i < t.Length; i++)
+            {
+                float o = e.Opacity(e.Epof(t[i], y[i], p[i], r[i]));
+                bw.Write(step.Step(o));
+                bw.Write(upd.Update(o, 1.0 / e.Fps));
+            }
         return 0;
     }
 

@@ -1,10 +1,12 @@
-// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 1).
+// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 2).
 // Written by `vimsim export GRID.npz -o DIR --format unity`; docs/unity.md in vimsim.
 // Plain C# (C# 6, .NET Framework 4.x / .NET Standard 2.0 profile): no UnityEngine here.
 //
 //   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin
 //   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s
-//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1
+//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1 (the paper's rule)
+//   var ease = e.CreateEasing();                      // once; then per video frame:
+//   float shown = ease.Step(opacity);                 // the exported rule (default: comfort)
 //
 // Conventions, exactly as `vimsim epof`: angles in degrees; yaw + turns right (toward +lon),
 // pitch + looks up, roll + tilts the head right ear down, applied yaw, then pitch, then roll
@@ -40,7 +42,7 @@ namespace Vimsim
     public sealed class VimsimEpof
     {
         /// <summary>The binary format version this runtime reads.</summary>
-        public const int FormatVersion = 1;
+        public const int FormatVersion = 2;
         /// <summary>File name of the data inside an export folder.</summary>
         public const string DataFileName = "vimsim_epof.bin";
         /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
@@ -60,15 +62,20 @@ namespace Vimsim
         /// <summary>Opacity 0 at or below this EPOF (deg/s), 1 at or above OpacityHighDps.</summary>
         public double OpacityLowDps { get; private set; }
         public double OpacityHighDps { get; private set; }
-        /// <summary>Time constant (s) of the opacity easing; 0 = none (see CreateEasing).</summary>
+        /// <summary>Time constant (s) of the opacity's exponential smoothing; 0 = none (see CreateEasing).</summary>
         public double SmoothingS { get; private set; }
+        /// <summary>Ease-in time (s): a full 0 -> 1 opacity change takes at least this long; 0 = no limit.</summary>
+        public double EaseInS { get; private set; }
+        /// <summary>Ease-out time (s): a full 1 -> 0 opacity change takes at least this long; 0 = no limit.</summary>
+        public double EaseOutS { get; private set; }
         /// <summary>Content hash of the source video ("sha256:...", as in the grid file).</summary>
         public string SourceVideoHash { get; private set; }
         /// <summary>The JSON header, verbatim.</summary>
         public string HeaderJson { get; private set; }
         public string SourcePath { get; private set; }
 
-        float[] data;     // FrameCount x rowLength, deg/s
+        float[] data;     // paper mode: FrameCount x rowLength, deg/s
+        double[] prefix;  // sphere mode: per frame and cell row, the running sums P[0..NLon] (P[0] = 0)
         int rowLength;
         PaperModel paper;
         SphereModel sphere;
@@ -159,6 +166,10 @@ namespace Vimsim
             OpacityLowDps = op.Num("low_dps");
             OpacityHighDps = op.Num("high_dps");
             SmoothingS = op.Num("smoothing_s");
+            EaseInS = op.Num("ease_in_s");
+            EaseOutS = op.Num("ease_out_s");
+            if (!(SmoothingS >= 0 && EaseInS >= 0 && EaseOutS >= 0) || double.IsInfinity(SmoothingS + EaseInS + EaseOutS))
+                throw new VimsimLoadException(src, "header opacity times (smoothing_s, ease_in_s, ease_out_s) must be seconds >= 0");
             var video = hd.Obj("video");
             SourceVideoHash = video.Has("content_hash") ? video.Str("content_hash") : "";
 
@@ -219,6 +230,19 @@ namespace Vimsim
                 sphere = new SphereModel(f.Num("cell_deg"), f.Num("query_step_deg"), HfovDeg, VfovDeg, (int)f.Num("cache_bins"));
                 if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
                     throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")");
+                // Running sums along each cell row (double: exact to ~1e-12 relative): a run of
+                // interior cells costs two reads, a cell P[j + 1] - P[j].
+                int nl = shape[2], rows = shape[0] * shape[1];
+                prefix = new double[(long)rows * (nl + 1)];
+                for (int r = 0; r < rows; r++)
+                {
+                    double acc = 0;
+                    int src0 = r * nl, dst = r * (nl + 1);
+                    prefix[dst] = 0;
+                    for (int j = 0; j < nl; j++) { acc += data[src0 + j]; prefix[dst + j + 1] = acc; }
+                }
+                rowLength = shape[1] * (nl + 1);
+                data = null;
             }
             else throw new VimsimLoadException(src, "mode '" + Mode + "'; expected paper or sphere");
         }
@@ -280,7 +304,7 @@ namespace Vimsim
                 throw new ArgumentOutOfRangeException("yawDeg", "orientation must be finite degrees");
             int off = row * rowLength;
             return paper != null ? paper.Query(data, off, yawDeg, pitchDeg, rollDeg, scratch)
-                                 : sphere.Query(data, off, yawDeg, pitchDeg, rollDeg);
+                                 : sphere.Query(prefix, off, yawDeg, pitchDeg, rollDeg);
         }
 
         /// <summary>GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to OpacityHighDps, clamped.</summary>
@@ -291,10 +315,12 @@ namespace Vimsim
             return e > lo ? 1f : 0f; // constant flow: a step at the threshold
         }
 
-        /// <summary>A stateful opacity easing with the exported time constant (SmoothingS; 0 = passthrough).</summary>
+        /// <summary>A stateful opacity easing with the exported rule (SmoothingS, EaseInS, EaseOutS;
+        /// all 0 = passthrough): feed it Opacity(Epof(...)) once per video frame (Step) or per
+        /// render frame (Update) for vimsim epof's opacity column.</summary>
         public OpacityEasing CreateEasing()
         {
-            return new OpacityEasing(SmoothingS, Fps);
+            return new OpacityEasing(SmoothingS, Fps, EaseInS, EaseOutS);
         }
 
         /// <summary>Number of cached sphere-mode weight bins (0 in paper mode).</summary>
@@ -381,45 +407,66 @@ namespace Vimsim
     }
 
     /// <summary>
-    /// Causal exponential easing of the GRF opacity, as `vimsim epof --smooth S`: per video frame
-    /// v += a (x - v) with a = 1 - exp(-1 / (fps S)), starting at the first value. Step() advances
-    /// one video frame; Update() advances any time step (render frames). S = 0: passthrough.
+    /// The opacity easing of `vimsim epof` (simulator.grf.OpacityRule), causal, starting at the
+    /// first value: per video frame an exponential smoothing v += a (x - v), a = 1 - exp(-1 /
+    /// (fps S)) (S = smoothing time constant, 0 = off), then a slew-rate limit on the eased
+    /// value e: it rises by at most 1 / (fps easeIn) and falls by at most 1 / (fps easeOut) per
+    /// frame (0 = no limit). Step() advances one video frame; Update() advances any time step
+    /// dt (render frames: a = 1 - exp(-dt / S), limits dt / easeIn, dt / easeOut).
     /// </summary>
     public sealed class OpacityEasing
     {
-        readonly double tau, aFrame;
-        double value;
+        readonly double tau, aFrame, easeIn, easeOut, upFrame, downFrame;
+        double smooth, value;
         bool started;
 
-        public OpacityEasing(double timeConstantS, double fps)
+        /// <summary>Exponential smoothing only (time constant S seconds, 0 = passthrough).</summary>
+        public OpacityEasing(double timeConstantS, double fps) : this(timeConstantS, fps, 0.0, 0.0) { }
+
+        public OpacityEasing(double timeConstantS, double fps, double easeInS, double easeOutS)
         {
             if (!(timeConstantS >= 0) || double.IsInfinity(timeConstantS))
                 throw new ArgumentOutOfRangeException("timeConstantS", "time constant must be seconds >= 0");
+            if (!(easeInS >= 0) || double.IsInfinity(easeInS))
+                throw new ArgumentOutOfRangeException("easeInS", "ease-in time must be seconds >= 0");
+            if (!(easeOutS >= 0) || double.IsInfinity(easeOutS))
+                throw new ArgumentOutOfRangeException("easeOutS", "ease-out time must be seconds >= 0");
             if (!(fps > 0)) throw new ArgumentOutOfRangeException("fps", "fps must be > 0");
             tau = timeConstantS;
+            easeIn = easeInS;
+            easeOut = easeOutS;
             aFrame = tau > 0 ? 1.0 - Math.Exp(-1.0 / (fps * tau)) : 1.0;
+            upFrame = easeIn > 0 ? 1.0 / (fps * easeIn) : double.PositiveInfinity;
+            downFrame = easeOut > 0 ? 1.0 / (fps * easeOut) : double.PositiveInfinity;
         }
 
+        /// <summary>The eased opacity after the last Step / Update (0 before the first).</summary>
         public float Value { get { return (float)value; } }
 
-        public void Reset() { started = false; value = 0; }
+        /// <summary>Forget the history: the next call starts at its opacity (e.g. after a seek).</summary>
+        public void Reset() { started = false; value = 0; smooth = 0; }
 
         /// <summary>Advance one video frame (1 / fps seconds) towards opacity; returns the eased value.</summary>
         public float Step(float opacity)
         {
-            return Advance(opacity, aFrame);
+            return Advance(opacity, aFrame, upFrame, downFrame);
         }
 
         /// <summary>Advance dtS seconds towards opacity; returns the eased value.</summary>
         public float Update(float opacity, double dtS)
         {
-            return Advance(opacity, tau > 0 ? 1.0 - Math.Exp(-Math.Max(0.0, dtS) / tau) : 1.0);
+            double dt = Math.Max(0.0, dtS);
+            return Advance(opacity, tau > 0 ? 1.0 - Math.Exp(-dt / tau) : 1.0,
+                           easeIn > 0 ? dt / easeIn : double.PositiveInfinity,
+                           easeOut > 0 ? dt / easeOut : double.PositiveInfinity);
         }
 
-        float Advance(double x, double a)
+        float Advance(double x, double a, double up, double down)
         {
-            if (!started) { value = x; started = true; }
-            value = value + a * (x - value);
+            if (!started) { smooth = x; value = x; started = true; }
+            smooth = smooth + a * (x - smooth);
+            double d = smooth - value;
+            value = value + (d > 0 ? Math.Min(d, up) : Math.Max(d, -down));
             return (float)value;
         }
     }
@@ -722,7 +769,8 @@ namespace Vimsim
         int[] scratchR = new int[0], scratchC = new int[0];
         readonly double[] nw = new double[12], hk = new double[4], phik = new double[4], hRow = new double[4], nySl = new double[4];
         int[] cand = new int[16], inner = new int[16], tmp = new int[16];
-        readonly int[] arc = new int[4];
+        readonly int[] arc = new int[4], arcS0 = new int[8], arcLen = new int[8];
+        int nInner, cutMask;
         int[] runRowS = new int[64], runJ0S = new int[64], runJ1S = new int[64];
         double[] runSaS = new double[64];
 
@@ -774,7 +822,9 @@ namespace Vimsim
 
         public int CachedBins { get { return bins.Count; } }
 
-        public double Query(float[] field, int off, double yaw, double pitch, double roll)
+        /// <summary>EPOF of one orientation from one frame's running sums P (off: the frame's
+        /// first; per cell row NLon + 1 values, P[0] = 0, cell j = P[j + 1] - P[j]).</summary>
+        public double Query(double[] P, int off, double yaw, double pitch, double roll)
         {
             if (pitch > 90.0 || pitch < -90.0)
             {   // the same rotation with pitch in [-90, 90]
@@ -811,14 +861,7 @@ namespace Vimsim
             {   // columns j0 + shift .. j1 + shift, wrapping at nLon: one or two contiguous pieces
                 int o = off + rr[q], a = r0[q] + shift, e = r1[q] + shift;
                 if (a >= nLon) { a -= nLon; e -= nLon; }
-                double t = 0;
-                if (e <= nLon) for (int j = a; j < e; j++) t += field[o + j];
-                else
-                {
-                    int j = a;
-                    for (; j < nLon; j++) t += field[o + j];
-                    for (j = 0; j < e - nLon; j++) t += field[o + j];
-                }
+                double t = e <= nLon ? P[o + e] - P[o + a] : (P[o + nLon] - P[o + a]) + P[o + e - nLon];
                 s += t * rs[q];
             }
             int[] rb = b.rowBase, cols = b.cols;
@@ -827,7 +870,8 @@ namespace Vimsim
             {
                 int col = cols[q] + shift;
                 if (col >= nLon) col -= nLon;
-                s += field[off + rb[q] + col] * w[q];
+                int o = off + rb[q] + col;
+                s += (P[o + 1] - P[o]) * w[q];
             }
             return s / b.wsum;
         }
@@ -838,8 +882,8 @@ namespace Vimsim
         /// along the normal), kept where w > max(w) 1e-7, rows as simulator.sphere's band. Per
         /// row, d_k(lon) = rho_k cos(lon - phi_k) + ny_k sin(lat) and hw_k <= H_k, so the columns
         /// with d_k > -H_k for every plane (all others weigh exactly 0) and those with d_k >= H_k
-        /// for every plane (weight exactly A_c) are arcs found analytically, with a column of
-        /// margin; only the columns in between get the formula.
+        /// for every plane (weight exactly A_c) are arcs found analytically (with AcosSlack of
+        /// margin); only the columns in between get the formula.
         /// </summary>
         Bin Compute(double yawDeg, double pitchDeg, double rollDeg)
         {
@@ -863,25 +907,13 @@ namespace Vimsim
             int[] sr = scratchR, sc = scratchC;
             double hn = halfN;
             int nLon = NLon;
-            double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2], nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
-            double nx2 = nw[6], ny2 = nw[7], nz2 = nw[8], nx3 = nw[9], ny3 = nw[10], nz3 = nw[11];
             for (int i = i0; i < i1; i++)
             {
                 double cl = rowCl[i], sl = rowSl[i], he = rowHalfE[i], sa = rowSa[i];
-                int rowBase = i * nLon;
-                for (int k = 0; k < 4; k++)
-                {
-                    double ny = nw[3 * k + 1];
-                    hRow[k] = he * hk[k] + halfN * (Math.Abs(ny) * cl + Math.Abs(sl) * hk[k]) + 1e-9;
-                    nySl[k] = ny * sl;
-                }
-                int nc = 1, ni = 1;
-                cand[0] = 0; cand[1] = nLon; inner[0] = 0; inner[1] = nLon;
-                for (int k = 0; k < 4 && nc > 0; k++)
-                    nc = Intersect(ref cand, nc, cl * hk[k], phik[k], -hRow[k] - nySl[k], 1);
+                int rowBase = i * (nLon + 1); // into the running sums
+                int nc = RowArcs(cl, sl, he);
                 if (nc == 0) continue;
-                for (int k = 0; k < 4 && ni > 0; k++)
-                    ni = Intersect(ref inner, ni, cl * hk[k], phik[k], hRow[k] - nySl[k], -1);
+                int ni = nInner, cut = cutMask;
                 for (int q = 0; q < ni; q++)
                 {   // interior runs: coverage exactly 1, weight = the row's cell area
                     if (nRun == runRowS.Length) GrowRuns();
@@ -890,8 +922,22 @@ namespace Vimsim
                     nRun++;
                     if (sa > wmax) wmax = sa;
                 }
+                // Per plane that cuts this row (the others weigh 1 on every candidate): d = n .
+                // centre = ax so + az co + s and the half extent hw = |ex co - ez so| + |c - gx so -
+                // gz co| + 1e-9 (simulator.sphere's |n . east_half| + |n . north_half| + 1e-9),
+                // so = sin lon, co = cos lon; coverage clip(0.5 + 0.5 d / hw, 0, 1), 1 for d >= H.
+                bool cut0 = (cut & 1) != 0, cut1 = (cut & 2) != 0, cut2 = (cut & 4) != 0, cut3 = (cut & 8) != 0;
                 double h0 = hRow[0], h1 = hRow[1], h2 = hRow[2], h3 = hRow[3];
                 double s0 = nySl[0], s1 = nySl[1], s2 = nySl[2], s3 = nySl[3];
+                double hs = hn * sl, hc = hn * cl;
+                double nx0 = nw[0], ny0 = nw[1], nz0 = nw[2];
+                double ax0 = cl * nx0, az0 = cl * nz0, ex0 = he * nx0, ez0 = he * nz0, c0 = hc * ny0, gx0 = hs * nx0, gz0 = hs * nz0;
+                double nx1 = nw[3], ny1 = nw[4], nz1 = nw[5];
+                double ax1 = cl * nx1, az1 = cl * nz1, ex1 = he * nx1, ez1 = he * nz1, c1 = hc * ny1, gx1 = hs * nx1, gz1 = hs * nz1;
+                double nx2 = nw[6], ny2 = nw[7], nz2 = nw[8];
+                double ax2 = cl * nx2, az2 = cl * nz2, ex2 = he * nx2, ez2 = he * nz2, c2 = hc * ny2, gx2 = hs * nx2, gz2 = hs * nz2;
+                double nx3 = nw[9], ny3 = nw[10], nz3 = nw[11];
+                double ax3 = cl * nx3, az3 = cl * nz3, ex3 = he * nx3, ez3 = he * nz3, c3 = hc * ny3, gx3 = hs * nx3, gz3 = hs * nz3;
                 int iq = 0;
                 for (int q = 0; q < nc; q++)
                 {
@@ -906,40 +952,39 @@ namespace Vimsim
                             pe = inner[2 * iq];
                         }
                         for (int j = cur; j < pe; j++)
-                        {   // per plane clip(0.5 + 0.5 d / hw, 0, 1), hw = |n . east_half| +
-                            // |n . north_half| + 1e-9 (simulator.sphere); H >= hw settles most planes
-                            double so = cs[j], co = cc[j], cov = 1.0, u, d0, hw;
-                            u = nx0 * so + nz0 * co; d0 = cl * u + s0; // n . centre
-                            if (d0 < h0)
+                        {
+                            double so = cs[j], co = cc[j], cov = 1.0, d, hw, t;
+                            if (cut0 && (d = ax0 * so + az0 * co + s0) < h0)
                             {
-                                if (d0 <= -h0) continue;
-                                hw = Math.Abs(he * (nx0 * co - nz0 * so)) + Math.Abs(hn * (ny0 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h0) continue;
+                                t = ex0 * co - ez0 * so; hw = t < 0 ? -t : t;
+                                t = c0 - gx0 * so - gz0 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx1 * so + nz1 * co; d0 = cl * u + s1; // n . centre
-                            if (d0 < h1)
+                            if (cut1 && (d = ax1 * so + az1 * co + s1) < h1)
                             {
-                                if (d0 <= -h1) continue;
-                                hw = Math.Abs(he * (nx1 * co - nz1 * so)) + Math.Abs(hn * (ny1 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h1) continue;
+                                t = ex1 * co - ez1 * so; hw = t < 0 ? -t : t;
+                                t = c1 - gx1 * so - gz1 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx2 * so + nz2 * co; d0 = cl * u + s2; // n . centre
-                            if (d0 < h2)
+                            if (cut2 && (d = ax2 * so + az2 * co + s2) < h2)
                             {
-                                if (d0 <= -h2) continue;
-                                hw = Math.Abs(he * (nx2 * co - nz2 * so)) + Math.Abs(hn * (ny2 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h2) continue;
+                                t = ex2 * co - ez2 * so; hw = t < 0 ? -t : t;
+                                t = c2 - gx2 * so - gz2 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
-                            u = nx3 * so + nz3 * co; d0 = cl * u + s3; // n . centre
-                            if (d0 < h3)
+                            if (cut3 && (d = ax3 * so + az3 * co + s3) < h3)
                             {
-                                if (d0 <= -h3) continue;
-                                hw = Math.Abs(he * (nx3 * co - nz3 * so)) + Math.Abs(hn * (ny3 * cl - sl * u)) + 1e-9;
-                                if (d0 <= -hw) continue;
-                                if (d0 < hw) cov *= 0.5 + 0.5 * d0 / hw;
+                                if (d <= -h3) continue;
+                                t = ex3 * co - ez3 * so; hw = t < 0 ? -t : t;
+                                t = c3 - gx3 * so - gz3 * co; hw += (t < 0 ? -t : t) + 1e-9;
+                                if (d <= -hw) continue;
+                                if (d < hw) cov *= 0.5 + 0.5 * d / hw;
                             }
                             double w = cov * sa;
                             if (w < minBoundary) minBoundary = w;
@@ -1001,6 +1046,8 @@ namespace Vimsim
         }
 
         /// <summary>acos(x), x in [-1, 1], within 6.8e-5 rad (Abramowitz and Stegun 4.4.45).</summary>
+        const double AcosSlack = 1e-4; // rad, > AcosApprox's error
+
         static double AcosApprox(double x)
         {
             double ax = x < 0 ? -x : x;
@@ -1009,37 +1056,188 @@ namespace Vimsim
         }
 
         /// <summary>
-        /// Intersect the sorted column ranges set[0..2n) (pairs [start, end)) with the columns j
-        /// whose centre longitude lon_j satisfies rho cos(lon_j - phi) >= b, grown (margin 1) or
-        /// shrunk (margin -1) by a column on each side; returns the new number of ranges.
+        /// One row's arcs (cos lat cl, sin lat sl, the cells' east half extent he): per plane k
+        /// the bound H_k of the half extent (hRow) and ny_k sin lat (nySl), the columns where
+        /// d_k > -H_k (cand arc, grown by AcosSlack) and where d_k >= H_k (inner arc, shrunk);
+        /// cand = the intersection of the 4 cand arcs (returned count of ranges), inner (count
+        /// nInner) that of the inner arcs, cutMask bit k set where plane k's inner arc does not
+        /// hold every candidate column. All in one method: Mono inlines almost nothing.
         /// </summary>
-        int Intersect(ref int[] set, int n, double rho, double phi, double b, int margin)
+        int RowArcs(double cl, double sl, double he)
         {
-            if (n == 0) return 0;
-            if (rho < 1e-12)
+            int nLon = NLon;
+            double asl = sl < 0 ? -sl : sl, hn = halfN, ic = invC;
+            int[] cs0 = arcS0, clen = arcLen; // [k] cand, [4 + k] inner
+            for (int k = 0; k < 4; k++)
             {
-                if (margin > 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) return n; // constant in lon
-                return 0;
+                double ny = nw[3 * k + 1], h = hk[k], phi = phik[k];
+                double H = he * h + hn * ((ny < 0 ? -ny : ny) * cl + asl * h) + 1e-9, nys = ny * sl;
+                hRow[k] = H; nySl[k] = nys;
+                double rho = cl * h, bc = -H - nys, bi = H - nys, inv = rho < 1e-12 ? 0.0 : 1.0 / rho;
+                // acos(x) within 6.8e-5 rad (Abramowitz and Stegun 4.4.45); grown / shrunk by
+                // AcosSlack the arc holds / lies within the exact one, so no column with any
+                // weight is missed and every interior one is truly interior.
+                {   // cand: rho cos(lon - phi) >= bc, grown
+                    int len, s0 = 0;
+                    double x = bc * inv;
+                    if (rho < 1e-12) len = 0 > bc - 1e-12 ? nLon : 0; // constant in lon
+                    else if (x <= -1.0) len = nLon;
+                    else
+                    {
+                        if (x > 1.0) x = 1.0;
+                        double ax = x < 0 ? -x : x;
+                        double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+                        double al = (x < 0 ? Math.PI - r : r) + AcosSlack;
+                        double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
+                        int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
+                        if (a0 < fa) a0++;
+                        if (fb < 0 && a1 > fb) a1--;
+                        len = a1 - a0 + 1;
+                        if (len <= 0) len = 0;
+                        else if (len >= nLon) len = nLon;
+                        else
+                        {
+                            while (a0 < 0) a0 += nLon;
+                            while (a0 >= nLon) a0 -= nLon;
+                            s0 = a0;
+                        }
+                    }
+                    cs0[0 + k] = s0; clen[0 + k] = len;
+                }
+                {   // inner: rho cos(lon - phi) >= bi, shrunk
+                    int len, s0 = 0;
+                    double x = bi * inv;
+                    if (rho < 1e-12) len = 0 >= bi + 1e-12 ? nLon : 0; // constant in lon
+                    else if (x <= -1.0) len = x < -1.0 - 1e-12 ? nLon : 0;
+                    else if (x >= 1.0) len = 0;
+                    else
+                    {
+                        double ax = x < 0 ? -x : x;
+                        double r = Math.Sqrt(1.0 - ax) * (1.5707288 + ax * (-0.2121144 + ax * (0.0742610 - 0.0187293 * ax)));
+                        double al = (x < 0 ? Math.PI - r : r) - AcosSlack;
+                        double fa = (phi - al + Math.PI) * ic - 0.5, fb = (phi + al + Math.PI) * ic - 0.5;
+                        int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
+                        if (a0 < fa) a0++;
+                        if (fb < 0 && a1 > fb) a1--;
+                        len = a1 - a0 + 1;
+                        if (len <= 0) len = 0;
+                        else if (len >= nLon) len = nLon;
+                        else
+                        {
+                            while (a0 < 0) a0 += nLon;
+                            while (a0 >= nLon) a0 -= nLon;
+                            s0 = a0;
+                        }
+                    }
+                    cs0[4 + k] = s0; clen[4 + k] = len;
+                }
             }
+            // Intersections; the usual case inline: one range [lo, hi) and arcs that do not wrap
+            // (Compute's viewport faces longitude 0 +- a cell: arcs wrap only near the poles).
+            int nc = 1, lo = 0, hi = nLon;
+            bool one = true;
+            for (int k = 0; k < 4; k++)
+            {
+                int len = clen[k], s0 = cs0[k];
+                if (len >= nLon) continue;
+                if (len == 0) return 0;
+                if (one && s0 + len <= nLon)
+                {
+                    if (s0 > lo) lo = s0;
+                    if (s0 + len < hi) hi = s0 + len;
+                    if (lo >= hi) return 0;
+                    continue;
+                }
+                if (one) { cand[0] = lo; cand[1] = hi; one = false; }
+                nc = Intersect(ref cand, nc, s0, len);
+                if (nc == 0) return 0;
+            }
+            if (one) { cand[0] = lo; cand[1] = hi; }
+            int ni = 1, cut = 0, clo = lo, chi = hi;
+            bool candOne = one;
+            lo = 0; hi = nLon; one = true;
+            for (int k = 0; k < 4; k++)
+            {
+                int len = clen[4 + k], s0 = cs0[4 + k];
+                if (len >= nLon) continue; // holds every column: does not cut
+                if (candOne && s0 + len <= nLon) { if (clo < s0 || chi > s0 + len) cut |= 1 << k; }
+                else if (!Within(cand, nc, s0, len)) cut |= 1 << k;
+                if (one && len > 0 && s0 + len <= nLon)
+                {
+                    if (s0 > lo) lo = s0;
+                    if (s0 + len < hi) hi = s0 + len;
+                    if (lo >= hi) { ni = 0; one = false; }
+                    continue;
+                }
+                if (one) { inner[0] = lo; inner[1] = hi; one = false; }
+                ni = Intersect(ref inner, ni, s0, len);
+            }
+            if (one) { inner[0] = lo; inner[1] = hi; }
+            nInner = ni; cutMask = cut;
+            return nc;
+        }
+
+        /// <summary>
+        /// The columns j whose centre longitude lon_j satisfies rho cos(lon_j - phi) >= b, the arc
+        /// grown (margin 1) or shrunk (margin -1) by AcosSlack on each side, as len columns from
+        /// column s0 (wrapping at NLon): len 0 = none, NLon = the whole row.
+        /// </summary>
+        int Arc(double rho, double phi, double b, int margin, out int s0)
+        {
+            s0 = 0;
+            if (rho < 1e-12) // constant in lon
+                return (margin > 0 ? 0 > b - 1e-12 : 0 >= b + 1e-12) ? NLon : 0;
             double x = b / rho;
-            if (x <= -1.0) return margin > 0 || x < -1.0 - 1e-12 ? n : 0;
+            if (x <= -1.0) return margin > 0 || x < -1.0 - 1e-12 ? NLon : 0;
             if (x >= 1.0)
             {
                 if (margin < 0) return 0;
                 x = 1.0;
             }
-            double al = AcosApprox(x); // within 7e-5 rad: the column of margin absorbs it
+            // AcosApprox is within 6.8e-5 rad: grown / shrunk by AcosSlack the arc holds / lies
+            // within the exact one, so no column with any weight is missed and every interior
+            // column is truly interior.
+            double al = AcosApprox(x) + margin * AcosSlack;
             double fa = (phi - al + Math.PI) * invC - 0.5, fb = (phi + al + Math.PI) * invC - 0.5;
-            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (fa, fb > -1: phi >= -pi)
+            int a0 = (int)fa, a1 = (int)fb;  // ceil(fa), floor(fb) (truncation toward 0, fixed)
             if (a0 < fa) a0++;
             if (fb < 0 && a1 > fb) a1--;
-            a0 -= margin; a1 += margin;
             if (a1 < a0) return 0;
-            if (a1 - a0 + 1 >= NLon) return n;
-            int s0 = a0;
-            while (s0 < 0) s0 += NLon;
-            while (s0 >= NLon) s0 -= NLon;
-            int end = s0 + a1 - a0 + 1;
+            int len = a1 - a0 + 1;
+            if (len >= NLon) return NLon;
+            while (a0 < 0) a0 += NLon;
+            while (a0 >= NLon) a0 -= NLon;
+            s0 = a0;
+            return len;
+        }
+
+        /// <summary>Whether the sorted column ranges set[0..2n) all lie in the arc (s0, len) of Arc.</summary>
+        bool Within(int[] set, int n, int s0, int len)
+        {
+            if (len >= NLon) return true;
+            for (int q = 0; q < n; q++)
+            {
+                int o = set[2 * q] - s0;
+                if (o < 0) o += NLon;
+                if (o + set[2 * q + 1] - set[2 * q] > len) return false;
+            }
+            return true;
+        }
+
+        /// <summary>Intersect the sorted column ranges set[0..2n) (pairs [start, end)) with the
+        /// arc (s0, len) of Arc; returns the new number of ranges.</summary>
+        int Intersect(ref int[] set, int n, int s0, int len)
+        {
+            if (n == 0 || len == 0) return 0;
+            if (len >= NLon) return n;
+            if (n == 1 && s0 + len <= NLon)
+            {   // one range and an arc that does not wrap: [max, min)
+                int lo = set[0] > s0 ? set[0] : s0, hi = set[1] < s0 + len ? set[1] : s0 + len;
+                if (lo >= hi) return 0;
+                set[0] = lo; set[1] = hi;
+                return 1;
+            }
+            int end = s0 + len;
             // The arc as sorted ranges in [0, NLon): [0, end - NLon) then [s0, NLon) if it wraps.
             int m;
             if (end > NLon) { arc[0] = 0; arc[1] = end - NLon; arc[2] = s0; arc[3] = NLon; m = 2; }

@@ -1,7 +1,7 @@
 // vimsim export: VimsimEpofBehaviour.cs, an optional thin Unity MonoBehaviour around VimsimEpof.cs.
 // Needs UnityEngine (and UnityEngine.Video for a VideoPlayer's time); VimsimEpof.cs does not.
 // Every frame: the head's rotation -> vimsim yaw/pitch/roll -> EPOF at the video's time ->
-// GRF opacity (eased with the exported time constant when `ease` is on). docs/unity.md.
+// GRF opacity (eased with the exported rule: smoothing, ease-in, ease-out, when `ease` is on). docs/unity.md.
 using UnityEngine;
 using UnityEngine.Video;
 
@@ -25,7 +25,7 @@ namespace Vimsim
                  + "Unity's Skybox/Panoramic shader: its Rotation minus 90")]
         public float yawOffsetDeg = 0f;
 
-        [Tooltip("Ease the opacity with the exported time constant (vimsim epof --smooth)")]
+        [Tooltip("Ease the opacity with the exported rule (vimsim epof --opacity-rule, --smooth, --ease-in, --ease-out)")]
         public bool ease = true;
 
         [Tooltip("Optional: material whose float property receives the opacity")]
