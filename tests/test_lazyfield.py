@@ -146,7 +146,9 @@ def test_viewport_query_cache_is_bounded_in_bytes():
     angles = rng.uniform([-180, -80, -40], [180, 80, 40], (200, 3))
     got = [q(f, *a) for a in angles]
     assert 0 < q._bytes <= 200_000 and len(q._bins) < 200
-    assert q._bytes == sum(sum(x.nbytes for x in (b[0], b[1], b[3], b[4])) for b in q._bins.values())
+    assert q._bytes == sum(
+        sum(x.nbytes for x in (b[0], b[1], b[3], b[4])) for b in q._bins.values()
+    )
     assert got == [fresh(f, *a) for a in angles] == [q(f, *a) for a in angles]
 
 

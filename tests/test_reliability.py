@@ -13,6 +13,7 @@ import errno
 import hashlib
 import json
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -491,22 +492,38 @@ def test_full_disk_tmpfs(base, tmp_path, capsys):
 
 
 # ------------------------------------------------------------------------- signals
-def _run_and_signal(argv, sig, watch: Path, env_extra=None, timeout=60.0, after_s=None):
+def _run_and_signal(argv, sig, watch: Path, env_extra=None, timeout=60.0, after_s=None,
+                    after_stderr=None):  # fmt: skip
+    """Run the CLI, signal it once a temporary file exists under ``watch`` (or after
+    ``after_s`` seconds, or once ``after_stderr`` has appeared on its stderr, e.g. its
+    progress bar: the work has started), return ``(status, stderr)``."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", **(env_extra or {}))
     p = subprocess.Popen([sys.executable, "-m", "simulator", *argv], stderr=subprocess.PIPE,
                          stdout=subprocess.PIPE, env=env, cwd=REPO)  # fmt: skip
     t0 = time.monotonic()
-    while time.monotonic() - t0 < timeout:  # wait until a temporary file exists
-        if after_s is None and any(".tmp-" in q.name for q in watch.rglob("*")):
-            break
-        if after_s is not None and time.monotonic() - t0 > after_s:
+    seen = b""
+    while time.monotonic() - t0 < timeout:
+        if after_stderr is not None:
+            ready, _, _ = select.select([p.stderr], [], [], 0.02)
+            if ready:
+                chunk = os.read(p.stderr.fileno(), 4096)
+                seen += chunk
+                if after_stderr.encode() in seen or not chunk:
+                    break
+        elif (
+            after_s is None
+            and any(".tmp-" in q.name for q in watch.rglob("*"))
+            or after_s is not None
+            and time.monotonic() - t0 > after_s
+        ):
             break
         if p.poll() is not None:
             break
-        time.sleep(0.02)
+        if after_stderr is None:
+            time.sleep(0.02)
     p.send_signal(sig)
     _out, err = p.communicate(timeout=timeout)
-    return p.returncode, err.decode()
+    return p.returncode, (seen + err).decode(errors="replace")
 
 
 @pytest.fixture(scope="module")
@@ -530,12 +547,15 @@ def test_signal_cleans_up(base, long_video, tmp_path, which, sig):
     argv = {
         "synth": ["synth", str(d / "t.mp4"), "--scene", "rotate", "--seconds", "60", "--size", "256x128"],
         "preprocess-sphere": ["preprocess", str(d / "long.mp4"), "-o", str(d / "g.npz"), "--method",
-                              "sphere", "--cell", "10", "--window-size", "32", "--no-progress"],
+                              "sphere", "--cell", "10", "--window-size", "32"],
         "render": ["render", str(d / "long.mp4"), str(d / "P.csv"), "-o", str(d / "o"), "--eye-size",
                    "256x256", "--no-progress", "--hold-last", "--opacity", "0.5"],
     }[which]  # fmt: skip
     # sphere mode writes its file at the end: signal it while it computes
-    rc, err = _run_and_signal(argv, sig, d, after_s=2.5 if which.startswith("pre") else None)
+    # sphere mode streams its field to an unnamed temporary file: signal it once its
+    # progress bar shows that the work has started
+    sphere = which.startswith("pre")
+    rc, err = _run_and_signal(argv, sig, d, after_stderr="preprocess (sphere)" if sphere else None)
     if rc == 0:
         pytest.skip(f"{which} finished before the signal arrived")  # not counted as a pass
     assert rc == 128 + sig, err
