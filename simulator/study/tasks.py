@@ -12,6 +12,7 @@ render).
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import time
 import warnings
@@ -60,8 +61,11 @@ def _grid(path: str) -> GridFile:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             g = load_grid(path)
-        # The sphere-mode field stays lazy (simulator.lazyfield): each viewing reads it
-        # chunk by chunk, so a worker's memory does not grow with the video's length.
+        if g.field_dps is not None:
+            # Read once per worker as float32, not once per viewing: a worker holds one
+            # video's field at a time (one grid cached), the price of not decompressing it
+            # again for every viewing of the video (the single commands stay lazy).
+            g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
         _GRIDS[key] = g
     return _GRIDS[key]
 
