@@ -317,6 +317,8 @@ class VideoWriter:
     crf : x264 constant rate factor (lower = better quality)
     audio : None, or a :class:`simulator.audio.AudioSource` (duck-typed: ``add_to(container)``)
         whose audio (range) is carried into the file
+    threads : x264 encoder threads (None: x264's default, about 1.5 per core); a task that
+        declares its CPUs (``vimsim study``) passes them
 
     Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
     """
@@ -330,6 +332,7 @@ class VideoWriter:
         crf: int = 18,
         preset: str = "veryfast",
         audio=None,
+        threads: int | None = None,
     ):
         import av
 
@@ -350,7 +353,11 @@ class VideoWriter:
         self._stream = self._container.add_stream("libx264", rate=rate)
         self._stream.width, self._stream.height = w, h
         self._stream.pix_fmt = "yuv420p"
-        self._stream.options = {"crf": str(crf), "preset": preset}
+        self._stream.options = {
+            "crf": str(crf),
+            "preset": preset,
+            **({} if threads is None else {"threads": str(int(threads))}),
+        }
         self._closed = False
         self.n_audio_packets = 0
         if audio is not None:

@@ -87,6 +87,13 @@ def _query(cell_deg: float, frustum: Frustum, step_deg: float) -> ViewportQuery:
     return ViewportQuery(cell_deg, frustum, step_deg=step_deg)
 
 
+def shared_query(cell_deg: float, frustum: Frustum, step_deg: float = 0.5) -> ViewportQuery:
+    """The :class:`ViewportQuery` :func:`viewport_epof` uses for these cells and frustum
+    (one per process, LRU of 8), e.g. to give it a larger weight cache
+    (:meth:`ViewportQuery.set_cache_bytes`) in a process that serves many viewings."""
+    return _query(float(CellGrid(cell_deg).cell_deg), frustum, float(step_deg))
+
+
 class ViewportQuery:
     """Fast exact-EPOF queries: a few microseconds per viewport.
 
@@ -169,6 +176,13 @@ class ViewportQuery:
         self._bins[key] = b
         self._bytes += size
         return b
+
+    def set_cache_bytes(self, cache_bytes: int) -> None:
+        """Keep at most ``cache_bytes`` of bin weights from now on (the oldest go first)."""
+        self._cache_bytes = int(cache_bytes)
+        while self._bins and self._bytes > self._cache_bytes:
+            old = self._bins.pop(next(iter(self._bins)))
+            self._bytes -= sum(a.nbytes for a in (old[0], old[1], old[3], old[4]))
 
     def _key(
         self, yaw_deg: float, pitch_deg: float, roll_deg: float

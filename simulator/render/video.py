@@ -135,6 +135,7 @@ def render_video(
     n_frames: int | None = None,
     preset: str = "veryfast",
     crf: int = 18,
+    encoder_threads: int | None = None,
     progress: Progress | None = None,
     start_frame: int = 0,
     on_frame=None,
@@ -217,7 +218,9 @@ def render_video(
         with contextlib.ExitStack() as stack:
             writers = [
                 stack.enter_context(
-                    VideoWriter(p, fps, (w, h), crf=crf, preset=preset, audio=audio)
+                    VideoWriter(
+                        p, fps, (w, h), crf=crf, preset=preset, audio=audio, threads=encoder_threads
+                    )
                 )
                 for p in paths[: len(eyes)]
             ]

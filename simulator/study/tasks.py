@@ -20,11 +20,14 @@ from pathlib import Path
 
 import numpy as np
 
+from simulator.cells import Frustum
+from simulator.epof.exact import shared_query
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, json_text
+from simulator.geometry import check_fov
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
-from simulator.gridfile import GridFile, load_grid
+from simulator.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.headpath import HeadPath
 from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
@@ -41,6 +44,9 @@ __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 _GRIDS: dict[tuple, GridFile] = {}
 _TRACES: dict[tuple, dict[int, HeadPath]] = {}
 _GL: list = []
+
+#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
+WEIGHT_CACHE_BYTES = 192 << 20
 
 
 def _error_line(e: BaseException) -> str:
@@ -178,6 +184,19 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
     try:
         grid = _grid(grid_path)
         rule = _rule(opts)
+        if grid.field_dps is not None and opts["method"] != "paper":
+            # One worker serves every viewing of this video: let exact EPOF keep the
+            # weights of more orientation bins (bounded, not growing with the video).
+            h = grid.hfov_deg if opts["hfov_deg"] is None else opts["hfov_deg"]
+            v = (
+                (grid.vfov_deg if opts["hfov_deg"] is None else h)
+                if opts["vfov_deg"] is None
+                else opts["vfov_deg"]
+            )
+            fr = Frustum.symmetric(*check_fov(h, v, source="viewport"))
+            shared_query(cells_from_meta(grid.meta).cell_deg, fr).set_cache_bytes(
+                WEIGHT_CACHE_BYTES
+            )
     except Exception as e:  # noqa: BLE001
         line = _error_line(e)
         return [{"id": it["id"], "status": line, "warnings": [], "seconds": 0.0} for it in items]
@@ -268,6 +287,7 @@ def render_task(
             hold=opts["hold_last"],
             preset=opts["preset"],
             crf=opts["crf"],
+            encoder_threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,
             ctx=_context(),
         )
