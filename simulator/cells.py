@@ -147,6 +147,13 @@ class Frustum:
         (:mod:`simulator.headsets`)."""
         return cls(*get_headset(name).half_angles_deg(eye))
 
+    def for_eye(self, eye: str = "left") -> Frustum:
+        """This (left-eye) frustum as ``eye`` sees it: the right eye mirrors left and right
+        (as headset profiles do, :meth:`simulator.headsets.Headset.half_angles_deg`)."""
+        if eye == "right":
+            return Frustum(self.right_deg, self.left_deg, self.down_deg, self.up_deg)
+        return self
+
     @property
     def hfov_deg(self) -> float:
         return self.left_deg + self.right_deg

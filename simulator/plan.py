@@ -167,14 +167,8 @@ def plan_viewing(
     epof_method = None
     stereo = layout != "mono" or right is not None
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
-    epof_frustum = config.frustum
-    if epof_eye == "right":  # the grid holds the right eye's flow: that eye's view
-        epof_frustum = Frustum(
-            config.frustum.right_deg,
-            config.frustum.left_deg,
-            config.frustum.down_deg,
-            config.frustum.up_deg,
-        )
+    # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
+    epof_frustum = config.frustum.for_eye(epof_eye)
     if grid is not None:
         # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
         # and easing have their state at the range's start (cost ~ the range).

@@ -115,11 +115,9 @@ class RenderConfig:
         half_width + centre_x`` (right) and ``(1 - (j + 0.5) / h * 2) * half_height +
         centre_y`` (up). Symmetric views have centre 0 (``perspective_rays``); the right
         eye mirrors the left eye's frustum."""
-        fr = self.frustum
+        fr = self.frustum.for_eye(eye)
         lf, rt = math.tan(math.radians(fr.left_deg)), math.tan(math.radians(fr.right_deg))
         dn, up = math.tan(math.radians(fr.down_deg)), math.tan(math.radians(fr.up_deg))
-        if eye == "right":
-            lf, rt = rt, lf
         return ((rt + lf) / 2.0, (up + dn) / 2.0), ((rt - lf) / 2.0, (up - dn) / 2.0)
 
     @property
