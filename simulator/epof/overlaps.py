@@ -38,7 +38,13 @@ from simulator.geometry import check_fov, head_angles_deg, head_rotation, perspe
 from simulator.gridfile import GridFile
 from simulator.windows import WindowGrid
 
-__all__ = ["ViewportOverlaps", "epof_from_grid", "viewport_overlaps", "weighted_epof"]
+__all__ = [
+    "ViewportOverlaps",
+    "epof_from_grid",
+    "viewport_fov",
+    "viewport_overlaps",
+    "weighted_epof",
+]
 
 
 def _window_runs(grid: WindowGrid, lat_step_deg: float, lon_step_deg: float):
@@ -386,7 +392,7 @@ def viewport_overlaps(grid: WindowGrid, hfov_deg: float, vfov_deg: float) -> Vie
     return ViewportOverlaps(grid, hfov_deg, vfov_deg)
 
 
-def _fov(grid: GridFile, hfov_deg, vfov_deg) -> tuple[float, float]:
+def viewport_fov(grid: GridFile, hfov_deg=None, vfov_deg=None) -> tuple[float, float]:
     """Viewport FOV (degrees): the grid's window FOV by default, ``vfov`` = ``hfov`` when
     only that is given; checked by the one rule, :func:`simulator.geometry.check_fov`."""
     h = grid.hfov_deg if hfov_deg is None else hfov_deg
@@ -429,7 +435,7 @@ def epof_from_grid(
     -------
     ndarray, float64, the broadcast shape of the orientation arguments
     """
-    h, v = _fov(grid, hfov_deg, vfov_deg)
+    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     key = tuple(
         (k, tuple(x) if isinstance(x, list) else x) for k, x in sorted(grid.meta["grid"].items())
     )

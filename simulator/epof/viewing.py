@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from simulator.cells import Frustum
 from simulator.epof.exact import viewport_epof
-from simulator.epof.overlaps import _fov, _frames, epof_from_grid
+from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file
 from simulator.grf import OpacityRule
@@ -151,7 +151,7 @@ def compute_epof(
         field, cells = require_field(grid)
         if frames_sel is not None:
             field = take_rows(field, rows)  # lazy: nothing read yet
-        h, v = _fov(grid, hfov_deg, vfov_deg)
+        h, v = viewport_fov(grid, hfov_deg, vfov_deg)
         fr = frustum or Frustum.symmetric(h, v)
         e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)
     else:
@@ -160,7 +160,7 @@ def compute_epof(
         )
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
-    h, v = _fov(grid, hfov_deg, vfov_deg)
+    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     meta = {
         "hfov_deg": h,
         "vfov_deg": v,

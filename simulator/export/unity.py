@@ -39,10 +39,9 @@ from numpy.typing import NDArray
 
 from simulator import __version__
 from simulator.epof.exact import viewport_epof
-from simulator.epof.overlaps import ViewportOverlaps
+from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, check_input_file, check_output_dir
-from simulator.geometry import check_fov
 from simulator.grf import OpacityRule
 from simulator.gridfile import GridFile, content_hash, load_grid, require_field
 
@@ -112,14 +111,6 @@ def _table_params() -> dict:
     )
 
 
-def _viewport_fov(grid: GridFile, hfov_deg, vfov_deg) -> tuple[float, float]:
-    """The viewport FOV rule of ``vimsim epof``: the grid's window FOV by default, ``vfov`` =
-    ``hfov`` when only that is given (:func:`simulator.geometry.check_fov`)."""
-    h = grid.hfov_deg if hfov_deg is None else hfov_deg
-    v = (grid.vfov_deg if hfov_deg is None else h) if vfov_deg is None else vfov_deg
-    return check_fov(h, v, source="viewport")
-
-
 def _is_ours(path: Path) -> bool:
     """Whether an existing file was written by ``vimsim export`` (so it may be replaced)."""
     try:
@@ -182,7 +173,7 @@ def export_unity(
     if not (1 <= int(cache_bins) <= 1_000_000):
         raise InputError(f"cache_bins must be 1..1000000; got {cache_bins}")
     sphere = method == "sphere" or (method == "auto" and g.field_dps is not None)
-    h, v = _viewport_fov(g, hfov_deg, vfov_deg)
+    h, v = viewport_fov(g, hfov_deg, vfov_deg)
     if sphere:
         field, cells = require_field(g)
         stored = np.dtype(g.field_dps.dtype)

@@ -28,6 +28,7 @@ import scipy
 from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
+from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output
 from simulator.geometry import extract_view, split_eye
@@ -65,9 +66,9 @@ def write_viewings_csv(path, rows: list[dict], columns) -> None:
 
 def _load_epof(path: Path) -> np.ndarray:
     """(T, 7) array of an EPOF CSV (frame, time_s, yaw, pitch, roll, epof_dps, opacity),
-    without its ``#`` settings lines and its header."""
-    lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
-    return np.loadtxt(lines[1:], delimiter=",", ndmin=2)[:, :7]
+    read by :func:`simulator.epof.read_epof_csv`."""
+    r = read_epof_csv(path)
+    return np.column_stack([getattr(r, c) for c in EPOF_COLUMNS]).astype(np.float64)
 
 
 def provocative_moments(pof_ty, yaw_deg, fps: float, *, n: int = N_MOMENTS,

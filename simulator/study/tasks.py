@@ -22,10 +22,10 @@ import numpy as np
 
 from simulator.cells import Frustum
 from simulator.epof.exact import shared_query
+from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.errors import InputError
 from simulator.fileio import atomic_output, json_text
-from simulator.geometry import check_fov
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.headpath import HeadPath
@@ -187,13 +187,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
         if grid.field_dps is not None and opts["method"] != "paper":
             # One worker serves every viewing of this video: let exact EPOF keep the
             # weights of more orientation bins (bounded, not growing with the video).
-            h = grid.hfov_deg if opts["hfov_deg"] is None else opts["hfov_deg"]
-            v = (
-                (grid.vfov_deg if opts["hfov_deg"] is None else h)
-                if opts["vfov_deg"] is None
-                else opts["vfov_deg"]
-            )
-            fr = Frustum.symmetric(*check_fov(h, v, source="viewport"))
+            fr = Frustum.symmetric(*viewport_fov(grid, opts["hfov_deg"], opts["vfov_deg"]))
             shared_query(cells_from_meta(grid.meta).cell_deg, fr).set_cache_bytes(
                 WEIGHT_CACHE_BYTES
             )
