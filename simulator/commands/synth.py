@@ -183,12 +183,7 @@ def run(args: argparse.Namespace) -> int:
     )
     with progress_bar(f"synth {cfg.scene}") as bar:
         video, truth = synthesize(cfg, args.output, crf=args.crf, progress=bar)
-    w, h = cfg.size
-    print(
-        f"wrote {video} ({cfg.scene}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
-        f"{w}x{h * len(cfg.eyes)} {cfg.layout}) and {truth}"
-    )
-    return 0
+    return _wrote(video, truth, cfg, cfg.scene)
 
 
 def _run_trajectory(args: argparse.Namespace) -> int:
@@ -218,9 +213,14 @@ def _run_trajectory(args: argparse.Namespace) -> int:
             seed=args.seed,
             truth_cell_deg=args.truth_cell,
         )
+    return _wrote(video, truth, cfg, f"trajectory {args.camera}")
+
+
+def _wrote(video, truth, cfg, what: str) -> int:
+    """The one summary line of a written clip and its truth file; exit status 0."""
     w, h = cfg.size
     print(
-        f"wrote {video} (trajectory {args.camera}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
+        f"wrote {video} ({what}, {cfg.n_frames} frames at {cfg.fps:g} fps, "
         f"{w}x{h * len(cfg.eyes)} {cfg.layout}) and {truth}"
     )
     return 0
