@@ -15,6 +15,7 @@ __all__ = [
     "fov_deg",
     "fov_from_args",
     "frustum_from_args",
+    "nonneg_deg",
     "nonneg_float",
     "nonneg_int",
     "number",
@@ -90,6 +91,8 @@ fov_deg = number(
 positive_float = number("expected a number > 0", "30", lo=0.0, lo_open=True)
 #: A finite number >= 0 (e.g. ``1000``).
 nonneg_float = number("expected a number >= 0", "1000", lo=0.0)
+#: An angle in degrees >= 0 (e.g. ``10``).
+nonneg_deg = number("expected degrees >= 0", "10", lo=0.0)
 #: Seconds >= 0 (e.g. ``1.5``).
 seconds = number("expected seconds >= 0", "1.5", lo=0.0)
 #: An integer >= 0 (e.g. ``0``).

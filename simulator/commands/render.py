@@ -13,7 +13,7 @@ from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import (
     add_fov_arguments,
     frustum_from_args,
-    nonneg_float,
+    nonneg_deg,
     nonneg_int,
     positive_float,
     size_wxh,
@@ -88,7 +88,7 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--feather",
-        type=nonneg_float,
+        type=nonneg_deg,
         default=10.0,
         metavar="DEG",
         help="width of the vignette's soft edge, degrees, linear in angle (default 10; 0 = hard)",
