@@ -17,6 +17,7 @@ __all__ = [
     "FLOW_CHOICES",
     "FLOW_STATS",
     "GRID_PRESET_NAMES",
+    "HEADSET_NAMES",
     "HEADPATH_FORMATS",
     "INTERPS",
     "LAYOUTS",
@@ -31,6 +32,9 @@ __all__ = [
     "Eye",
     "Interp",
 ]
+
+#: Headset profiles (:data:`simulator.headsets.HEADSETS`, in the same order).
+HEADSET_NAMES: tuple[str, ...] = ("vive-pro-eye", "vive-focus-3", "pimax-crystal", "quest-2")
 
 #: Stereo layouts of an equirect frame: ``top-bottom`` (left eye on top),
 #: ``side-by-side`` (left eye on the left).

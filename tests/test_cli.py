@@ -43,6 +43,17 @@ def test_choice_lists_come_from_one_module():
     assert _choices(p, "analyze")["--flow-stat"] == choices.FLOW_STATS
 
 
+def test_headset_names_and_a_light_parser():
+    """The --headset help lists the profiles from simulator.choices, and building the whole
+    parser (every subcommand's options) imports no numpy (the CLI's fast start)."""
+    from simulator.headsets import HEADSETS
+
+    assert tuple(HEADSETS) == choices.HEADSET_NAMES
+    code = "import sys, simulator.cli as c; c.build_parser(); print('numpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
 def test_every_command_is_registered():
     parser = build_parser()
     sub = next(a for a in parser._actions if a.dest == "command")

@@ -141,13 +141,13 @@ def add_fov_arguments(
         help=f"exact vertical {what} FOV in degrees (with --hfov)",
     )
     if headset:
-        from simulator.headsets import HEADSETS
+        from simulator.choices import HEADSET_NAMES  # light: the parser stays numpy-free
 
         p.add_argument(
             "--headset",
             default=None,
             metavar="NAME",
-            help=f"per-eye FOV of a headset profile: {', '.join(HEADSETS)} "
+            help=f"per-eye FOV of a headset profile: {', '.join(HEADSET_NAMES)} "
             "(vive-pro-eye = 107 x 107, the paper's HMD); instead of --fov/--hfov/--vfov",
         )
 
