@@ -184,12 +184,14 @@ def iter_frames(
     eye: str = "left",
     start: int = 0,
     end: int | None = None,
+    threads: int | None = None,
 ) -> Iterator[NDArray[np.uint8]]:
     """Decode frames ``start <= index < end`` of a video (or the one frame of an image).
 
     Yields one eye's frame, ``(h, w, 3)`` RGB or ``(h, w)`` gray uint8 (stored pixels),
     one at a time (streaming: memory does not grow with the video's length). Frames are
     yielded as views into decoder buffers where possible: copy one to keep it.
+    ``threads``: decoder threads (None: FFmpeg's choice, about one per core).
     """
     p = _check_media_file(path)
     if _is_image_path(p):
@@ -203,6 +205,8 @@ def iter_frames(
             raise InputError(f"{p}: no video stream")
         s = c.streams.video[0]
         s.thread_type = "AUTO"
+        if threads is not None:
+            s.thread_count = max(1, int(threads))
         i = -1
         try:
             for i, frame in enumerate(c.decode(s)):

@@ -74,7 +74,7 @@ def render_viewing(
     eyes: str | None = None,
     right=None,
     audio: bool = True,
-    encoder_threads: int | None = None,
+    threads: int | None = None,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -113,8 +113,8 @@ def render_viewing(
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
-    encoder_threads : x264 threads per output (None: x264's default; a study passes its
-        task's declared CPUs)
+    threads : the render's CPU budget (:func:`simulator.render.render_video`; None: no
+        bound; a study passes its task's declared CPUs, 1: one core, no pipeline threads)
     note : one line for the user, printed on stderr once the inputs are checked and kept
         in ``summary.json``
     ctx : moderngl.Context, or None to create one (:func:`create_context`)
@@ -247,7 +247,7 @@ def render_viewing(
             n_frames=nf,
             preset=preset,
             crf=crf,
-            encoder_threads=encoder_threads,
+            threads=threads,
             progress=progress,
             start_frame=f0,
             on_frame=None if rev is None else rev.add_yuv,

@@ -575,6 +575,45 @@ def test_interrupted_render_leaves_no_mp4(ctx, tmp_path, monkeypatch):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.mp4"]
 
 
+@pytest.mark.parametrize("layout", ["mono", "top-bottom"])
+def test_one_cpu_render_is_serial_and_the_same(ctx, tmp_path, layout):
+    """render_video(threads=1) (a study task declaring one CPU) runs decode, drawing and
+    encoding on the calling thread, no pipeline thread, and draws the same frames, in
+    order, as the threaded pipeline."""
+    import threading
+
+    import simulator.render as R
+    from simulator.video import iter_frames
+
+    vid = tmp_path / "v.mp4"
+    _tiny_video(vid, layout, n=6)
+    ang = np.column_stack([np.linspace(0, 50, 6), np.linspace(-10, 10, 6), np.zeros(6)])
+    got = {}
+    for threads in (None, 1):
+        seen, names, extra = [], set(), set()
+        before = threading.active_count()
+
+        def on_frame(equirect, yuv, seen=seen, names=names, extra=extra, before=before):
+            seen.append(yuv.copy())
+            names.add(threading.current_thread().name)
+            extra.add(threading.active_count() - before)  # threads the render started
+
+        d = tmp_path / f"t{threads}"
+        d.mkdir()
+        outs = (str(d / "left.mp4"), str(d / "right.mp4"))
+        res = R.render_video(ctx, str(vid), outs, ang, opacity=np.full(6, 0.5), layout=layout,
+                             config=R.RenderConfig(eye_size=(48, 32), grf=GrfConfig(seed=3)),
+                             threads=threads, on_frame=on_frame, progress=False)  # fmt: skip
+        assert res.n_frames == 6
+        for p in outs:
+            assert sum(1 for _ in iter_frames(p)) == 6
+        got[threads] = (seen, names, extra)
+    (a, names_a, extra_a), (b, names_b, extra_b) = got[None], got[1]
+    assert len(a) == len(b) == 6 and all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert names_a == {"on-frame"} and min(extra_a) >= 2  # prefetch, encoder(s), on-frame
+    assert names_b == {threading.current_thread().name} and extra_b == {0}  # serial
+
+
 # ------------------------------------------- render_viewing, reader options, OUTDIR state
 def _render_argv(vid, path, out, *extra):
     return [

@@ -61,16 +61,19 @@ def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
 
 
 class _Worker:
-    """A thread draining a bounded queue into ``fn``; errors resurface in :meth:`join`."""
+    """A thread draining a bounded queue into ``fn``; errors resurface in :meth:`join`.
 
-    def __init__(self, fn, maxsize: int = 3, name: str = "worker"):
+    ``inline=True``: no thread, :meth:`put` calls ``fn`` itself (a one-CPU render)."""
 
+    def __init__(self, fn, maxsize: int = 3, name: str = "worker", inline: bool = False):
         self.q: queue.Queue = queue.Queue(maxsize=maxsize)
         self.fn = fn
         self.error: BaseException | None = None
         self.busy_s = 0.0
-        self.t = threading.Thread(target=self._run, name=name, daemon=True)
-        self.t.start()
+        self.t = None
+        if not inline:
+            self.t = threading.Thread(target=self._run, name=name, daemon=True)
+            self.t.start()
 
     def _run(self) -> None:
         while True:
@@ -89,19 +92,25 @@ class _Worker:
     def put(self, item) -> None:
         if self.error is not None:
             raise self.error
+        if self.t is None:
+            t0 = time.perf_counter()
+            self.fn(item)
+            self.busy_s += time.perf_counter() - t0
+            return
         self.q.put(item)
 
     def join(self) -> None:
-        self.q.put(None)
-        self.t.join()
+        if self.t is not None:
+            self.q.put(None)
+            self.t.join()
         if self.error is not None:
             raise self.error
 
 
-def _decode(video_path: str, right_path: str | None, start: int, end: int):
+def _decode(video_path: str, right_path: str | None, start: int, end: int, threads=None):
     """Decoded frames ``start <= i < end`` (copies): of ``video_path``, or ``(left, right)``
     pairs of two per-eye files; both files are closed on every exit."""
-    left = iter_frames(video_path, layout="mono", start=start, end=end)
+    left = iter_frames(video_path, layout="mono", start=start, end=end, threads=threads)
     if right_path is None:
         try:
             for f in left:
@@ -109,7 +118,7 @@ def _decode(video_path: str, right_path: str | None, start: int, end: int):
         finally:
             left.close()
         return
-    right = iter_frames(right_path, layout="mono", start=start, end=end)
+    right = iter_frames(right_path, layout="mono", start=start, end=end, threads=threads)
     try:
         for fl in left:
             fr = next(right, None)
@@ -135,7 +144,7 @@ def render_video(
     n_frames: int | None = None,
     preset: str = "veryfast",
     crf: int = 18,
-    encoder_threads: int | None = None,
+    threads: int | None = None,
     progress: Progress | None = None,
     start_frame: int = 0,
     on_frame=None,
@@ -168,6 +177,13 @@ def render_video(
         (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
         its errors are raised here (e.g. :class:`simulator.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
+    threads : the render's CPU budget. None: no bound (decoding and each eye's encoder
+        overlap the drawing in threads of their own; FFmpeg and x264 pick their thread
+        counts). ``n``: the decoder and each x264 encoder use ``n`` threads, and with
+        ``n == 1`` decoding, drawing and encoding take turns on the calling thread, so
+        the render keeps one core busy, not more (a study's task declaring one CPU:
+        tasks side by side then scale with the cores). llvmpipe's threads are the
+        process's ``LP_NUM_THREADS``, read when Mesa loads.
     audio : None, or a :class:`simulator.audio.AudioSource` (the source's audio, the
         range's part) carried into every eye file
     right_path : the right eye's equirect file: ``video_path`` is then the left eye's (two
@@ -219,26 +235,25 @@ def render_video(
             writers = [
                 stack.enter_context(
                     VideoWriter(
-                        p, fps, (w, h), crf=crf, preset=preset, audio=audio, threads=encoder_threads
+                        p, fps, (w, h), crf=crf, preset=preset, audio=audio, threads=threads
                     )
                 )
                 for p in paths[: len(eyes)]
             ]
+            serial = threads is not None and int(threads) <= 1
             workers = [
-                _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}")
+                _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}", inline=serial)
                 for i, wr in enumerate(writers)
             ]
             if on_frame is not None:
-                workers.append(_Worker(lambda item: on_frame(*item), name="on-frame"))
+                workers.append(
+                    _Worker(lambda item: on_frame(*item), name="on-frame", inline=serial)
+                )
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
+                decoded = _decode(video_path, right_path, start_frame, start_frame + total, threads)
                 frames = stack.enter_context(
-                    contextlib.closing(
-                        prefetch(
-                            _decode(video_path, right_path, start_frame, start_frame + total),
-                            depth=3,
-                        )
-                    )
+                    contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
                 bar = Counter(progress, total)
                 t0 = time.perf_counter()

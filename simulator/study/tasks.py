@@ -281,7 +281,7 @@ def render_task(
             hold=opts["hold_last"],
             preset=opts["preset"],
             crf=opts["crf"],
-            encoder_threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
+            threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,
             ctx=_context(),
         )
