@@ -318,3 +318,75 @@ def test_render_mitigation_from_the_manifest(base, tmp_path, capsys):
     assert main(["study", str(bad), "-o", str(tmp_path / "b"), "--cache-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "mitigation" in err[0] and "bad_mitigation.toml" in err[0], err
+
+
+def _crash_manifest(d: Path) -> Path:
+    m = d / "crash.toml"
+    m.write_text("""
+[[videos]]
+id = "clip"
+path = "clip.mp4"
+method = "sphere"
+window_size = 64
+
+[[viewings]]
+video = "clip"
+trace = "P0*.csv"
+participant = "{stem}"
+render = true
+
+[render]
+eye_size = "32x32"
+""")
+    return m
+
+
+@pytest.mark.parametrize("kills", [1, 99], ids=["killed-once", "always-dies"])
+def test_worker_process_death(kills, base, tmp_path, monkeypatch, capsys):
+    """A worker process that dies (killed, out of memory, a crash in a native library)
+    takes the local pool down with the tasks it ran: they are run once more, each alone on
+    new workers, so a one-off death costs nothing; a task whose worker dies every time
+    fails with one line, every other viewing completes, exit 3, no traceback."""
+    import os
+
+    from simulator.study import runner, tasks
+    from simulator.study.executors import LocalExecutor
+
+    runs: dict[str, int] = {}
+
+    class Dying(LocalExecutor):
+        def submit(self, fn, *args, **kw):
+            if fn is tasks.render_task and args[2]["id"] == "clip-P02":
+                runs["P02"] = runs.get("P02", 0) + 1
+                if runs["P02"] <= kills:
+                    return super().submit(os._exit, 9, **kw)  # the worker dies
+            return super().submit(fn, *args, **kw)
+
+    monkeypatch.setattr(runner, "make_executor", lambda text, workers: Dying(2))
+    # a copy of the base folder without its cache: the grid is made in this run
+    d = tmp_path / "in"
+    d.mkdir()
+    for f in base.glob("P0*.csv"):
+        shutil.copy(f, d)
+    shutil.copy(base / "clip.mp4", d)
+    out = tmp_path / "o"
+    rc = main(["study", str(_crash_manifest(d)), "-o", str(out), "--cache-dir",
+               str(base / "cache"), "--no-progress"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    rows = {r["viewing"]: r for r in _rows(out / "viewings.csv")}
+    assert (out / "study.json").is_file()
+    if kills == 1:
+        assert rc == 0 and runs["P02"] == 2, err
+        assert all(r["status"] == "ok" for r in rows.values())
+        assert (out / "render" / "clip-P02" / "left.mp4").is_file()
+    else:
+        assert rc == 3 and runs["P02"] == runner.TASK_ATTEMPTS
+        assert rows["clip-P02"]["status"] == (
+            "render: internal error: worker failed: a worker process died (killed, out of "
+            "memory or crashed)"
+        )
+        lines = [ln for ln in err.splitlines() if "clip-P02" in ln]
+        assert len(lines) == 1, err
+        # the task beside it when it died ran again, alone, as did the dying one
+        assert [v for v, r in rows.items() if r["status"] != "ok"] == ["clip-P02"]

@@ -1,8 +1,11 @@
 """Executors of the study's task graph: a local process pool (default) and Ray (optional).
 
 Both take the same calls -- ``submit(fn, *args, num_cpus=)`` returning a handle,
-``wait(handles, timeout)`` returning the finished ones, ``result(handle)`` and
-``close()`` -- so the runner schedules one graph either way and the results are the same
+``wait(handles, timeout)`` returning the finished ones, ``result(handle)`` (raising if
+the task's worker process died: ``lost(exc)`` says so, ``describe(exc)`` in one line; a
+lost local pool is replaced by the next ``submit``), ``close()``
+(``close(wait=False)`` shuts down in the background, e.g. while the driver writes the
+study's outputs; ``join()`` then waits for it) -- so the runner schedules one graph either way and the results are the same
 bytes. ``num_cpus`` is the task's declared CPU need: Ray schedules by it; the local pool
 runs ``workers`` tasks at a time and uses it only for the task's own thread count.
 
@@ -15,11 +18,14 @@ cluster is one line, not a hang.
 
 from __future__ import annotations
 
+import collections
 import concurrent.futures as cf
 import multiprocessing
 import os
 import signal
 import socket
+import threading
+from concurrent.futures.process import BrokenProcessPool
 
 from simulator.errors import InputError
 
@@ -81,13 +87,19 @@ def _run_task(fn, args):
 
 
 class LocalExecutor:
-    """A pool of ``workers`` processes.
+    """A pool of ``workers`` processes, fed at most ``workers`` tasks at a time.
 
     Workers come from a fork server where the platform has one (a fresh single-threaded
     process that has imported the task module once, then forks each worker): no
     re-import per worker, and none of the caller's threads (decoders, encoders, a test
     runner's) are forked with a lock held, which can deadlock a plain ``fork``.
     Elsewhere ``spawn``.
+
+    The rest wait here, not in the pool's queue: when a worker process dies (killed, out
+    of memory, a crash in a native library) the pool fails every task it holds, so it
+    holds only the running ones. The pool is then replaced; a task submitted with
+    ``alone=True`` (a rerun of such a task) runs with no other task beside it, so a task
+    that kills its worker every time cannot take others down with it twice.
     """
 
     name = "local"
@@ -107,16 +119,73 @@ class LocalExecutor:
             )
         else:
             ctx = multiprocessing.get_context("spawn")
-        self._pool = cf.ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=ctx, initializer=_worker_init
+        self._ctx = ctx
+        self._pool = self._new_pool()
+        self._queue: collections.deque = collections.deque()  # (handle, fn, args, alone)
+        self._running: dict = {}  # pool future -> (handle, alone)
+
+    def _new_pool(self) -> cf.ProcessPoolExecutor:
+        return cf.ProcessPoolExecutor(
+            max_workers=self.workers, mp_context=self._ctx, initializer=_worker_init
         )
 
-    def submit(self, fn, *args, num_cpus: int = 1):
-        return self._pool.submit(_run_task, fn, args)
+    def submit(self, fn, *args, num_cpus: int = 1, alone: bool = False) -> cf.Future:
+        h: cf.Future = cf.Future()
+        self._queue.append((h, fn, args, alone))
+        self._dispatch()
+        return h
+
+    def _dispatch(self) -> None:
+        """Hand queued tasks to the pool: up to ``workers`` at once; an ``alone`` task
+        only into an empty pool, and nothing beside it."""
+        while self._queue and len(self._running) < self.workers:
+            h, fn, args, alone = self._queue[0]
+            if any(a for _, a in self._running.values()) or (alone and self._running):
+                return
+            self._queue.popleft()
+            try:
+                f = self._pool.submit(_run_task, fn, args)
+            except BrokenProcessPool:
+                # A worker died: the pool is unusable; later tasks go to a new one.
+                self._pool.shutdown(wait=False, cancel_futures=True)
+                self._pool = self._new_pool()
+                f = self._pool.submit(_run_task, fn, args)
+            self._running[f] = (h, alone)
+
+    def _collect(self, timeout: float | None) -> None:
+        """Wait for a running task; move finished ones' results to their handles."""
+        if not self._running:
+            return
+        done, _ = cf.wait(list(self._running), timeout=timeout, return_when=cf.FIRST_COMPLETED)
+        for f in done:
+            h, _ = self._running.pop(f)
+            e = f.exception()
+            if e is None:
+                h.set_result(f.result())
+            else:
+                h.set_exception(e)
+        self._dispatch()
+
+    @staticmethod
+    def lost(exc: BaseException) -> bool:
+        """The task's worker process died (this or another task's: the pool breaks)."""
+        return isinstance(exc, BrokenProcessPool)
+
+    @staticmethod
+    def describe(exc: BaseException) -> str:
+        if LocalExecutor.lost(exc):
+            return "a worker process died (killed, out of memory or crashed)"
+        return f"{type(exc).__name__}: {' '.join(str(exc).split())}"
 
     def wait(self, handles, timeout: float | None = None) -> list:
-        done, _ = cf.wait(list(handles), timeout=timeout, return_when=cf.FIRST_COMPLETED)
-        return list(done)
+        hs = list(handles)
+        while True:
+            done = [h for h in hs if h.done()]
+            if done or not self._running:
+                return done
+            self._collect(timeout)
+            if timeout is not None:
+                return [h for h in hs if h.done()]
 
     def result(self, handle):
         return handle.result()
@@ -124,8 +193,15 @@ class LocalExecutor:
     def info(self) -> dict:
         return {"executor": "local", "workers": self.workers}
 
-    def close(self, cancel: bool = False) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=cancel)
+    def close(self, cancel: bool = False, wait: bool = True) -> None:
+        if cancel:
+            for h, *_ in self._queue:
+                h.cancel()
+            self._queue.clear()
+        self._pool.shutdown(wait=wait, cancel_futures=cancel)
+
+    def join(self) -> None:
+        self._pool.shutdown(wait=True)
 
 
 class RayExecutor:
@@ -153,12 +229,25 @@ class RayExecutor:
             ray.init(address=address, **kw)
         self.workers = int(ray.cluster_resources().get("CPU", workers))
         self._remote: dict = {}
+        self._closing: threading.Thread | None = None
 
-    def submit(self, fn, *args, num_cpus: int = 1):
+    def submit(self, fn, *args, num_cpus: int = 1, alone: bool = False):
         r = self._remote.get(fn)
         if r is None:
             r = self._remote[fn] = self._ray.remote(fn)
-        return r.options(num_cpus=num_cpus, max_retries=0).remote(*args)
+        # max_retries: Ray reruns a task whose worker process died, once (a task's own
+        # errors are its result's status, never raised, so never retried).
+        return r.options(num_cpus=num_cpus, max_retries=1).remote(*args)
+
+    def lost(self, exc: BaseException) -> bool:
+        """Ray has already rerun a task whose worker died (``max_retries``)."""
+        return False
+
+    def describe(self, exc: BaseException) -> str:
+        e = self._ray.exceptions
+        if isinstance(exc, (e.WorkerCrashedError, e.NodeDiedError)):
+            return f"its Ray worker died twice ({type(exc).__name__})"
+        return f"{type(exc).__name__}: {' '.join(str(exc).split()[:40])}"
 
     def wait(self, handles, timeout: float | None = None) -> list:
         hs = list(handles)
@@ -177,8 +266,18 @@ class RayExecutor:
             "ray_version": self._ray.__version__,
         }
 
-    def close(self, cancel: bool = False) -> None:
-        self._ray.shutdown()
+    def close(self, cancel: bool = False, wait: bool = True) -> None:
+        """Disconnect (a local runtime: stop it, about 1.3 s here); ``wait=False`` in a
+        background thread, so it overlaps the driver's remaining work."""
+        if self._closing is None:
+            self._closing = threading.Thread(target=self._ray.shutdown, name="ray-shutdown")
+            self._closing.start()
+        if wait:
+            self.join()
+
+    def join(self) -> None:
+        if self._closing is not None:
+            self._closing.join()
 
 
 def make_executor(text: str, workers: int | None):

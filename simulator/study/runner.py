@@ -100,6 +100,11 @@ def _check_outputs(m: Manifest, out: Path, cache: Path) -> None:
             )
 
 
+#: Runs of a task whose worker process died before it is failed (a task's own errors
+#: are its result's status, never retried).
+TASK_ATTEMPTS = 2
+
+
 def _chunks(items: list, workers: int) -> list[list]:
     """Split a video's viewings into chunks: a few per worker (balance) but not one per
     viewing (each chunk loads the grid once per worker process anyway)."""
@@ -202,25 +207,29 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     threads = max(1, (os.cpu_count() or 1) // max(1, min(ex.workers, n_pre)))
     render_opts = dict(manifest.render)
 
+    def submit(what: tuple, call: tuple, cpus: int, attempt: int = 1) -> None:
+        """Submit ``call`` = (fn, *args); ``what`` = (kind, video id, payload)."""
+        h = ex.submit(*call, num_cpus=cpus, alone=attempt > 1)
+        pending[h] = (*what, call, cpus, attempt)
+
     def launch(v: VideoSpec) -> None:
         mine = [w for w in todo if w.video == v.id]
         for chunk in _chunks([_item(w) for w in mine], ex.workers):
-            h = ex.submit(tasks.epof_task, str(grids[v.id]), chunk, manifest.epof,
-                          str(out / "epof"), num_cpus=1)  # fmt: skip
-            pending[h] = ("epof", v.id, chunk)
+            submit(("epof", v.id, chunk),
+                   (tasks.epof_task, str(grids[v.id]), chunk, manifest.epof, str(out / "epof")),
+                   1)  # fmt: skip
         for w in mine:
             if w.render:
-                h = ex.submit(tasks.render_task, _video_dict(v), str(grids[v.id]), _item(w),
-                              render_opts, manifest.grf, str(out / "render" / w.id),
-                              num_cpus=render_opts["cpus"])  # fmt: skip
-                pending[h] = ("render", v.id, w.id)
+                submit(("render", v.id, w.id),
+                       (tasks.render_task, _video_dict(v), str(grids[v.id]), _item(w),
+                        render_opts, manifest.grf, str(out / "render" / w.id)),
+                       render_opts["cpus"])  # fmt: skip
 
     t0 = time.perf_counter()
     for v in manifest.videos:
         if not grids[v.id].is_file():
-            h = ex.submit(tasks.preprocess_task, _video_dict(v), str(grids[v.id]), threads,
-                          num_cpus=threads)  # fmt: skip
-            pending[h] = ("preprocess", v.id, None)
+            submit(("preprocess", v.id, None),
+                   (tasks.preprocess_task, _video_dict(v), str(grids[v.id]), threads), threads)  # fmt: skip
         elif v.id in need_grid:
             launch(v)
 
@@ -230,17 +239,20 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     by_id = {w.id: w for w in manifest.viewings}
     while pending:
         for h in ex.wait(pending.keys()):
-            kind, vid, payload = pending.pop(h)
+            kind, vid, payload, call, cpus, attempt = pending.pop(h)
             try:
                 res = ex.result(h)
                 cpu_tasks += sum(
                     r.get("cpu_s", 0.0) for r in (res if isinstance(res, list) else [res])
                 )
             except Exception as e:  # noqa: BLE001 -- a worker died: its tasks fail, the rest go on
+                if ex.lost(e) and attempt < TASK_ATTEMPTS:
+                    # Its process died (killed, out of memory, a crash) -- maybe another
+                    # task's, which takes the whole local pool down: once more, new workers.
+                    submit((kind, vid, payload), call, cpus, attempt + 1)
+                    continue
                 res = None
-                line = (
-                    f"internal error: worker failed: {type(e).__name__}: {' '.join(str(e).split())}"
-                )
+                line = f"internal error: worker failed: {ex.describe(e)}"
             if kind == "preprocess":
                 if res is not None:
                     line = f"video {vid}: {res['error']}"
@@ -274,7 +286,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
                 _maybe_finish(out, by_id[payload], keys, results, renders, rows)
     timings["tasks"] = time.perf_counter() - t0
     ex_info = ex.info()
-    ex.close()
+    ex.close(wait=False)  # Ray's runtime stops while the outputs are written
 
     # ---- outputs
     t0 = time.perf_counter()
@@ -282,6 +294,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     outputs.write_viewings_csv(out / "viewings.csv", table, VIEWING_COLUMNS)
     report = outputs.write_study_outputs(manifest, out, grids, table)
     timings["outputs"] = time.perf_counter() - t0
+    ex.join()
     timings["total"] = time.perf_counter() - t_start
     # CPU seconds: this process, and the tasks as measured in their workers (worker
     # start-up and imports not included).
