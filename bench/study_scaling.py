@@ -4,12 +4,14 @@ local executor and on Ray (a local runtime, ``--executor ray``).
 Figures: wall-clock ratio 1 worker / 2 workers per executor (goal >= 1.7x on 2 cores) and
 the Ray overhead against the local executor at 2 workers (goal <= 10 %). Each is the whole
 ``vimsim study`` process (Ray's start-up included) and, beside it, the task phase alone
-(``timings_s.tasks`` of study.json). The grid is made once before (cached), every run
-recomputes all viewings (``--no-resume``) into a fresh folder; viewings.csv of all runs
-must be identical. Clip: synthetic ``coaster`` scene, 4 s at 30 fps, 1024x512; eyes 480x480,
-one llvmpipe thread per render task (its declared CPU).
+(``timings_s.tasks`` of study.json), and the executor's own fixed cost (start-up and
+shut-down: the whole process less tasks and outputs). The grid is made once before
+(cached), every run recomputes all viewings (``--no-resume``) into a fresh folder;
+viewings.csv of all runs must be identical. Rounds alternate the four runs; medians.
+Clip: synthetic ``coaster`` scene, ``--seconds`` (default 8) at 30 fps, 1024x512; eyes
+480x480; each render task declares one CPU and keeps to it (``[render] cpus = 1``).
 
-Run: .venv/bin/python bench/study_scaling.py [--rounds N]
+Run: .venv/bin/python bench/study_scaling.py [--rounds N] [--seconds S]
 """
 
 from __future__ import annotations
@@ -29,26 +31,28 @@ OUT = REPO / "bench" / "_out" / "study_scaling"
 VIMSIM = [str(Path(sys.executable).with_name("vimsim"))]
 
 
-def setup() -> Path:
+def setup(seconds: float) -> Path:
     from simulator.headpath import save_headpath_csv, synth
     from simulator.synth import SynthConfig, synthesize
 
     OUT.mkdir(parents=True, exist_ok=True)
-    clip = OUT / "coaster.mp4"
+    clip = OUT / f"coaster{seconds:g}s.mp4"
     if not clip.is_file():
-        synthesize(SynthConfig("coaster", seconds=4.0, fps=30, size=(1024, 512)), clip)
+        synthesize(SynthConfig("coaster", seconds=seconds, fps=30, size=(1024, 512)), clip)
     for i in range(8):
-        save_headpath_csv(OUT / f"P{i + 1:02d}.csv", synth("look-around", 4.5, rate_hz=60, seed=i))
+        save_headpath_csv(
+            OUT / f"P{i + 1:02d}.csv", synth("look-around", seconds + 0.5, rate_hz=60, seed=i)
+        )
     m = OUT / "study.toml"
-    m.write_text("""[[videos]]
+    m.write_text(f"""[[videos]]
 id = "coaster"
-path = "coaster.mp4"
+path = "{clip.name}"
 method = "sphere"
 
 [[viewings]]
 video = "coaster"
 trace = "P*.csv"
-participant = "{stem}"
+participant = "{{stem}}"
 render = true
 
 [render]
@@ -74,9 +78,10 @@ def study(m: Path, name: str, executor: str, workers: int) -> tuple[float, dict]
 
 def main() -> int:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--rounds", type=int, default=1)
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--seconds", type=float, default=8.0, help="clip length (s)")
     args = ap.parse_args()
-    m = setup()
+    m = setup(args.seconds)
     shutil.rmtree(OUT / "cache", ignore_errors=True)  # the clip may have changed
     study(m, "warmup", "local", 2)  # makes the cached grid
     ref = (OUT / "warmup" / "viewings.csv").read_bytes()
@@ -87,16 +92,21 @@ def main() -> int:
             for w in (1, 2):
                 wall, s = study(m, f"{ex}{w}", ex, w)
                 assert (OUT / f"{ex}{w}" / "viewings.csv").read_bytes() == ref
-                res.setdefault((ex, w), []).append((wall, s["timings_s"]["tasks"]))
-    med = {k: (statistics.median(a for a, _ in v), statistics.median(b for _, b in v))
-           for k, v in res.items()}  # fmt: skip
+                t = s["timings_s"]
+                fixed = wall - t["tasks"] - t["outputs"]  # process start, executor up/down
+                res.setdefault((ex, w), []).append((wall, t["tasks"], fixed))
+    med = {k: tuple(statistics.median(r[i] for r in v) for i in range(3)) for k, v in res.items()}
+    n_frames = round(args.seconds * 30)
     print(
-        f"render-heavy study: 8 viewings rendered (480x480 per eye, 120 frames), median of "
+        f"render-heavy study: 8 viewings rendered (480x480 per eye, {n_frames} frames), median of "
         f"{args.rounds} round(s); load average {load0:.1f} before, {os.getloadavg()[0]:.1f} "
         "after (2 cores)"
     )
-    for (ex, w), (wall, tasks) in sorted(med.items()):
-        print(f"  {ex:5s} {w} worker(s): {wall:6.2f} s whole process, {tasks:6.2f} s tasks")
+    for (ex, w), (wall, tasks, fixed) in sorted(med.items()):
+        print(
+            f"  {ex:5s} {w} worker(s): {wall:6.2f} s whole process, {tasks:6.2f} s tasks, "
+            f"{fixed:5.2f} s start-up and shut-down"
+        )
     for ex in ("local", "ray"):
         a, b = med[(ex, 1)], med[(ex, 2)]
         print(
@@ -105,7 +115,8 @@ def main() -> int:
     lw, rw = med[("local", 2)], med[("ray", 2)]
     print(
         f"  Ray overhead vs local at 2 workers: {100 * (rw[0] / lw[0] - 1):+.1f}% whole process, "
-        f"{100 * (rw[1] / lw[1] - 1):+.1f}% tasks (goal <= 10%)"
+        f"{100 * (rw[1] / lw[1] - 1):+.1f}% tasks (goal <= 10%); Ray's fixed cost "
+        f"{rw[2] - lw[2]:+.2f} s"
     )
     print("  viewings.csv identical in every run")
     return 0

@@ -14,10 +14,9 @@ import csv
 import glob
 import math
 import re
+import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import tomllib
 
 from simulator.choices import MITIGATIONS
 from simulator.errors import InputError
