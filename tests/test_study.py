@@ -390,3 +390,65 @@ def test_worker_process_death(kills, base, tmp_path, monkeypatch, capsys):
         assert len(lines) == 1, err
         # the task beside it when it died ran again, alone, as did the dying one
         assert [v for v, r in rows.items() if r["status"] != "ok"] == ["clip-P02"]
+
+
+def test_interrupted_study_resumes(base, tmp_path):
+    """Ctrl-C (SIGINT) while the study runs: one line, exit 130, no temporary file and
+    no study.json left; the viewings finished before it keep their state records, and
+    the next run on the same OUTDIR skips them and completes the rest."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from simulator.synth import SynthConfig, synthesize
+
+    d = tmp_path / "in"
+    d.mkdir()
+    synthesize(SynthConfig("rotate", seconds=12, fps=10, size=(128, 64)), d / "long.mp4")
+    for i in range(6):
+        save_headpath_csv(d / f"P{i + 1}.csv", synth("look-around", 12.5, rate_hz=30, seed=i))
+    m = d / "s.toml"
+    m.write_text("""
+[[videos]]
+id = "v"
+path = "long.mp4"
+method = "sphere"
+window_size = 32
+
+[[viewings]]
+video = "v"
+trace = "P*.csv"
+participant = "{stem}"
+render = true
+
+[render]
+eye_size = "160x160"
+""")
+    out = tmp_path / "o"
+    argv = [sys.executable, "-m", "simulator", "study", str(m), "-o", str(out), "--cache-dir",
+            str(tmp_path / "cache"), "--workers", "1", "--no-progress"]  # fmt: skip
+    p = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                         env=dict(os.environ, PYTHONUNBUFFERED="1"))  # fmt: skip
+    t0 = time.monotonic()
+    state = out / "state"
+    while p.poll() is None and time.monotonic() - t0 < 120:
+        if state.is_dir() and len(list(state.glob("*.json"))) >= 2:
+            break
+        time.sleep(0.02)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=120)
+    err = err.decode()
+    done = sorted(q.stem for q in state.glob("*.json"))
+    assert p.returncode == 130, err  # (0: it finished first: the renders must be longer)
+    assert len(err.strip().splitlines()) == 1 and "SIGINT" in err and "Traceback" not in err
+    assert not [q for q in out.rglob("*") if ".tmp-" in q.name]
+    assert not (out / "study.json").exists()
+    assert 2 <= len(done) < 6, done
+    assert main([*argv[3:], "--resume"]) == 0
+    s = json.loads((out / "study.json").read_text())
+    assert s["counts"]["ok"] == 6 and s["counts"]["resumed"] == len(done), s["counts"]
+    for r in _rows(out / "viewings.csv"):
+        assert r["status"] == "ok"
+        assert (out / "render" / r["viewing"] / "summary.json").is_file()
