@@ -47,11 +47,23 @@ def test_ray_local_runtime_identical(base, local_run, tmp_path):  # noqa: F811
     assert (out / "render" / "render-P01" / "summary.json").is_file()
 
 
-def test_ray_two_node_loopback_cluster(base, local_run, tmp_path):  # noqa: F811
+def test_ray_two_node_loopback_cluster(base, local_run, tmp_path, capsys):  # noqa: F811
+    """Two 1-CPU nodes, a cold cache: the video is preprocessed on the cluster (a task
+    asking for more CPUs than a node has would wait for ever), same bytes as local."""
     out = tmp_path / "cluster"
+    bad = base / "bad_cpus.toml"  # beside the inputs it names
+    bad.write_text(
+        _manifest(base).read_text().replace('eye_size = "64x64"', 'eye_size = "64x64"\ncpus = 2')
+    )
     with loopback_cluster(tmp_path / "ray_logs") as address:
-        argv = ["study", str(_manifest(base)), "-o", str(out), "--cache-dir", str(base / "cache")]
+        argv = ["study", str(_manifest(base)), "-o", str(out), "--cache-dir", str(tmp_path / "c")]
         assert main([*argv, "--executor", f"ray:{address}", "--no-progress"]) == 3
+        capsys.readouterr()
+        argv[1] = str(bad)
+        assert main([*argv, "--executor", f"ray:{address}", "--no-progress"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and "cpus = 2" in err[0] and "has 1 CPUs" in err[0], err
     s = json.loads((out / "study.json").read_text())
     assert s["ray_nodes"] == 2 and s["workers"] == 2
+    assert next(iter(s["videos"].values()))["cache"] == "miss"
     _same(local_run, out)

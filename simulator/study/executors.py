@@ -190,6 +190,11 @@ class LocalExecutor:
     def result(self, handle):
         return handle.result()
 
+    @property
+    def max_task_cpus(self) -> int:
+        """The most CPUs one task can have: this machine's."""
+        return os.cpu_count() or 1
+
     def info(self) -> dict:
         return {"executor": "local", "workers": self.workers}
 
@@ -256,6 +261,13 @@ class RayExecutor:
 
     def result(self, handle):
         return self._ray.get(handle)
+
+    @property
+    def max_task_cpus(self) -> int:
+        """The most CPUs one task can have: the largest node's (Ray never schedules a
+        task that asks for more; it would wait for ever)."""
+        cpus = [n.get("Resources", {}).get("CPU", 0) for n in self._ray.nodes() if n.get("Alive")]
+        return max(1, int(max(cpus, default=1)))
 
     def info(self) -> dict:
         nodes = [n for n in self._ray.nodes() if n.get("Alive")]

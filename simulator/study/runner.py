@@ -148,6 +148,12 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     t_start, c_start = start
     timings: dict[str, float] = {}
     cpu_tasks = 0.0
+    cpus = manifest.render["cpus"]
+    if ex.name == "ray" and any(w.render for w in manifest.viewings) and cpus > ex.max_task_cpus:
+        raise InputError(
+            f"{manifest.path}: [render] cpus = {cpus}, but the largest node of the Ray "
+            f"cluster has {ex.max_task_cpus} CPUs: a render task would never start"
+        )
     check_output_dir(out)
     (cache / "grids").mkdir(parents=True, exist_ok=True)
     for sub in ("epof", "state"):
@@ -205,6 +211,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     pending: dict = {}
     n_pre = sum(not grids[v.id].is_file() for v in manifest.videos)
     threads = max(1, (os.cpu_count() or 1) // max(1, min(ex.workers, n_pre)))
+    threads = min(threads, ex.max_task_cpus)  # a task no node can take would never start
     render_opts = dict(manifest.render)
 
     def submit(what: tuple, call: tuple, cpus: int, attempt: int = 1) -> None:
