@@ -1,13 +1,14 @@
 """Executors of the study's task graph: a local process pool (default) and Ray (optional).
 
-Both take the same calls -- ``submit(fn, *args, num_cpus=)`` returning a handle,
-``wait(handles, timeout)`` returning the finished ones, ``result(handle)`` (raising if
-the task's worker process died: ``lost(exc)`` says so, ``describe(exc)`` in one line; a
-lost local pool is replaced by the next ``submit``), ``close()``
+Both take the same calls -- ``submit(fn, *args, num_cpus=, alone=)`` returning a
+handle, ``wait(handles, timeout)`` returning the finished ones, ``result(handle)``
+(raising if the task's worker process died: ``lost(exc)`` says whether to run it again,
+``describe(exc)`` says it in one line), ``max_task_cpus`` and ``close()``
 (``close(wait=False)`` shuts down in the background, e.g. while the driver writes the
-study's outputs; ``join()`` then waits for it) -- so the runner schedules one graph either way and the results are the same
-bytes. ``num_cpus`` is the task's declared CPU need: Ray schedules by it; the local pool
-runs ``workers`` tasks at a time and uses it only for the task's own thread count.
+study's outputs; ``join()`` then waits for it) -- so the runner schedules one graph
+either way and the results are the same bytes. ``num_cpus`` is the task's declared CPU
+need: Ray schedules by it; the local pool runs ``workers`` tasks at a time and uses it
+only for the task's own thread count (a task keeps to what it declares).
 
 Ray is imported only here, only when asked for (``pip install vimsim[ray]``).
 ``ray`` starts a local Ray runtime with ``workers`` CPUs; ``ray:ADDRESS`` joins a running
