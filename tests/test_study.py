@@ -320,23 +320,25 @@ def test_render_mitigation_from_the_manifest(base, tmp_path, capsys):
     assert len(err) == 1 and "mitigation" in err[0] and "bad_mitigation.toml" in err[0], err
 
 
-def _crash_manifest(d: Path) -> Path:
-    m = d / "crash.toml"
-    m.write_text("""
+def _renders_manifest(m: Path, video: str, traces: str, window: int, eye: str) -> Path:
+    """A manifest ``m``: one sphere-mode video (its file ``video`` beside ``m``, id
+    ``video``'s stem), every trace of the glob ``traces`` rendered at ``eye`` ("WxH")."""
+    vid = Path(video).stem
+    m.write_text(f"""
 [[videos]]
-id = "clip"
-path = "clip.mp4"
+id = "{vid}"
+path = "{video}"
 method = "sphere"
-window_size = 64
+window_size = {window}
 
 [[viewings]]
-video = "clip"
-trace = "P0*.csv"
-participant = "{stem}"
+video = "{vid}"
+trace = "{traces}"
+participant = "{{stem}}"
 render = true
 
 [render]
-eye_size = "32x32"
+eye_size = "{eye}"
 """)
     return m
 
@@ -370,7 +372,8 @@ def test_worker_process_death(kills, base, tmp_path, monkeypatch, capsys):
         shutil.copy(f, d)
     shutil.copy(base / "clip.mp4", d)
     out = tmp_path / "o"
-    rc = main(["study", str(_crash_manifest(d)), "-o", str(out), "--cache-dir",
+    m = _renders_manifest(d / "crash.toml", "clip.mp4", "P0*.csv", 64, "32x32")
+    rc = main(["study", str(m), "-o", str(out), "--cache-dir",
                str(base / "cache"), "--no-progress"])  # fmt: skip
     err = capsys.readouterr().err
     assert "Traceback" not in err
@@ -409,23 +412,7 @@ def test_interrupted_study_resumes(base, tmp_path):
     synthesize(SynthConfig("rotate", seconds=12, fps=10, size=(128, 64)), d / "long.mp4")
     for i in range(6):
         save_headpath_csv(d / f"P{i + 1}.csv", synth("look-around", 12.5, rate_hz=30, seed=i))
-    m = d / "s.toml"
-    m.write_text("""
-[[videos]]
-id = "v"
-path = "long.mp4"
-method = "sphere"
-window_size = 32
-
-[[viewings]]
-video = "v"
-trace = "P*.csv"
-participant = "{stem}"
-render = true
-
-[render]
-eye_size = "160x160"
-""")
+    m = _renders_manifest(d / "s.toml", "long.mp4", "P*.csv", 32, "160x160")
     out = tmp_path / "o"
     argv = [sys.executable, "-m", "simulator", "study", str(m), "-o", str(out), "--cache-dir",
             str(tmp_path / "cache"), "--workers", "1", "--no-progress"]  # fmt: skip
