@@ -12,21 +12,12 @@ import sys
 
 from simulator.choices import HEADPATH_FORMATS, SYNTH_KINDS
 from simulator.commands._progress import warnings_to_stderr
-from simulator.commands._types import finite_float, nonneg_int, positive_float
+from simulator.commands._types import finite_float, nonneg_int, number, positive_float
 
 __all__ = ["add_reader_options", "load_headpath_args", "register", "run"]
 
 
-def _user(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected a user number >= 1, e.g. 1; got {text!r}"
-        ) from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected a user number >= 1, e.g. 1; got {text!r}")
-    return v
+_user = number("expected a user number >= 1", "1", integer=True, lo=1)
 
 
 def _user_or_all(text: str) -> int | str:

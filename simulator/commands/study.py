@@ -5,19 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
+from simulator.commands._types import positive_int
+
 __all__ = ["register", "run"]
-
-
-def _workers(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(
-            f"expected an integer >= 1, e.g. 2; got {text!r}"
-        ) from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 1, e.g. 2; got {text!r}")
-    return v
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -45,7 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument(
         "--workers",
-        type=_workers,
+        type=positive_int,
         default=None,
         metavar="N",
         help="parallel tasks (default: CPU count; on a joined cluster its CPUs decide)",
