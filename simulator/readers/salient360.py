@@ -74,18 +74,22 @@ def _read_salient360_dyn(p: Path) -> HeadPath:
     return HeadPath(t, r, str(p))
 
 
+#: The columns of a Salient360! raw image recording that are read: time (us), quaternion.
+_STATIC_COLUMNS = (
+    "OcutimeStamp",
+    "cameraRotation.x",
+    "cameraRotation.y",
+    "cameraRotation.z",
+    "cameraRotation.w",
+)
+
+
 def _read_salient360_static(p: Path) -> HeadPath:
     """Salient360! raw image recording (``rawDataStatic*.csv``): ``OcutimeStamp`` (us),
     ``cameraRotation.{x,y,z,w}`` = Unity quaternion, scalar last, head->world with Unity's
     axes = ours (x right, y up, z forward): used as is. Time from the first row."""
     cols, data, lines = _parse_salient_static(p)
-    need = (
-        "OcutimeStamp",
-        "cameraRotation.x",
-        "cameraRotation.y",
-        "cameraRotation.z",
-        "cameraRotation.w",
-    )
+    need = _STATIC_COLUMNS
     ix = {c: cols.index(c) for c in need}
     sub = data[:, [ix[c] for c in need]]
     _check_finite(p, list(need), sub, lines)
@@ -103,13 +107,7 @@ def _parse_salient_static(p: Path):
     if not lines:
         raise InputError(f"{p}: head path file is empty")
     cols = [c.strip() for c in lines[0].split(",")]
-    need = (
-        "OcutimeStamp",
-        "cameraRotation.x",
-        "cameraRotation.y",
-        "cameraRotation.z",
-        "cameraRotation.w",
-    )
+    need = _STATIC_COLUMNS
     missing = [c for c in need if c not in cols]
     if missing:
         raise InputError(f"{p}: Salient360 raw image file lacks columns {missing}")
