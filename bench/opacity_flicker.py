@@ -18,17 +18,8 @@ Run: ``.venv/bin/python bench/opacity_flicker.py`` (the preprocess takes ~3 min 
 
 from __future__ import annotations
 
-import subprocess
-import sys
-from pathlib import Path
-
 import numpy as np
-
-REPO = Path(__file__).resolve().parents[1]
-REAL = REPO.parent / "shared" / "data" / "real"
-VIDEO = REAL / "equirect" / "threejs" / "pano.mp4"
-TRACES = REAL / "headtraces" / "avtrack360" / "Head_rotation"
-CACHE = REPO / "outputs" / "bench15"
+from _pano import TRACES, VIDEO, pano_grid  # bench/_pano.py: the clip, its cached grid
 
 RULES = {
     "paper (no smoothing)": {},
@@ -48,14 +39,7 @@ def main() -> int:
     from simulator.gridfile import load_grid
     from simulator.readers import load_headpath
 
-    CACHE.mkdir(parents=True, exist_ok=True)
-    grid_path = CACHE / "pano.npz"
-    if not grid_path.exists():
-        subprocess.run(
-            [sys.executable, "-m", "simulator", "preprocess", str(VIDEO), "-o", str(grid_path)],
-            check=True,
-        )
-    grid = load_grid(grid_path)
+    grid = load_grid(pano_grid())
     fps = float(grid.fps)
     epofs, thr = [], None
     for subj in ("2.json", "3.json"):

@@ -19,19 +19,14 @@ Usage: ``.venv/bin/python bench/render_audio.py [--eye-size 1440]``
 from __future__ import annotations
 
 import argparse
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _pano import CACHE, TRACES, VIDEO, pano_grid  # bench/_pano.py: the clip, its cached grid
 
-REPO = Path(__file__).resolve().parents[1]
-REAL = REPO.parent / "shared" / "data" / "real"
-VIDEO = REAL / "equirect" / "threejs" / "pano.mp4"
-TRACE = REAL / "headtraces" / "avtrack360" / "Head_rotation" / "2.json"
-CACHE = REPO / "outputs" / "bench15"
+TRACE = TRACES / "2.json"
 
 
 def with_tone(src: Path, dst: Path, codec: str, fmt: str) -> None:
@@ -80,10 +75,7 @@ def main() -> int:
     from simulator.render import RenderConfig, create_context
     from simulator.viewing import render_viewing
 
-    CACHE.mkdir(parents=True, exist_ok=True)
-    gp = CACHE / "pano.npz"
-    if not gp.exists():
-        subprocess.run([sys.executable, "-m", "simulator", "preprocess", str(VIDEO), "-o", str(gp)], check=True)  # fmt: skip
+    gp = pano_grid()
     aac, pcm = CACHE / "pano_tone.mp4", CACHE / "pano_tone_pcm.mkv"
     if not aac.exists():
         with_tone(VIDEO, aac, "aac", "mp4")

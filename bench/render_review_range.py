@@ -17,17 +17,12 @@ The reference (plain full render) is measured in the same run. Usage:
 from __future__ import annotations
 
 import argparse
-import subprocess
-import sys
 import tempfile
 import time
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-REAL = REPO.parent / "shared" / "data" / "real"
-VIDEO = REAL / "equirect" / "threejs" / "pano.mp4"
-TRACE = REAL / "headtraces" / "avtrack360" / "Head_rotation" / "2.json"
-CACHE = REPO / "outputs" / "bench15"
+from _pano import TRACES, VIDEO, pano_grid  # bench/_pano.py: the clip, its cached grid
+
+TRACE = TRACES / "2.json"
 
 
 def main() -> int:
@@ -41,10 +36,7 @@ def main() -> int:
     from simulator.render import RenderConfig, create_context
     from simulator.viewing import render_viewing
 
-    CACHE.mkdir(parents=True, exist_ok=True)
-    gp = CACHE / "pano.npz"
-    if not gp.exists():
-        subprocess.run([sys.executable, "-m", "simulator", "preprocess", str(VIDEO), "-o", str(gp)], check=True)  # fmt: skip
+    gp = pano_grid()
     grid = load_grid(gp)
     hp = load_headpath(TRACE, video="6.mp4")
     ctx = create_context()
