@@ -48,3 +48,19 @@ def _map_cache_dir(tmp_path_factory) -> Path:
         os.environ.pop("VIMSIM_CACHE_DIR", None)
     else:
         os.environ["VIMSIM_CACHE_DIR"] = old
+
+
+@pytest.fixture(scope="module")
+def ctx():
+    """A headless EGL context (moderngl) per test module; skips only where creating one
+    fails (CI installs libegl1 + libgl1-mesa-dri), and no GL error is left at the end."""
+    from simulator.errors import InputError
+    from simulator.render import create_context
+
+    try:
+        c = create_context()
+    except InputError as e:
+        pytest.skip(f"headless EGL absent on this machine ({e})")
+    assert c.error == "GL_NO_ERROR"
+    yield c
+    assert c.error == "GL_NO_ERROR"

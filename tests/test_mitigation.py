@@ -30,18 +30,6 @@ WHITE = np.full((256, 512, 3), 255, np.uint8)
 FOV = 107.0
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from simulator.render import create_context
-
-    try:
-        c = create_context()
-    except InputError as e:
-        pytest.skip(f"headless EGL absent on this machine ({e})")
-    yield c
-    assert c.error == "GL_NO_ERROR"
-
-
 def _render(ctx, img, yaw, pitch, roll, mit, *, size=400, grf=None, opacity=1.0, co=None):
     cfg = RenderConfig(eye_size=(size, size), hfov_deg=FOV, vfov_deg=FOV, grf=grf, mitigation=mit)
     return render_view(ctx, img, yaw, pitch, roll, config=cfg, opacity=opacity, cell_opacity=co)

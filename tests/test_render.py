@@ -33,19 +33,6 @@ REPO = Path(__file__).resolve().parents[1]
 GOLDEN = REPO / "tests" / "golden"
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from simulator.render import create_context
-
-    try:
-        c = create_context()
-    except InputError as e:
-        pytest.skip(f"headless EGL absent on this machine ({e})")
-    assert c.error == "GL_NO_ERROR"
-    yield c
-    assert c.error == "GL_NO_ERROR"
-
-
 @pytest.fixture(autouse=True)
 def _no_gl_error(request):
     """Assert no GL error before and after each GL test."""

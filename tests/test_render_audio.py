@@ -8,21 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
-
 RATE = 48000
 FPS = 10
 N = 10  # frames: 1.0 s
-
-
-@pytest.fixture(scope="module")
-def ctx():
-    from simulator.render import create_context
-
-    try:
-        return create_context()
-    except InputError as e:
-        pytest.skip(f"headless EGL absent on this machine ({e})")
 
 
 def _tone(t: np.ndarray) -> np.ndarray:

@@ -17,16 +17,6 @@ def _data_lines(path):
     return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
 
 
-@pytest.fixture(scope="module")
-def ctx():
-    from simulator.render import create_context
-
-    try:
-        return create_context()
-    except InputError as e:
-        pytest.skip(f"headless EGL absent on this machine ({e})")
-
-
 def _ramp_video(path: Path, n: int = 10, fps: int = 10) -> None:
     """Frame i is a uniform gray of 20 + 20 i: its brightness names the frame."""
     from simulator.video import VideoWriter
