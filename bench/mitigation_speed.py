@@ -28,6 +28,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
+from render_speed import head_angles, make_video  # bench/render_speed.py: the same clip and path
+
 from simulator import video
 from simulator.cells import CellGrid
 from simulator.choices import MITIGATIONS
@@ -35,20 +37,7 @@ from simulator.grf import GrfConfig
 from simulator.mitigation import Mitigation, cell_opacity, visible_flow
 from simulator.render import RenderConfig, create_context, render_video
 
-REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL = 1.15
-
-
-def make_video(path: Path, n: int, fps: int = 30) -> None:
-    img = video.read_frame(REAL / "vrview/petra.jpg")  # 2048x1024
-    with video.VideoWriter(path, fps, (2048, 1024), preset="ultrafast", crf=20) as w:
-        for i in range(n):
-            w.write(np.roll(img, 3 * i, axis=1))
-
-
-def head_angles(n: int, fps: int) -> np.ndarray:
-    t = np.arange(n) / fps
-    return np.stack([-60 + 60 * t, 15 * np.sin(2 * np.pi * 0.5 * t), np.zeros(n)], axis=-1)
 
 
 def half_field(n: int) -> np.ndarray:
