@@ -65,55 +65,20 @@ def test_errors_name_the_column(tmp_path, capsys):
     p = tmp_path / "log.csv"
     p.write_text("t,yaw,pitch\n0,1,2\n1,x,3\n")
     out = tmp_path / "o.csv"
-    assert (
-        main(
-            [
-                "headpath",
-                "convert",
-                str(p),
-                "-o",
-                str(out),
-                "--columns",
-                "time=t,yaw=yaw,pitch=elev",
-            ]
-        )
-        == 2
-    )
+
+    def convert(columns: str) -> int:
+        return main(["headpath", "convert", str(p), "-o", str(out), "--columns", columns])
+
+    assert convert("time=t,yaw=yaw,pitch=elev") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'elev'" in err and "among its 3 columns" in err
     assert "t, yaw, pitch" not in err  # the header is not echoed (issue 13)
-    assert (
-        main(
-            [
-                "headpath",
-                "convert",
-                str(p),
-                "-o",
-                str(out),
-                "--columns",
-                "time=t,yaw=yaw,pitch=pitch",
-            ]
-        )
-        == 2
-    )
+    assert convert("time=t,yaw=yaw,pitch=pitch") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "line 3" in err and "'yaw'" in err and "non-numeric" in err
     assert not out.exists()
     p.write_text("t,yaw,pitch\n0,350,2\n1,10,3\n")
-    assert (
-        main(
-            [
-                "headpath",
-                "convert",
-                str(p),
-                "-o",
-                str(out),
-                "--columns",
-                "time=t,yaw=yaw,pitch=pitch",
-            ]
-        )
-        == 0
-    )
+    assert convert("time=t,yaw=yaw,pitch=pitch") == 0
     rows = out.read_text().splitlines()
     assert rows[0] == "time_s,yaw_deg,pitch_deg,roll_deg" and float(
         rows[1].split(",")[1]
