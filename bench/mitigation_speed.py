@@ -32,7 +32,7 @@ from render_speed import head_angles, make_video  # bench/render_speed.py: the s
 
 from simulator import video
 from simulator.cells import CellGrid
-from simulator.choices import MITIGATIONS
+from simulator.core.choices import MITIGATIONS
 from simulator.grf import GrfConfig
 from simulator.mitigation import Mitigation, cell_opacity, visible_flow
 from simulator.render import RenderConfig, create_context, render_video

@@ -7,7 +7,7 @@ angles in degrees at every boundary (``*_deg``), radians inside; world frame
 roll (+ right ear down), applied yaw, then pitch, then roll (intrinsic).
 """
 
-from simulator.errors import InputError, VimsimError
+from simulator.core.errors import InputError, VimsimError
 
 __version__ = "0.1.0"
 __all__ = ["InputError", "VimsimError", "__version__"]

@@ -16,8 +16,8 @@ import os
 from dataclasses import dataclass
 from fractions import Fraction
 
-from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
 
 __all__ = ["MP4_COPY_CODECS", "AudioSource", "audio_source"]
 

@@ -24,7 +24,7 @@ from numpy.typing import NDArray
 from scipy import sparse
 from scipy.special import ellipe
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import check_fov, dir_to_lonlat, head_rotation, perspective_rays
 from simulator.headsets import get_headset
 from simulator.windows import WindowGrid

@@ -17,7 +17,7 @@ import importlib
 import os
 import sys
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["build_parser", "main"]
 
@@ -59,7 +59,7 @@ def _inputs_named(args: argparse.Namespace) -> list[str]:
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """InputError before any work for an unusable output name (see the module text)."""
-    from simulator.fileio import check_not_input, check_output_file
+    from simulator.core.fileio import check_not_input, check_output_file
 
     out = getattr(args, "output", None)
     folder = args.command in FOLDER_OUTPUTS or (
@@ -128,7 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     from simulator.commands._signals import exit_status, handle_signals, signal_name
-    from simulator.fileio import input_scope
+    from simulator.core.fileio import input_scope
 
     name = f"vimsim {args.command}"
     try:

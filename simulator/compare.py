@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.frames import FRAMES_JSON
 
 __all__ = [

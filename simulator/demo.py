@@ -30,15 +30,15 @@ from pathlib import Path
 import numpy as np
 
 from simulator.epof.viewing import compute_epof, write_epof_csv
-from simulator.errors import InputError
-from simulator.fileio import OutputFolder, atomic_output, json_text
+from simulator.core.errors import InputError
+from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.gridfile import load_grid
 from simulator.headpath import save_headpath_csv
 from simulator.headpath import synth as synth_headpath
 from simulator.preprocess.paper import preprocess_video
-from simulator.progress import Progress
+from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig
 from simulator.synth.clip import load_truth, synthesize
 from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps

@@ -42,8 +42,8 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.choices import FLOW_CHOICES, DISPreset
-from simulator.errors import InputError
+from simulator.core.choices import FLOW_CHOICES, DISPreset
+from simulator.core.errors import InputError
 from simulator.geometry import check_fov
 
 __all__ = [

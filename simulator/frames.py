@@ -24,12 +24,12 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_output_dir, json_text
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.geometry import head_rotation, split_eye
 from simulator.grf import OpacityRule
 from simulator.plan import grf_settings, plan_viewing
-from simulator.progress import Counter, Progress
+from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
 from simulator.video import iter_frames, probe

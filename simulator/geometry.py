@@ -47,8 +47,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from simulator.choices import EYES, INTERPS, LAYOUTS, Interp
-from simulator.errors import InputError
+from simulator.core.choices import EYES, INTERPS, LAYOUTS, Interp
+from simulator.core.errors import InputError
 
 __all__ = [
     "EYES",

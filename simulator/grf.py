@@ -30,8 +30,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.choices import OPACITY_SOURCES
-from simulator.errors import InputError
+from simulator.core.choices import OPACITY_SOURCES
+from simulator.core.errors import InputError
 from simulator.gridfile import GridFile
 
 __all__ = [

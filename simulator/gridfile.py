@@ -36,8 +36,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.cells import CellGrid
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_input_file
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_input_file
 from simulator.lazyfield import LazyField
 from simulator.windows import WindowGrid
 

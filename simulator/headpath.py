@@ -31,9 +31,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation, Slerp
 
-from simulator.choices import SYNTH_KINDS
-from simulator.errors import InputError
-from simulator.fileio import atomic_output
+from simulator.core.choices import SYNTH_KINDS
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output
 from simulator.geometry import head_angles_deg, head_rotation
 
 __all__ = [

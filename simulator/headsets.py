@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import check_fov
 
 __all__ = ["HEADSETS", "Headset", "get_headset", "resolve_fov"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from simulator.epof.viewing import EpofResult
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.video import MediaInfo, probe
 
 __all__ = ["check_right_eye", "csv_opacity", "frame_range"]

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["CHUNK_BYTES", "LazyField", "field_chunks", "take_rows"]
 

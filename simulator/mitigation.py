@@ -1,7 +1,7 @@
 """Mitigations beyond the paper (tunneling vignette, flow-local grains) and the flow that still reaches the eye.
 
 A :class:`Mitigation` says what is drawn over the video (one of
-:data:`simulator.choices.MITIGATIONS`):
+:data:`simulator.core.choices.MITIGATIONS`):
 
 * ``grf`` (default): the paper's world-fixed grains, alpha ``cutout(ecc) * opacity``
   (:mod:`simulator.grf`);
@@ -37,8 +37,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.cells import CellGrid, Frustum
-from simulator.choices import MITIGATIONS
-from simulator.errors import InputError
+from simulator.core.choices import MITIGATIONS
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.grf import GrainField, GrfConfig, cutout_alpha
 from simulator.lazyfield import LazyField, field_chunks
@@ -71,7 +71,7 @@ def parse_color(text: str) -> tuple[float, float, float]:
 class Mitigation:
     """What is drawn over the video, and the vignette's parameters (degrees).
 
-    kind : one of :data:`simulator.choices.MITIGATIONS` (default ``"grf"``)
+    kind : one of :data:`simulator.core.choices.MITIGATIONS` (default ``"grf"``)
     aperture_min_deg : vignette aperture diameter at opacity 1, degrees of visual field,
         in (0, FOV) (checked against the view by :meth:`check_view`); default 60
     feather_deg : width of the vignette's soft edge, degrees >= 0 (default 10)

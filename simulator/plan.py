@@ -17,7 +17,7 @@ import numpy as np
 
 from simulator.cells import Frustum
 from simulator.epof.viewing import compute_epof, read_epof_csv
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.grf import OpacityRule, grain_count
 from simulator.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.headpath import HeadPath

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.fileio import atomic_output
+from simulator.core.fileio import atomic_output
 from simulator.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
 from simulator.video import VideoWriter
 

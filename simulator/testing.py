@@ -24,7 +24,7 @@ from simulator.compare import (
     compare_dirs,
     update_goldens,
 )
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.frames import render_frames
 
 __all__ = ["UPDATE_ENV", "assert_frames_match", "render_frames"]

@@ -25,8 +25,8 @@ from typing import Literal, TypeVar
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import PendingOutput, check_input_file
+from simulator.core.errors import InputError
+from simulator.core.fileio import PendingOutput, check_input_file
 from simulator.geometry import check_equirect_aspect, split_eye
 
 __all__ = [

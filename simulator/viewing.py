@@ -12,15 +12,15 @@ import numpy as np
 
 from simulator.audio import audio_source
 from simulator.epof.viewing import EpofResult, write_epof_csv
-from simulator.errors import InputError
-from simulator.fileio import OutputFolder, atomic_output, json_text
+from simulator.core.errors import InputError
+from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import OpacityRule
 from simulator.gridfile import require_field
 from simulator.headpath import HeadPath
 from simulator.lazyfield import take_rows
 from simulator.mitigation import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
-from simulator.progress import Progress
+from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video

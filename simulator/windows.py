@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import (
     _PAD,
     _check_size,
@@ -25,7 +25,7 @@ from simulator.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.mapcache import cached_arrays
+from simulator.core.mapcache import cached_arrays
 
 __all__ = ["GRID_PRESETS", "WindowExtractor", "WindowGrid", "grid_preset"]
 
@@ -149,7 +149,7 @@ class WindowExtractor:
     """Extract every window of a :class:`WindowGrid` from equirect frames of one size, fast.
 
     The sampling maps of all windows are built once (per grid and frame size; cached in
-    the user cache folder, :mod:`simulator.mapcache`), stacked window after window into
+    the user cache folder, :mod:`simulator.core.mapcache`), stacked window after window into
     tall maps in OpenCV's fixed-point form, so that every frame is a few ``cv2.remap``
     calls (seam wrap, pole crossing) writing each window contiguously: the
     ``(P, Y, h, w)`` result needs no rearranging copy and can be written into a reused

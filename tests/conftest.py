@@ -39,7 +39,7 @@ def out_dir() -> Path:
 @pytest.fixture(scope="session", autouse=True)
 def _map_cache_dir(tmp_path_factory) -> Path:
     """Tests (and the CLI subprocesses they start) use a temporary map cache, never the
-    user's (:mod:`simulator.mapcache`)."""
+    user's (:mod:`simulator.core.mapcache`)."""
     d = tmp_path_factory.mktemp("vimsim-cache")
     old = os.environ.get("VIMSIM_CACHE_DIR")
     os.environ["VIMSIM_CACHE_DIR"] = str(d)
@@ -54,7 +54,7 @@ def _map_cache_dir(tmp_path_factory) -> Path:
 def ctx():
     """A headless EGL context (moderngl) per test module; skips only where creating one
     fails (CI installs libegl1 + libgl1-mesa-dri), and no GL error is left at the end."""
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.render import create_context
 
     try:

@@ -22,7 +22,7 @@ from simulator.analyze import (
     ssq_scores,
 )
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "study_example.csv"

@@ -1,4 +1,4 @@
-"""The CLI as a whole: registry, exit statuses, and choice lists from simulator.choices."""
+"""The CLI as a whole: registry, exit statuses, and choice lists from simulator.core.choices."""
 
 from __future__ import annotations
 
@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from simulator import choices, readers, windows
+from simulator import readers, windows
+from simulator.core import choices
 from simulator.cli import COMMANDS, build_parser, main
 from simulator.grf import OPACITY_SOURCES
 from simulator.headpath import SYNTH_KINDS
@@ -28,7 +29,7 @@ def _choices(parser: argparse.ArgumentParser, *path: str) -> dict[str, tuple]:
 
 
 def test_choice_lists_come_from_one_module():
-    """The parsers offer exactly the library's choices (both read simulator.choices)."""
+    """The parsers offer exactly the library's choices (both read simulator.core.choices)."""
     p = build_parser()
     for cmd in ("preprocess", "render", "viewport"):
         assert _choices(p, cmd)["--layout"] == choices.LAYOUTS
@@ -44,7 +45,7 @@ def test_choice_lists_come_from_one_module():
 
 
 def test_headset_names_and_a_light_parser():
-    """The --headset help lists the profiles from simulator.choices, and building the whole
+    """The --headset help lists the profiles from simulator.core.choices, and building the whole
     parser (every subcommand's options) imports no numpy (the CLI's fast start)."""
     from simulator.headsets import HEADSETS
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.readers import load_columns, load_headpath, parse_column_map
 
 

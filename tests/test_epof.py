@@ -20,7 +20,7 @@ from simulator.epof import (
     viewport_overlaps,
     weighted_epof,
 )
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.grf import OpacityRule
 from simulator.gridfile import load_grid, save_grid
 from simulator.headpath import HeadPath, save_headpath_csv, synth

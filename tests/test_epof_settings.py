@@ -100,7 +100,7 @@ def test_render_records_settings_in_summary_and_csv(tmp_path):
     from simulator.cli import main
 
     pytest.importorskip("moderngl")
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.render import create_context
 
     try:

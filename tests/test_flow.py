@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.flow import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
 from simulator.geometry import perspective_rays
 

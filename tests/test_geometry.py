@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from simulator import geometry as g
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.windows import WindowExtractor, WindowGrid, grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

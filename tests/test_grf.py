@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.grf import GrainField, GrfConfig, cutout_alpha, grain_count
 
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.gridfile import VERSION, content_hash, load_grid, save_grid
 from simulator.video import MediaInfo
 from simulator.windows import grid_preset

@@ -11,7 +11,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.headpath import (
     CoarseSamplingWarning,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.readers import load_all_users, load_headpath
 
 

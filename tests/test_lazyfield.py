@@ -11,7 +11,7 @@ import pytest
 from simulator import lazyfield
 from simulator.cells import CellGrid, Frustum
 from simulator.epof.exact import viewport_epof
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.gridfile import load_grid, require_field, save_grid
 from simulator.lazyfield import LazyField, take_rows
 from simulator.mitigation import Mitigation, cell_opacity, visible_flow

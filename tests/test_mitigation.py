@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from simulator.cells import CellGrid, Frustum
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.mitigation import Mitigation, cell_opacity, parse_color, visible_flow

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.grf import OpacityRule, comfort_rule, ease
 
 

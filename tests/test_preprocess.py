@@ -16,7 +16,7 @@ from scipy.spatial.transform import Rotation
 
 from simulator import geometry
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.preprocess import (

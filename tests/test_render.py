@@ -17,7 +17,7 @@ import cv2
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import perspective_rays
 from simulator.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
@@ -686,7 +686,7 @@ def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
     monkeypatch.setattr(os, "replace", rec)
     cfg = R.RenderConfig(eye_size=(32, 32), grf=GrfConfig(seed=1))
     s = render_viewing(vid, hp, tmp_path / "o", config=cfg, opacity=0.4, progress=False, ctx=ctx)
-    from simulator.fileio import MANIFEST_NAME, json_text
+    from simulator.core.fileio import MANIFEST_NAME, json_text
 
     # a mono video: one eye file by default (right.mp4 would be the same image); every
     # output once, the manifest (written first as incomplete, then complete) beside them,

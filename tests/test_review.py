@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import equirect_pixel_lonlat, head_rotation, lonlat_to_dir
 from simulator.review import frustum_outline_xy
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 import simulator.preprocess.sphere
 from simulator.cells import CellGrid, Frustum, viewport_weights, window_pof
 from simulator.epof import ViewportQuery, viewport_epof
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid, require_field, save_grid
 from simulator.headsets import HEADSETS, get_headset, resolve_fov

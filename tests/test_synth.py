@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import lonlat_to_dir
 from simulator.synth import (
     SynthConfig,

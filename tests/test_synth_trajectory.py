@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_angles_deg
 from simulator.synth import SynthConfig, load_truth, synthesize, truth_path_for
 from simulator.synth.camera_path import (
@@ -418,7 +418,7 @@ def test_sphere_mode_matches_truth_on_small_walk(tmp_path):
 
 
 def test_cli_choice_list_matches_module():
-    from simulator import choices
+    from simulator.core import choices
     from simulator.synth import camera_path
 
     assert camera_path.INTERPS == choices.CAMERA_INTERPS

@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.video import VideoWriter, iter_frames, prefetch, probe, read_frame
 
 

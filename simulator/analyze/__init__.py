@@ -19,7 +19,7 @@ from simulator.analyze.scores import (
     mssq_short_score,
     ssq_scores,
 )
-from simulator.choices import FLOW_STATS
+from simulator.core.choices import FLOW_STATS
 
 __all__ = [
     "FLOW_STATS",

@@ -24,9 +24,9 @@ from simulator.analyze.scores import (
     mssq_short_score,
     ssq_scores,
 )
-from simulator.choices import FLOW_STATS
-from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.core.choices import FLOW_STATS
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
 
 __all__ = ["FLOW_STATS", "Study", "read_study", "session_flow"]
 

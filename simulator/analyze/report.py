@@ -14,8 +14,8 @@ from numpy.typing import NDArray
 
 from simulator.analyze.data import Participant, Study
 from simulator.analyze.scores import k_of
-from simulator.errors import InputError
-from simulator.fileio import OutputFolder, atomic_output, csv_cell
+from simulator.core.errors import InputError
+from simulator.core.fileio import OutputFolder, atomic_output, csv_cell
 
 __all__ = ["Analysis", "analyze_study", "write_report"]
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = [
     "MSSQ_TYPES",

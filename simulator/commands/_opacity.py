@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.choices import OPACITY_SOURCES
+from simulator.core.choices import OPACITY_SOURCES
 from simulator.commands._types import percentile, seconds
 
 __all__ = ["add_opacity_arguments", "rule_from_args"]
@@ -68,7 +68,7 @@ def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
 def rule_from_args(args: argparse.Namespace):
     """The :class:`simulator.grf.OpacityRule` the options ask for (InputError if
     ``--opacity-rule paper`` is combined with smoothing or easing)."""
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
 
     given = [

@@ -19,7 +19,7 @@ def _handler(signum, frame):
 @contextlib.contextmanager
 def handle_signals() -> Iterator[None]:
     """Within it SIGTERM and SIGINT raise KeyboardInterrupt (cleanup runs in ``finally``
-    and ``except BaseException`` blocks, e.g. :func:`simulator.fileio.atomic_output`)."""
+    and ``except BaseException`` blocks, e.g. :func:`simulator.core.fileio.atomic_output`)."""
     _received.clear()
     old = {}
     for s in (signal.SIGTERM, signal.SIGINT):

@@ -141,7 +141,7 @@ def add_fov_arguments(
         help=f"exact vertical {what} FOV in degrees (with --hfov)",
     )
     if headset:
-        from simulator.choices import HEADSET_NAMES  # light: the parser stays numpy-free
+        from simulator.core.choices import HEADSET_NAMES  # light: the parser stays numpy-free
 
         p.add_argument(
             "--headset",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import FLOW_STATS
+from simulator.core.choices import FLOW_STATS
 from simulator.commands._types import nonneg_float
 
 __all__ = ["register", "run"]

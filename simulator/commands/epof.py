@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import EPOF_METHODS
+from simulator.core.choices import EPOF_METHODS
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, frustum_from_args, positive_int
 
@@ -65,7 +65,7 @@ def _check_output_file(path: str) -> None:
     import os
     from pathlib import Path
 
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
 
     target = Path(path)
     parent = target.parent if str(target.parent) else Path(".")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import HEADPATH_FORMATS, SYNTH_KINDS
+from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
 from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
 
@@ -230,7 +230,7 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
 def run(args: argparse.Namespace) -> int:
     """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
     from simulator import headpath as hp_mod
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.readers import load_headpath, load_keyframes
 
     with warnings_to_stderr("vimsim headpath"):
@@ -282,8 +282,8 @@ def _convert_all(args: argparse.Namespace) -> int:
     """``convert IN --user all -o DIR``: every user of IN, read once, as DIR/<stem>_user<N>.csv."""
     from pathlib import Path
 
-    from simulator.errors import InputError
-    from simulator.fileio import check_not_input, check_output_dir
+    from simulator.core.errors import InputError
+    from simulator.core.fileio import check_not_input, check_output_dir
     from simulator.headpath import save_headpath_csv
     from simulator.readers import load_all_users
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
+from simulator.core.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
 from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float, seconds
 
 __all__ = ["register", "run"]
@@ -137,7 +137,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Preprocess; 0 when the grid file was written, 2 on bad input, 130 when interrupted."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
     from simulator.windows import grid_preset
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
+from simulator.core.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import (
     add_fov_arguments,
@@ -169,13 +169,13 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     options: the one frustum, the GRF, the stereo layout (the grid's when not given) and
     the opacity rule."""
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.grf import GrfConfig, grain_count
     from simulator.gridfile import load_grid
     from simulator.mitigation import Mitigation, parse_color
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig
-    from simulator.resources import check_fits
+    from simulator.core.resources import check_fits
 
     frustum = frustum_from_args(args, (107.0, 107.0))
     w, h = args.eye_size

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.choices import CAMERA_INTERPS, SCENES, SYNTH_LAYOUTS
+from simulator.core.choices import CAMERA_INTERPS, SCENES, SYNTH_LAYOUTS
 from simulator.commands._types import nonneg_int, positive_float, size_wxh, x264_crf
 
 __all__ = ["register", "run"]
@@ -160,7 +160,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Render the clip and its truth file; print what was written."""
     from simulator.commands._progress import progress_bar
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.synth import SynthConfig, synthesize
 
     if args.scene == "trajectory":
@@ -188,7 +188,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_trajectory(args: argparse.Namespace) -> int:
     from simulator.commands._progress import progress_bar
-    from simulator.errors import InputError
+    from simulator.core.errors import InputError
     from simulator.synth.trajectory import synthesize_trajectory
 
     if args.camera is None:

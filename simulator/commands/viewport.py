@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.choices import EYES, INTERPS, LAYOUTS
+from simulator.core.choices import EYES, INTERPS, LAYOUTS
 from simulator.commands._types import (
     add_fov_arguments,
     angle_deg,
@@ -12,7 +12,7 @@ from simulator.commands._types import (
     nonneg_int,
     size_wxh,
 )
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
 
@@ -90,8 +90,8 @@ def run(args: argparse.Namespace) -> int:
     from PIL import Image
 
     from simulator import geometry, video
-    from simulator.fileio import atomic_output
-    from simulator.resources import check_fits
+    from simulator.core.fileio import atomic_output
+    from simulator.core.resources import check_fits
 
     hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
     # rays (float64 x 3, twice), lon/lat, maps and the image: about 120 bytes per pixel

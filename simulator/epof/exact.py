@@ -23,7 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.cells import CellGrid, Frustum, _weights_band
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.lazyfield import LazyField
 

@@ -33,7 +33,7 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
 from simulator.gridfile import GridFile
 from simulator.windows import WindowGrid

@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from simulator.cells import Frustum
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_input_file
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_input_file
 from simulator.grf import OpacityRule
 from simulator.gridfile import GridFile, require_field
 from simulator.headpath import HeadPath

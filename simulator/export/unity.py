@@ -40,8 +40,8 @@ from numpy.typing import NDArray
 from simulator import __version__
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_input_file, check_output_dir
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_input_file, check_output_dir
 from simulator.grf import OpacityRule
 from simulator.gridfile import GridFile, content_hash, load_grid, require_field
 

@@ -6,7 +6,7 @@ import math
 import os
 from pathlib import Path
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["PreprocessInterrupted"]
 

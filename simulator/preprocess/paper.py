@@ -56,8 +56,8 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import atomic_output
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output
 from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.geometry import perspective_rays
 from simulator.gridfile import content_hash, save_grid
@@ -67,7 +67,7 @@ from simulator.preprocess.common import (
     common_meta,
     frame_range,
 )
-from simulator.progress import Counter, Progress
+from simulator.core.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
 from simulator.windows import WindowExtractor, WindowGrid
 
@@ -261,7 +261,7 @@ def preprocess_video(
     checkpoint_every_s : wall-clock seconds between periodic checkpoints (0: every frame)
     threads : worker threads for the flow (default: CPU count)
     cache : read and store the window maps in the user cache folder
-        (:mod:`simulator.mapcache`; False: ``--no-cache``)
+        (:mod:`simulator.core.mapcache`; False: ``--no-cache``)
     progress : ``progress(done, total)`` in frames, called as rows complete (the CLI draws a bar)
     on_frame : called with the grid row index after each row (tests use it to interrupt)
 

@@ -28,7 +28,7 @@ from numpy.typing import NDArray
 from scipy import sparse
 
 from simulator.cells import CellGrid, _cell_geometry, window_pof
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.geometry import (
     dir_to_lonlat,
@@ -39,7 +39,7 @@ from simulator.geometry import (
 )
 from simulator.gridfile import FieldSpool, content_hash, save_grid
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
-from simulator.progress import Counter, Progress
+from simulator.core.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
 from simulator.windows import WindowGrid
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import os
 
-from simulator.choices import HEADPATH_FORMATS as FORMATS
-from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.core.choices import HEADPATH_FORMATS as FORMATS
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
 from simulator.headpath import CANONICAL_COLUMNS, HeadPath
 from simulator.readers.avtrack360 import _read_avtrack360
 from simulator.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat

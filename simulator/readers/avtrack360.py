@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.headpath import HeadPath
 from simulator.readers.common import _check_finite, _check_increasing, _dedupe_times
 

@@ -20,8 +20,8 @@ import os
 
 import numpy as np
 
-from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
 from simulator.headpath import HeadPath
 from simulator.readers.common import _check_increasing, _dedupe_times, _hint, _value
 

@@ -12,7 +12,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.headpath import (
     COARSE_STEP_DEG,
     CoarseSamplingWarning,

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import head_rotation
 from simulator.headpath import HeadPath
 from simulator.readers.common import (

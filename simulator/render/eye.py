@@ -45,8 +45,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.cells import Frustum
-from simulator.choices import Eye
-from simulator.errors import InputError
+from simulator.core.choices import Eye
+from simulator.core.errors import InputError
 from simulator.geometry import check_fov, head_rotation
 from simulator.grf import GrainField, GrfConfig
 from simulator.mitigation import Mitigation

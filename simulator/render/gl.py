@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib.resources
 import re
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["EGL_PACKAGES", "ShaderError", "create_context", "load_shader_source"]
 

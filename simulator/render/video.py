@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import atomic_output
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output
 from simulator.geometry import head_rotation, split_eye
-from simulator.progress import Counter, Progress
+from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.video import VideoWriter, iter_frames, prefetch, probe
 

@@ -28,7 +28,7 @@ import socket
 import threading
 from concurrent.futures.process import BrokenProcessPool
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["LocalExecutor", "RayExecutor", "make_executor", "parse_executor"]
 

@@ -2,7 +2,7 @@
 
 Every check runs here, before any work: an unknown key, a missing video id, a glob that
 matches nothing, a duplicate viewing id or a bad option value is one
-:class:`~simulator.errors.InputError` line naming the manifest and the entry, e.g.
+:class:`~simulator.core.errors.InputError` line naming the manifest and the entry, e.g.
 ``study.toml: [[viewings]] #2 (video 'coaster'): unknown key 'usr'; expected one of ...``.
 Paths in the manifest are relative to its folder. The format, with a full example, is in
 ``docs/study.md`` and ``examples/study.toml``.
@@ -18,9 +18,9 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from simulator.choices import MITIGATIONS
-from simulator.errors import InputError
-from simulator.fileio import check_input_file
+from simulator.core.choices import MITIGATIONS
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
 from simulator.headsets import resolve_fov
 from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.readers import FORMATS, detect_format

@@ -25,8 +25,8 @@ from dataclasses import asdict
 from pathlib import Path
 
 from simulator import __version__
-from simulator.errors import InputError
-from simulator.fileio import check_output_dir
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_output_dir
 from simulator.gridfile import VERSION as GRID_VERSION
 from simulator.gridfile import content_hash
 from simulator.study import outputs, tasks

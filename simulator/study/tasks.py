@@ -3,7 +3,7 @@
 Each is a top-level function taking plain values (paths as strings, option dicts), so
 the local process pool and Ray ship them the same way; inputs are passed by path (a
 shared filesystem on a cluster) and outputs are written by the worker, each to a
-temporary name renamed when complete (:func:`simulator.fileio.atomic_output`). A task
+temporary name renamed when complete (:func:`simulator.core.fileio.atomic_output`). A task
 never raises for a bad input: the viewing's result carries the one-line error as its
 ``status``. Per worker process, loaded grids, parsed multi-user trace files and the GL
 context are kept for the next task (the context is created in the worker, on its first
@@ -24,8 +24,8 @@ from simulator.cells import Frustum
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, json_text
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, json_text
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.headpath import HeadPath

@@ -6,7 +6,7 @@ submodule says what it holds.
 
 from __future__ import annotations
 
-from simulator.choices import SCENES
+from simulator.core.choices import SCENES
 from simulator.synth.clip import Truth, load_truth, synthesize, truth_path_for
 from simulator.synth.scenes import (
     SynthConfig,

@@ -29,9 +29,9 @@ from numpy.typing import NDArray
 from scipy.interpolate import make_interp_spline
 from scipy.spatial.transform import Rotation, Slerp
 
-from simulator.choices import CAMERA_INTERPS
-from simulator.errors import InputError
-from simulator.fileio import atomic_output, check_input_file
+from simulator.core.choices import CAMERA_INTERPS
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_input_file
 from simulator.geometry import head_angles_deg, head_rotation
 
 __all__ = [

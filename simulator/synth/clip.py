@@ -20,10 +20,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
-from simulator.fileio import atomic_output
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output
 from simulator.geometry import lonlat_to_dir
-from simulator.progress import Counter, Progress
+from simulator.core.progress import Counter, Progress
 from simulator.synth.scenes import SynthConfig, SynthScene, make_scene
 from simulator.synth.textures import _bundled_texture_path
 from simulator.video import VideoWriter

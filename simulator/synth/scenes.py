@@ -54,8 +54,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from simulator.choices import SCENES, SYNTH_LAYOUTS
-from simulator.errors import InputError
+from simulator.core.choices import SCENES, SYNTH_LAYOUTS
+from simulator.core.errors import InputError
 from simulator.geometry import (
     check_equirect_aspect,
     equirect_pixel_lonlat,

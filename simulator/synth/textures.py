@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 from simulator.geometry import equirect_pixel_lonlat, lonlat_to_dir
 
 __all__ = ["load_texture", "procedural_panorama"]

@@ -20,8 +20,8 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from simulator.errors import InputError
-from simulator.progress import Progress
+from simulator.core.errors import InputError
+from simulator.core.progress import Progress
 from simulator.synth.camera_path import CameraTrajectory, load_camera_csv
 from simulator.synth.clip import load_truth, synthesize, truth_path_for
 from simulator.synth.scenes import MAX_FPS, MAX_FRAMES, SynthConfig, SynthScene, _Box

@@ -14,7 +14,7 @@ import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = [
     "OutputFolder",

@@ -1,4 +1,4 @@
-"""The map cache (simulator.mapcache) and its use by WindowExtractor and preprocess --no-cache."""
+"""The map cache (simulator.core.mapcache) and its use by WindowExtractor and preprocess --no-cache."""
 
 from __future__ import annotations
 
@@ -8,9 +8,10 @@ import av
 import numpy as np
 import pytest
 
-from simulator import mapcache, windows
+from simulator import windows
+from simulator.core import mapcache
 from simulator.cli import main
-from simulator.mapcache import cache_dir, cached_arrays
+from simulator.core.mapcache import cache_dir, cached_arrays
 from simulator.windows import WindowExtractor, WindowGrid
 
 SMALL = WindowGrid(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from simulator.errors import InputError
+from simulator.core.errors import InputError
 
 __all__ = ["available_memory", "check_fits", "human_bytes"]
 
