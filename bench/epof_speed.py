@@ -20,7 +20,7 @@ import numpy as np
 
 from simulator.epof import epof_from_grid, viewport_overlaps
 from simulator.gridfile import load_grid, save_grid
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 FRAME_BUDGET_US = 1e6 / 90.0
 SINGLE_TARGET_US = 50.0

@@ -20,9 +20,10 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
-from simulator import geometry, video
+from simulator import video
+from simulator.sphere import geometry
 from simulator.reference import v360_time_ms
-from simulator.windows import WindowExtractor, grid_preset
+from simulator.sphere.windows import WindowExtractor, grid_preset
 
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"
 ANCHOR_V360_MS = {(256, 256): 1.9, (1440, 1600): 29.8}

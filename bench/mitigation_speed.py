@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 from render_speed import head_angles, make_video  # bench/render_speed.py: the same clip and path
 
 from simulator import video
-from simulator.cells import CellGrid
+from simulator.sphere.cells import CellGrid
 from simulator.core.choices import MITIGATIONS
 from simulator.grf import GrfConfig
 from simulator.mitigation import Mitigation, cell_opacity, visible_flow

@@ -4,7 +4,7 @@ A real panorama (vrview ``petra.jpg``, 2048x1024) is rotated about a known axis 
 omega deg/s and encoded as H.264 (crf 18) at 30 fps. Under that rotation a scene point at
 direction ``d`` moves at ``omega |a x d|`` (``a`` the unit axis), so a window's true POF
 is the solid-angle-weighted mean of ``omega |a x R_w d_i|`` over its pixel rays ``d_i``
-(:func:`simulator.geometry.perspective_rays`, :func:`simulator.geometry.head_rotation`).
+(:func:`simulator.sphere.geometry.perspective_rays`, :func:`simulator.sphere.geometry.head_rotation`).
 
 Prints, per case (axis, omega) and DIS preset, the median and 90th percentile of
 ``|pof_dps - truth| / truth`` over every (frame, window), the ratio of the median to the
@@ -24,13 +24,13 @@ import numpy as np
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from simulator import geometry
+from simulator.sphere import geometry
 from simulator.flow import DISFlow
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.preprocess import preprocess_video
 from simulator.video import VideoWriter
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

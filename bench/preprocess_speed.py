@@ -34,12 +34,12 @@ import numpy as np
 from PIL import Image
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
-from simulator import windows as windows_mod
+from simulator.sphere import windows as windows_mod
 from simulator.flow import make_backend
 from simulator.gridfile import content_hash
 from simulator.preprocess import WindowFlowReducer, reduce_stride
 from simulator.video import iter_frames, probe
-from simulator.windows import WindowExtractor, grid_preset
+from simulator.sphere.windows import WindowExtractor, grid_preset
 
 GOAL_STEADY, GOAL_WHOLE, GOAL_START_S, GOAL_COLD_S = 0.75, 0.6, 2.0, 5.0
 
@@ -47,7 +47,7 @@ _CHILD = """
 import json, sys, time
 t_launch = float(sys.argv[1])
 from simulator.preprocess import preprocess_video
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 t_import = time.time()
 stamps, cpu = [], []
 end = None if sys.argv[7] == "all" else float(sys.argv[7])

@@ -28,7 +28,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from v360_agreement import panoramas, sees_pole
 
-from simulator.geometry import extract_view, head_rotation
+from simulator.sphere.geometry import extract_view, head_rotation
 from simulator.reference import psnr, tile_displacement, v360_view
 from simulator.render import EyeRenderer, RenderConfig, create_context
 

@@ -38,12 +38,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from simulator.cells import CellGrid, window_pof
+from simulator.sphere.cells import CellGrid, window_pof
 from simulator.epof import compute_epof, viewport_epof
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid, require_field
 from simulator.headpath import synth as synth_headpath
-from simulator.headsets import get_headset
+from simulator.sphere.headsets import get_headset
 from simulator.preprocess import (
     SphereConfig,
     WindowFlowReducer,
@@ -52,7 +52,7 @@ from simulator.preprocess import (
 )
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 from simulator.video import iter_frames
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 PANO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "pano.mp4"
@@ -143,7 +143,7 @@ def window_flows(vid: Path, grid, *, end=None):
     """Per frame pair: ``(angles (N, h, w) rad, world rays (N, h, w, 3))`` of DIS ultrafast
     on the paper's windows (what paper mode averages), as a generator."""
     from simulator.flow import DISFlow
-    from simulator.windows import WindowExtractor
+    from simulator.sphere.windows import WindowExtractor
 
     ext = None
     flow = DISFlow()
@@ -161,7 +161,7 @@ def window_flows(vid: Path, grid, *, end=None):
 
 def diagnose(grid, pano_seconds: float) -> list[str]:
     """Section 4 (see the module docstring); returns the printed lines."""
-    from simulator.geometry import dir_to_lonlat
+    from simulator.sphere.geometry import dir_to_lonlat
 
     out = []
 

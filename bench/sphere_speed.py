@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.cells import Frustum, _window_matrices, window_pof
+from simulator.sphere.cells import Frustum, _window_matrices, window_pof
 from simulator.epof import ViewportQuery
 from simulator.preprocess import (
     FieldEstimator,
@@ -31,7 +31,7 @@ from simulator.preprocess import (
 )
 from simulator.synth import SynthConfig, synthesize
 from simulator.video import iter_frames
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from simulator.geometry import head_angles_deg
+from simulator.sphere.geometry import head_angles_deg
 from simulator.gridfile import load_grid
 from simulator.preprocess import preprocess_sphere
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
@@ -46,7 +46,7 @@ from simulator.synth.trajectory import (
     synthesize_trajectory,
     trajectory_config,
 )
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "bench" / "_out" / "trajectory"
@@ -288,7 +288,7 @@ def speed(args, size) -> bool:
     # The only per-frame work that differs between the two scenes: the poses the renderer
     # asks for and the truth row (45 x 90 cells; the trajectory adds its rotation and
     # translation parts). The rest (ray cast, texture lookups, encoding) is the same code.
-    from simulator.geometry import lonlat_to_dir
+    from simulator.sphere.geometry import lonlat_to_dir
 
     c = ccfg.truth_cell_deg
     lo_, la_ = np.meshgrid(

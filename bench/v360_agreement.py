@@ -4,7 +4,7 @@ Usage: .venv/bin/python bench/v360_agreement.py [--size 256] [--fov 90] [--inter
 
 Per panorama (each eye of stereo ones) x orientation: PSNR (dB, RGB) and the median
 |local displacement| (px, phase correlation on 32x32 tiles, textured tiles only) between
-``simulator.geometry.extract_view`` and ``v360=e:flat:...:interp=cubic``. For |yaw| > 30
+``simulator.sphere.geometry.extract_view`` and ``v360=e:flat:...:interp=cubic``. For |yaw| > 30
 deg v360 looks at yaw 0 of the panorama rolled by whole columns (v360 drifts with yaw;
 the drift is measured and printed first). Rows whose view contains a pole are reported
 separately (neither side prefilters; aliasing there makes PSNR content-dependent).
@@ -22,7 +22,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
-from simulator import geometry, video
+from simulator import video
+from simulator.sphere import geometry
 from simulator.reference import compare_with_v360, psnr, tile_displacement, v360_view
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"

@@ -32,7 +32,7 @@ import numpy as np
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.gridfile import load_grid
 from simulator.headpath import save_headpath_csv
@@ -43,7 +43,7 @@ from simulator.render.eye import RenderConfig
 from simulator.synth.clip import load_truth, synthesize
 from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps
 from simulator.viewing import render_viewing
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 __all__ = ["DemoConfig", "run_demo"]
 

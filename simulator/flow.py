@@ -44,7 +44,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import FLOW_CHOICES, DISPreset
 from simulator.core.errors import InputError
-from simulator.geometry import check_fov
+from simulator.sphere.geometry import check_fov
 
 __all__ = [
     "DIS_PRESETS",
@@ -316,7 +316,7 @@ def make_backend(spec: str, size: tuple[int, int] | None = None) -> FlowBackend:
 class RayAngles:
     """Angle between each pixel's ray and its flow target's ray, in a perspective view.
 
-    Rays follow :func:`simulator.geometry.perspective_rays`: the pixel centre ``(i, j)``
+    Rays follow :func:`simulator.sphere.geometry.perspective_rays`: the pixel centre ``(i, j)``
     (column, row) has its ray ``r0 = (u0, v0, 1)`` through the plane ``z = 1`` at
     ``u0 = ((i + 0.5) / w * 2 - 1) tan(hfov / 2)`` (+ right) and
     ``v0 = (1 - (j + 0.5) / h * 2) tan(vfov / 2)`` (+ up). A flow ``(dx, dy)`` in pixels

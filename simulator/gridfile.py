@@ -13,7 +13,7 @@ A ``.npz`` (no pickles; loaded with ``allow_pickle=False``) holding
     Window centres in degrees (yaw + right, pitch + up; windows have no roll).
 ``meta`` : 0-d str array, a JSON object with at least ``format``
     (:data:`FORMAT`), ``version`` (:data:`VERSION`), ``grid`` (a
-    :class:`~simulator.windows.WindowGrid` dict: steps, pitch range, ``hfov_deg``,
+    :class:`~simulator.sphere.windows.WindowGrid` dict: steps, pitch range, ``hfov_deg``,
     ``vfov_deg``, window ``size``), ``fps``, ``n_frames``, ``flow`` (method and
     parameters), ``layout``, ``eye``, ``video`` (``path``, ``width``, ``height``,
     ``sar``, ``content_hash``).
@@ -35,11 +35,11 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.cells import CellGrid
+from simulator.sphere.cells import CellGrid
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.lazyfield import LazyField
-from simulator.windows import WindowGrid
+from simulator.sphere.windows import WindowGrid
 
 __all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
 

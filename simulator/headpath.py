@@ -1,6 +1,6 @@
 """Head paths: times plus head orientations, their interpolation, and the scripted paths.
 
-Conventions (SPEC.md, :mod:`simulator.geometry`)
+Conventions (SPEC.md, :mod:`simulator.sphere.geometry`)
 ------------------------------------------------
 World frame +x right, +y up, +z forward (the centre of the equirect frame). Head
 orientation = yaw (+ turns right, toward +lon), pitch (+ looks up), roll (+ right ear
@@ -34,7 +34,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from simulator.core.choices import SYNTH_KINDS
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.geometry import head_angles_deg, head_rotation
+from simulator.sphere.geometry import head_angles_deg, head_rotation
 
 __all__ = [
     "MAX_SAMPLES",

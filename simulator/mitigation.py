@@ -36,10 +36,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.cells import CellGrid, Frustum
+from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation
+from simulator.sphere.geometry import head_rotation
 from simulator.grf import GrainField, GrfConfig, cutout_alpha
 from simulator.lazyfield import LazyField, field_chunks
 

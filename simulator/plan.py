@@ -15,7 +15,7 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.cells import Frustum
+from simulator.sphere.cells import Frustum
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.core.errors import InputError
 from simulator.grf import OpacityRule, grain_count

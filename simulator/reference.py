@@ -31,8 +31,8 @@ import cv2
 import imageio_ffmpeg
 import numpy as np
 
-from simulator.geometry import extract_view
-from simulator.windows import WindowGrid
+from simulator.sphere.geometry import extract_view
+from simulator.sphere.windows import WindowGrid
 
 __all__ = [
     "brute_overlaps",
@@ -73,7 +73,7 @@ def v360_view(
 ) -> np.ndarray:
     """ffmpeg v360's perspective view of an ``(H, W, 3)`` uint8 RGB equirect frame.
 
-    Same argument meaning as :func:`simulator.geometry.extract_view` (degrees, yaw +
+    Same argument meaning as :func:`simulator.sphere.geometry.extract_view` (degrees, yaw +
     right, pitch + up, roll + right ear down, ``size = (width, height)``); the values are
     passed to v360 as they are (v360's signs agree with SPEC.md). Returns
     ``(height, width, 3)`` uint8.

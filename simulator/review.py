@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.fileio import atomic_output
-from simulator.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
+from simulator.sphere.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
 from simulator.video import VideoWriter
 
 __all__ = ["ReviewWriter", "frustum_outline_xy"]
@@ -47,8 +47,8 @@ def frustum_outline_xy(
 
     The four edges of the image rectangle (``tan`` of half the FOVs, head frame +x right,
     +y up, +z forward) are sampled with ``per_edge`` points each, rotated to the world
-    by :func:`simulator.geometry.head_rotation` and mapped with
-    :func:`simulator.geometry.lonlat_to_equirect_xy`. Returns a list of ``(n, 2)`` arrays
+    by :func:`simulator.sphere.geometry.head_rotation` and mapped with
+    :func:`simulator.sphere.geometry.lonlat_to_equirect_xy`. Returns a list of ``(n, 2)`` arrays
     (x, y in pixels, pixel centres at +0.5): the closed outline cut wherever it crosses
     the +-180 deg seam (a jump of more than half the width between neighbours).
     """

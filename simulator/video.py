@@ -4,7 +4,7 @@ Frames are ``(H, W, 3)`` uint8 RGB or ``(H, W)`` uint8 grayscale (the Y plane, r
 without an RGB conversion), origin top-left, stored pixels (a non-square sample aspect
 ratio is reported in :class:`MediaInfo`, never resampled away: equirect longitude is
 linear in the stored column). Stereo layouts (``top-bottom``: left eye on top;
-``side-by-side``: left eye on the left) are split by :func:`simulator.geometry.split_eye`.
+``side-by-side``: left eye on the left) are split by :func:`simulator.sphere.geometry.split_eye`.
 
 Decoding streams: one frame in memory at a time, whatever the video's length.
 Writing goes to a temporary file renamed into place when the writer is closed without
@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import PendingOutput, check_input_file
-from simulator.geometry import check_equirect_aspect, split_eye
+from simulator.sphere.geometry import check_equirect_aspect, split_eye
 
 __all__ = [
     "IMAGE_SUFFIXES",

@@ -8,7 +8,8 @@ import sys
 
 import pytest
 
-from simulator import readers, windows
+from simulator import readers
+from simulator.sphere import windows
 from simulator.core import choices
 from simulator.cli import COMMANDS, build_parser, main
 from simulator.grf import OPACITY_SOURCES
@@ -47,7 +48,7 @@ def test_choice_lists_come_from_one_module():
 def test_headset_names_and_a_light_parser():
     """The --headset help lists the profiles from simulator.core.choices, and building the whole
     parser (every subcommand's options) imports no numpy (the CLI's fast start)."""
-    from simulator.headsets import HEADSETS
+    from simulator.sphere.headsets import HEADSETS
 
     assert tuple(HEADSETS) == choices.HEADSET_NAMES
     code = "import sys, simulator.cli as c; c.build_parser(); print('numpy' in sys.modules)"

@@ -25,7 +25,7 @@ from simulator.grf import OpacityRule
 from simulator.gridfile import load_grid, save_grid
 from simulator.headpath import HeadPath, save_headpath_csv, synth
 from simulator.reference import brute_overlaps
-from simulator.windows import WindowGrid, grid_preset
+from simulator.sphere.windows import WindowGrid, grid_preset
 
 
 def _gridfile(tmp_path, grid: WindowGrid, pof, fps=30.0, name="g.npz", **extra):

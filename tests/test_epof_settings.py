@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from simulator.cells import CellGrid, Frustum, window_pof
+from simulator.sphere.cells import CellGrid, Frustum, window_pof
 from simulator.epof import EPOF_COLUMNS, read_epof_csv, viewport_epof
 from simulator.gridfile import load_grid, save_grid
 from simulator.headpath import save_headpath_csv, synth
 from simulator.preprocess import SphereConfig, field_meta
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 CELL = 6.0
 

@@ -16,10 +16,10 @@ from simulator.cli import main
 from simulator.epof import read_epof_csv, viewport_overlaps
 from simulator.export import DATA_FILE, VERSION, export_unity, frame_at, read_export
 from simulator.export.unity import CS_FILES
-from simulator.geometry import head_rotation
+from simulator.sphere.geometry import head_rotation
 from simulator.gridfile import load_grid, save_grid
 from simulator.preprocess import SphereConfig, field_meta
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 CS_DIR = REPO / "simulator" / "export" / "unity"

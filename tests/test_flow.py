@@ -8,7 +8,7 @@ import pytest
 
 from simulator.core.errors import InputError
 from simulator.flow import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
-from simulator.geometry import perspective_rays
+from simulator.sphere.geometry import perspective_rays
 
 
 def _texture(h: int = 128, w: int = 128, seed: int = 0) -> np.ndarray:

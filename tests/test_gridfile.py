@@ -10,7 +10,7 @@ import pytest
 from simulator.core.errors import InputError
 from simulator.gridfile import VERSION, content_hash, load_grid, save_grid
 from simulator.video import MediaInfo
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 
 def _meta(video_path, n=5, **video):

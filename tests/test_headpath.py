@@ -12,7 +12,7 @@ from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation
+from simulator.sphere.geometry import head_rotation
 from simulator.headpath import (
     CoarseSamplingWarning,
     HeadPath,

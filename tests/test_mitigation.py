@@ -17,9 +17,9 @@ import cv2
 import numpy as np
 import pytest
 
-from simulator.cells import CellGrid, Frustum
+from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.mitigation import Mitigation, cell_opacity, parse_color, visible_flow
 from simulator.render import RenderConfig, render_view
@@ -165,7 +165,7 @@ def _half_moving_clip(path: Path, n: int = 6, fps: float = 30.0) -> None:
 def half_grid(tmp_path_factory):
     from simulator.gridfile import load_grid
     from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
-    from simulator.windows import grid_preset
+    from simulator.sphere.windows import grid_preset
 
     d = tmp_path_factory.mktemp("half")
     _half_moving_clip(d / "half.mp4")
@@ -362,7 +362,7 @@ def test_cli_render_mitigation_bad_input(ctx, tmp_path, capsys, half_grid, extra
 def test_cli_local_grf_on_a_paper_grid_says_how_to_make_a_field(ctx, tmp_path, capsys):
     from simulator.cli import main
     from simulator.preprocess import preprocess_video
-    from simulator.windows import grid_preset
+    from simulator.sphere.windows import grid_preset
 
     vid = tmp_path / "half.mp4"
     _half_moving_clip(vid, n=3)

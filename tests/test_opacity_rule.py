@@ -45,7 +45,7 @@ def test_rule_paper_is_the_clamp_and_eased_bounds_the_change():
 
 def _grid_and_path(tmp_path: Path, n: int = 6):
     from simulator.gridfile import save_grid
-    from simulator.windows import WindowGrid
+    from simulator.sphere.windows import WindowGrid
 
     g = WindowGrid()
     rng = np.random.default_rng(0)

@@ -14,10 +14,10 @@ import pytest
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from simulator import geometry
+from simulator.sphere import geometry
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid
 from simulator.preprocess import (
     PreprocessInterrupted,
@@ -26,7 +26,7 @@ from simulator.preprocess import (
     preprocess_video,
 )
 from simulator.video import VideoWriter
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 OBLIQUE = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
 FPS = 30.0
@@ -266,7 +266,7 @@ def test_real_kill9_subprocess(tmp_path, videos):
     out = tmp_path / "g.npz"
     code = (
         "import os, signal, sys\n"
-        "from simulator.windows import grid_preset\n"
+        "from simulator.sphere.windows import grid_preset\n"
         "from simulator.preprocess import preprocess_video\n"
         "def hook(row):\n"
         "    if row == 4: os.kill(os.getpid(), signal.SIGKILL)\n"
@@ -608,7 +608,7 @@ def test_fused_pipeline_equals_batch_path(tmp_path, videos, ref_long):
     from simulator.flow import make_backend
     from simulator.preprocess import WindowFlowReducer, reduce_stride
     from simulator.video import iter_frames
-    from simulator.windows import WindowExtractor
+    from simulator.sphere.windows import WindowExtractor
 
     fr = [np.array(f) for f in iter_frames(videos["long"], fmt="gray")]
     ex = WindowExtractor(TINY, (fr[0].shape[1], fr[0].shape[0]), cache=False)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.geometry import perspective_rays
+from simulator.sphere.geometry import perspective_rays
 from simulator.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
 from simulator.viewing import OUTDIR_FILES, render_viewing
@@ -204,7 +204,7 @@ def test_grf_opacity_scales_alpha(ctx):
 def _remap_from_view0(img0, yaw1, size, fov=107.0):
     """Pixels of the view at yaw ``yaw1`` predicted from the view at yaw 0 (same world
     content): each pixel's world ray is projected into view 0 and sampled there."""
-    from simulator.geometry import head_rotation
+    from simulator.sphere.geometry import head_rotation
 
     dirs, _ = perspective_rays((size, size), fov, fov)
     world = dirs.astype(np.float64) @ head_rotation(yaw1, 0, 0).as_matrix().T
@@ -240,7 +240,7 @@ def test_grains_are_world_fixed(ctx, petra_small):
 
 
 def test_parallax_only_with_grain_distance(ctx):
-    from simulator.geometry import head_rotation
+    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
 
     R = head_rotation(0, 0, 0).as_matrix()
@@ -298,7 +298,7 @@ def test_eye_size_beyond_gl_limits(ctx):
 
 
 def test_stereo_eyes_sample_their_own_half(ctx):
-    from simulator.geometry import head_rotation
+    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
 
     r = EyeRenderer(ctx, RenderConfig(eye_size=(64, 64), grf=None))
@@ -319,7 +319,7 @@ def test_yuv420p_readback_matches_swscale(ctx, petra_small, grf):
     swscale's rgb24 -> yuv420p of the rgb24 render (what VideoWriter.write does)."""
     import av
 
-    from simulator.geometry import head_rotation
+    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
 
     r = EyeRenderer(ctx, RenderConfig(eye_size=(160, 96), grf=GrfConfig() if grf else None))
@@ -467,7 +467,7 @@ def test_cli_render_grid_from_another_video(ctx, tmp_path, capsys):
 
     pytest.importorskip("simulator.preprocess")
     from simulator.gridfile import save_grid
-    from simulator.windows import WindowGrid
+    from simulator.sphere.windows import WindowGrid
 
     vid = tmp_path / "m.mp4"
     _tiny_video(vid, n=4, fps=10)
@@ -758,7 +758,7 @@ def test_mono_right_copy_is_atomic(ctx, tmp_path, monkeypatch):
 @pytest.mark.parametrize("bad", ["wide", None, float("nan"), float("inf"), 0.0, 180.0, -10.0])
 def test_render_config_fov_is_geometry_check_fov(bad):
     """RenderConfig applies the one FOV rule (geometry.check_fov): InputError, same words."""
-    from simulator.geometry import check_fov
+    from simulator.sphere.geometry import check_fov
     from simulator.render import RenderConfig
 
     with pytest.raises(InputError) as want:
@@ -797,7 +797,7 @@ def test_asymmetric_frustum_reaches_the_renderer(ctx):
     """A headset's off-axis frustum moves the view axis off the image centre, mirrored in
     the right eye: the column showing lon = 0 (a dark meridian) sits where the frustum's
     tangents put it, ``tan(left) / (tan(left) + tan(right)) * width``."""
-    from simulator.cells import Frustum
+    from simulator.sphere.cells import Frustum
     from simulator.render import EyeRenderer, RenderConfig
 
     W, H, size = 1024, 512, 200

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.geometry import equirect_pixel_lonlat, head_rotation, lonlat_to_dir
+from simulator.sphere.geometry import equirect_pixel_lonlat, head_rotation, lonlat_to_dir
 from simulator.review import frustum_outline_xy
 
 W, H = 360, 180

@@ -1,4 +1,4 @@
-"""Sphere mode (simulator/preprocess/sphere.py, simulator/cells.py, simulator/epof/exact.py) and headset profiles (simulator/headsets.py)."""
+"""Sphere mode (simulator/preprocess/sphere.py, simulator/sphere/cells.py, simulator/epof/exact.py) and headset profiles (simulator/sphere/headsets.py)."""
 
 from __future__ import annotations
 
@@ -11,12 +11,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import simulator.preprocess.sphere
-from simulator.cells import CellGrid, Frustum, viewport_weights, window_pof
+from simulator.sphere.cells import CellGrid, Frustum, viewport_weights, window_pof
 from simulator.epof import ViewportQuery, viewport_epof
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation, perspective_rays
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.gridfile import load_grid, require_field, save_grid
-from simulator.headsets import HEADSETS, get_headset, resolve_fov
+from simulator.sphere.headsets import HEADSETS, get_headset, resolve_fov
 from simulator.preprocess import (
     FieldEstimator,
     SphereConfig,
@@ -25,7 +25,7 @@ from simulator.preprocess import (
     preprocess_sphere,
 )
 from simulator.preprocess.sphere import _FieldRows
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 CELL = 4.0
 

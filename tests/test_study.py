@@ -142,7 +142,7 @@ def test_study_outputs(ran, base, capsys):
     # A thumbnail (found by seeking) is the viewport of that frame decoded from the start.
     from PIL import Image
 
-    from simulator.geometry import extract_view
+    from simulator.sphere.geometry import extract_view
     from simulator.video import read_frame
 
     r = mom[0]

@@ -11,7 +11,7 @@ import pytest
 
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.geometry import lonlat_to_dir
+from simulator.sphere.geometry import lonlat_to_dir
 from simulator.synth import (
     SynthConfig,
     angular_speed_dps,
@@ -288,7 +288,7 @@ def test_preprocess_matches_truth_on_small_clip(tmp_path, scene, bound):
     from simulator.gridfile import load_grid
     from simulator.preprocess import preprocess_video
     from simulator.synth import window_truth_dps
-    from simulator.windows import WindowGrid
+    from simulator.sphere.windows import WindowGrid
 
     cfg = SynthConfig(
         scene, seconds=0.4, fps=10, size=(384, 192), axis=(1.0, 2.0, 0.5), omega_dps=40.0

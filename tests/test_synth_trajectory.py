@@ -11,7 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.geometry import head_angles_deg
+from simulator.sphere.geometry import head_angles_deg
 from simulator.synth import SynthConfig, load_truth, synthesize, truth_path_for
 from simulator.synth.camera_path import (
     CAMERA_COLUMNS,
@@ -199,7 +199,7 @@ def test_truth_file_stereo_clip_and_rebuild(tmp_path):
     # The rebuilt scene gives the same truth at the cells.
     sc = scene_from_truth(tpath)
     LO, LA = np.meshgrid(np.radians(tru.lon_deg), np.radians(tru.lat_deg))
-    from simulator.geometry import lonlat_to_dir
+    from simulator.sphere.geometry import lonlat_to_dir
 
     d = lonlat_to_dir(LO, LA)
     np.testing.assert_allclose(sc.speed_dps(tru.time_s[4], d, "left"), tru.speed_dps[4], rtol=1e-5)
@@ -401,7 +401,7 @@ def test_sphere_mode_matches_truth_on_small_walk(tmp_path):
     from simulator.gridfile import load_grid
     from simulator.preprocess import SphereConfig, preprocess_sphere
     from simulator.synth import window_truth_dps
-    from simulator.windows import grid_preset
+    from simulator.sphere.windows import grid_preset
 
     tr = _walk(seconds=0.2, step=0.05, turn_dps=30.0)
     video, tpath, cfg = synthesize_trajectory(tr, tmp_path / "w.mp4", fps=30, size=(512, 256))

@@ -36,7 +36,7 @@ def _path_csv(path: Path, end_s: float) -> None:
 def _partial_grid(path: Path, start: int, end: int, n_video: int, fps: float = 10.0) -> None:
     """A grid of frames start..end of a 128x64 video, random flow (no preprocessing run)."""
     from simulator.gridfile import save_grid
-    from simulator.windows import WindowGrid
+    from simulator.sphere.windows import WindowGrid
 
     g = WindowGrid()
     rng = np.random.default_rng(0)
@@ -135,7 +135,7 @@ def test_render_layout_from_grid_meta(ctx, tmp_path, capsys):
     from simulator.cli import main
     from simulator.gridfile import save_grid
     from simulator.video import VideoWriter
-    from simulator.windows import WindowGrid
+    from simulator.sphere.windows import WindowGrid
 
     vid = tmp_path / "tb.mp4"
     with VideoWriter(vid, 10, (128, 128), preset="ultrafast") as w:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from simulator import geometry
+from simulator.sphere import geometry
 from simulator.cli import main
 
 

@@ -158,7 +158,7 @@ def fov_from_args(args: argparse.Namespace, default):
     ``default`` is returned when none is given (e.g. ``(107.0, 107.0)``, or
     ``(None, None)`` for "the grid's FOV"). InputError for conflicting options.
     """
-    from simulator.headsets import resolve_fov
+    from simulator.sphere.headsets import resolve_fov
 
     return resolve_fov(
         headset=getattr(args, "headset", None),
@@ -170,14 +170,14 @@ def fov_from_args(args: argparse.Namespace, default):
 
 
 def frustum_from_args(args: argparse.Namespace, default, eye: str = "left"):
-    """The one :class:`simulator.cells.Frustum` of the options of :func:`add_fov_arguments`.
+    """The one :class:`simulator.sphere.cells.Frustum` of the options of :func:`add_fov_arguments`.
 
     A headset profile gives its exact (asymmetric) per-eye frustum for ``eye``; FOV options
     a symmetric one; ``default`` (``(hfov, vfov)`` or ``(None, None)``) when none is given,
     ``None`` if that is ``(None, None)`` (e.g. "the grid's FOV"). Built and checked once,
     then carried to EPOF and the renderer.
     """
-    from simulator.cells import Frustum
+    from simulator.sphere.cells import Frustum
 
     if getattr(args, "headset", None):
         fov_from_args(args, default)  # refuses --headset together with FOV options

@@ -139,7 +139,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.core.errors import InputError
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
-    from simulator.windows import grid_preset
+    from simulator.sphere.windows import grid_preset
 
     hfov, vfov = fov_from_args(args, (107.0, 107.0))
     grid = grid_preset(

@@ -20,7 +20,7 @@ __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
 DEFAULT_SIZE = (512, 512)
 DEFAULT_FOV_DEG = 107.0
 
-# = simulator.geometry.LAYOUTS / EYES / INTERPS (kept light: no numpy/cv2 import here).
+# = simulator.sphere.geometry.LAYOUTS / EYES / INTERPS (kept light: no numpy/cv2 import here).
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -89,7 +89,8 @@ def run(args: argparse.Namespace) -> int:
     """Write the view; InputError (exit 2, no output) on bad input."""
     from PIL import Image
 
-    from simulator import geometry, video
+    from simulator import video
+    from simulator.sphere import geometry
     from simulator.core.fileio import atomic_output
     from simulator.core.resources import check_fits
 

@@ -33,7 +33,7 @@ __all__ = [
     "Interp",
 ]
 
-#: Headset profiles (:data:`simulator.headsets.HEADSETS`, in the same order).
+#: Headset profiles (:data:`simulator.sphere.headsets.HEADSETS`, in the same order).
 HEADSET_NAMES: tuple[str, ...] = ("vive-pro-eye", "vive-focus-3", "pimax-crystal", "quest-2")
 
 #: Stereo layouts of an equirect frame: ``top-bottom`` (left eye on top),
@@ -44,12 +44,12 @@ LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
 Eye = Literal["left", "right"]
 EYES: tuple[str, ...] = get_args(Eye)
 
-#: Interpolation kernels of :func:`simulator.geometry.sample_equirect`. ``cubic``: OpenCV's
+#: Interpolation kernels of :func:`simulator.sphere.geometry.sample_equirect`. ``cubic``: OpenCV's
 #: bicubic (Keys, a = -0.75); ``lagrange``: ffmpeg v360's 4-point Lagrange kernel.
 Interp = Literal["cubic", "lagrange", "linear", "nearest"]
 INTERPS: tuple[str, ...] = get_args(Interp)
 
-#: Window-grid presets (:data:`simulator.windows.GRID_PRESETS`).
+#: Window-grid presets (:data:`simulator.sphere.windows.GRID_PRESETS`).
 GRID_PRESET_NAMES: tuple[str, ...] = ("default", "paper-198")
 
 #: Preprocessing methods: the paper's windows, or one field per frame on the sphere.

@@ -6,7 +6,7 @@ Two EPOF definitions (do not mix them)
   overlap-weighted average of *window means*; a window far larger than the viewport still
   contributes its whole mean.
 * Sphere mode (:func:`viewport_epof`): sum_c f_c w_c / sum_c w_c with w_c the solid angle of
-  cell c inside the viewport (:func:`simulator.cells.viewport_weights`).
+  cell c inside the viewport (:func:`simulator.sphere.cells.viewport_weights`).
 
 They agree for uniform motion and differ in general. To compare sphere mode with paper mode
 compare like with like: :func:`simulator.preprocess.sphere.window_pof` derives the paper's
@@ -22,9 +22,9 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.cells import CellGrid, Frustum, _weights_band
+from simulator.sphere.cells import CellGrid, Frustum, _weights_band
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation
+from simulator.sphere.geometry import head_rotation
 from simulator.lazyfield import LazyField
 
 __all__ = ["ViewportQuery", "viewport_epof"]

@@ -34,9 +34,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
+from simulator.sphere.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
 from simulator.gridfile import GridFile
-from simulator.windows import WindowGrid
+from simulator.sphere.windows import WindowGrid
 
 __all__ = [
     "ViewportOverlaps",
@@ -394,7 +394,7 @@ def viewport_overlaps(grid: WindowGrid, hfov_deg: float, vfov_deg: float) -> Vie
 
 def viewport_fov(grid: GridFile, hfov_deg=None, vfov_deg=None) -> tuple[float, float]:
     """Viewport FOV (degrees): the grid's window FOV by default, ``vfov`` = ``hfov`` when
-    only that is given; checked by the one rule, :func:`simulator.geometry.check_fov`."""
+    only that is given; checked by the one rule, :func:`simulator.sphere.geometry.check_fov`."""
     h = grid.hfov_deg if hfov_deg is None else hfov_deg
     v = (grid.vfov_deg if hfov_deg is None else h) if vfov_deg is None else vfov_deg
     return check_fov(h, v, source="viewport")

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.cells import Frustum
+from simulator.sphere.cells import Frustum
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.core.errors import InputError
@@ -105,7 +105,7 @@ def compute_epof(
     naming the command that makes a field if the grid has none); ``"auto"`` (default) =
     sphere when the grid has a field and ``top_k`` is not given, else paper.
 
-    ``frustum`` (:class:`simulator.cells.Frustum`, e.g. a headset's asymmetric per-eye
+    ``frustum`` (:class:`simulator.sphere.cells.Frustum`, e.g. a headset's asymmetric per-eye
     frustum) is the viewport; it replaces ``hfov_deg``/``vfov_deg``. Sphere mode
     integrates over exactly that frustum; paper mode's overlap table is tabulated for
     centred views and uses the frustum's total FOVs (``hfov_deg``, ``vfov_deg``).

@@ -6,7 +6,7 @@ submodule says what it holds.
 
 from __future__ import annotations
 
-from simulator.cells import window_pof
+from simulator.sphere.cells import window_pof
 from simulator.preprocess.common import PreprocessInterrupted
 from simulator.preprocess.paper import (
     WindowFlowReducer,

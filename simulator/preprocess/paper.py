@@ -1,7 +1,7 @@
 """Paper-mode preprocessing (sections 3.2-3.4): a video's sliding-window POF matrix.
 
-For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.windows.WindowGrid`
-is extracted from both frames (gray, bilinear, :class:`~simulator.windows.WindowExtractor`),
+For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.sphere.windows.WindowGrid`
+is extracted from both frames (gray, bilinear, :class:`~simulator.sphere.windows.WindowExtractor`),
 the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
 scalars:
 
@@ -13,7 +13,7 @@ scalars:
     ``sum_p Omega(p) * angle(ray(p), ray(p + f(p))) * fps / sum_p Omega(p)``: the
     solid-angle-weighted (``Omega``) mean angle between the ray of a pixel centre and the
     ray of its flow target, times the frame rate. Rays follow
-    :func:`~simulator.geometry.perspective_rays`: the continuous window position
+    :func:`~simulator.sphere.geometry.perspective_rays`: the continuous window position
     ``(x, y)`` (pixel centres at ``i + 0.5``) has its ray through
     ``u = (x / w * 2 - 1) tan(hfov / 2)``, ``v = (1 - y / h * 2) tan(vfov / 2)`` on the
     plane ``z = 1``; flow targets outside the window still have a ray. The angle between
@@ -59,7 +59,7 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
-from simulator.geometry import perspective_rays
+from simulator.sphere.geometry import perspective_rays
 from simulator.gridfile import content_hash, save_grid
 from simulator.preprocess.common import (
     PreprocessInterrupted,
@@ -69,7 +69,7 @@ from simulator.preprocess.common import (
 )
 from simulator.core.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
-from simulator.windows import WindowExtractor, WindowGrid
+from simulator.sphere.windows import WindowExtractor, WindowGrid
 
 __all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video", "reduce_stride"]
 

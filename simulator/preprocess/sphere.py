@@ -4,12 +4,12 @@ The paper computes flow separately for 198-264 heavily overlapping windows per f
 needs a new preprocessing run for every headset FOV. Here the flow of a frame pair is
 computed once, on a few overlapping perspective *tiles* covering the sphere (a cube with
 faces a little wider than 90 deg), converted to angular speed per pixel and splatted into
-lon/lat cells (:class:`simulator.cells.CellGrid`). Any viewport or window grid is then a
+lon/lat cells (:class:`simulator.sphere.cells.CellGrid`). Any viewport or window grid is then a
 weighted sum over cells (:mod:`simulator.epof.exact`).
 
 Speeds are **deg/s of visual angle**: the angle between the ray of a pixel of frame t-1
 and the ray of its flow target in frame t, times fps. The field ``field_dps`` is float32,
-shape (T, n_lat, n_lon), laid out like an equirect frame (:mod:`simulator.cells`); a cell
+shape (T, n_lat, n_lon), laid out like an equirect frame (:mod:`simulator.sphere.cells`); a cell
 holds the solid-angle-weighted mean angular speed of the content inside it at frame t-1
 (the flow from t-1 to t); frame 0 repeats frame 1 (the grid file's rule).
 """
@@ -27,10 +27,10 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
 
-from simulator.cells import CellGrid, _cell_geometry, window_pof
+from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.core.errors import InputError
 from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
-from simulator.geometry import (
+from simulator.sphere.geometry import (
     dir_to_lonlat,
     equirect_remap_coords,
     head_rotation,
@@ -41,7 +41,7 @@ from simulator.gridfile import FieldSpool, content_hash, save_grid
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
 from simulator.core.progress import Counter, Progress
 from simulator.video import iter_frames, prefetch, probe
-from simulator.windows import WindowGrid
+from simulator.sphere.windows import WindowGrid
 
 __all__ = [
     "FieldEstimator",

@@ -8,7 +8,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from simulator.core.errors import InputError
-from simulator.geometry import head_rotation
+from simulator.sphere.geometry import head_rotation
 from simulator.headpath import HeadPath
 from simulator.readers.common import (
     _check_finite,

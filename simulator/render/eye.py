@@ -2,8 +2,8 @@
 
 Per eye, one full-screen pass (``shaders/fullscreen.vert`` + ``shaders/eye.frag``)
 computes each pixel's view ray from the eye's perspective projection (exact hfov/vfov,
-pixel centres as :func:`simulator.geometry.perspective_rays`) and the head rotation
-(the 3x3 head->world matrix of :func:`simulator.geometry.head_rotation`, passed as a
+pixel centres as :func:`simulator.sphere.geometry.perspective_rays`) and the head rotation
+(the 3x3 head->world matrix of :func:`simulator.sphere.geometry.head_rotation`, passed as a
 uniform), converts it to lon/lat with the project's conventions and samples the eye's
 equirect frame:
 
@@ -44,10 +44,10 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.cells import Frustum
+from simulator.sphere.cells import Frustum
 from simulator.core.choices import Eye
 from simulator.core.errors import InputError
-from simulator.geometry import check_fov, head_rotation
+from simulator.sphere.geometry import check_fov, head_rotation
 from simulator.grf import GrainField, GrfConfig
 from simulator.mitigation import Mitigation
 from simulator.render.gl import _check_gl, _gl_limit, _program
@@ -66,7 +66,7 @@ class RenderConfig:
     mitigation : :class:`simulator.mitigation.Mitigation`: what is drawn (default ``grf``:
         the paper's grains); grains are drawn when it has grains and ``grf`` is set, the
         vignette when it has one
-    frustum : :class:`simulator.cells.Frustum` of the **left** eye (the right eye mirrors
+    frustum : :class:`simulator.sphere.cells.Frustum` of the **left** eye (the right eye mirrors
         left and right), e.g. a headset's asymmetric per-eye frustum
         (``Frustum.from_headset``); default the symmetric ``hfov_deg x vfov_deg`` view.
         After construction it is always set, and ``hfov_deg``/``vfov_deg`` are its totals.

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.geometry import head_rotation, split_eye
+from simulator.sphere.geometry import head_rotation, split_eye
 from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.video import VideoWriter, iter_frames, prefetch, probe

@@ -21,7 +21,7 @@ from pathlib import Path
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.headsets import resolve_fov
+from simulator.sphere.headsets import resolve_fov
 from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.readers import FORMATS, detect_format
 

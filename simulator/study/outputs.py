@@ -31,7 +31,7 @@ from simulator.analyze.report import analyze_study, write_report
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.geometry import extract_view, split_eye
+from simulator.sphere.geometry import extract_view, split_eye
 
 __all__ = [
     "provocative_moments",

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.cells import Frustum
+from simulator.sphere.cells import Frustum
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
@@ -36,7 +36,7 @@ from simulator.readers import load_all_users, load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.viewing import render_viewing
-from simulator.windows import grid_preset
+from simulator.sphere.windows import grid_preset
 
 __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 

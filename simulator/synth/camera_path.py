@@ -3,7 +3,7 @@
 World frame (everywhere in vimsim): +x right, +y up, +z forward, metres. A pose's
 orientation is yaw/pitch/roll in degrees (yaw + turns right, pitch + looks up, roll +
 right ear down; applied yaw, then pitch, then roll, intrinsic, as ffmpeg v360:
-:func:`simulator.geometry.head_rotation`), i.e. a rotation taking camera-frame vectors
+:func:`simulator.sphere.geometry.head_rotation`), i.e. a rotation taking camera-frame vectors
 (+x right, +y up, +z forward) to the world frame. Between poses the position follows a
 linear or cubic (not-a-knot) interpolating spline
 (:func:`scipy.interpolate.make_interp_spline`) and the orientation scipy's
@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation, Slerp
 from simulator.core.choices import CAMERA_INTERPS
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
-from simulator.geometry import head_angles_deg, head_rotation
+from simulator.sphere.geometry import head_angles_deg, head_rotation
 
 __all__ = [
     "CAMERA_COLUMNS",
@@ -65,7 +65,7 @@ class CameraTrajectory:
     times_s : ndarray, shape (N,), float64, seconds, finite and strictly increasing, N >= 2
     positions_m : ndarray, shape (N, 3), float64, world frame (+x right, +y up, +z forward)
     rotations : scipy Rotation of N poses, camera -> world (camera +x right, +y up,
-        +z forward; :func:`simulator.geometry.head_rotation` of yaw/pitch/roll)
+        +z forward; :func:`simulator.sphere.geometry.head_rotation` of yaw/pitch/roll)
     interp : ``"linear"`` or ``"cubic"`` (positions; cubic = not-a-knot spline, quadratic
         for 3 poses, linear for 2)
     source : where the poses came from (a file name), for messages

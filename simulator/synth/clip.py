@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.geometry import lonlat_to_dir
+from simulator.sphere.geometry import lonlat_to_dir
 from simulator.core.progress import Counter, Progress
 from simulator.synth.scenes import SynthConfig, SynthScene, make_scene
 from simulator.synth.textures import _bundled_texture_path

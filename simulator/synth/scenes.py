@@ -19,7 +19,7 @@ Four scenes (:data:`SCENES`), all described as a camera moving through a static 
     Any camera path (a CSV of timed poses) through a textured box room:
     :mod:`simulator.synth.trajectory` (it subclasses :class:`SynthScene`).
 
-Frames and conventions (:mod:`simulator.geometry`): world and camera frames are
+Frames and conventions (:mod:`simulator.sphere.geometry`): world and camera frames are
 +x right, +y up, +z forward; the equirect frame of the video *is* the camera frame
 (pixel column ``x`` has longitude ``(x + 0.5) / W * 360 - 180`` deg, row ``y`` latitude
 ``90 - (y + 0.5) / H * 180`` deg). The camera pose at time ``t`` (seconds) is a rotation
@@ -56,7 +56,7 @@ from scipy.spatial.transform import Rotation
 
 from simulator.core.choices import SCENES, SYNTH_LAYOUTS
 from simulator.core.errors import InputError
-from simulator.geometry import (
+from simulator.sphere.geometry import (
     check_equirect_aspect,
     equirect_pixel_lonlat,
     equirect_remap_coords,
@@ -66,7 +66,7 @@ from simulator.geometry import (
     perspective_rays,
 )
 from simulator.synth.textures import _MipTexture, load_texture
-from simulator.windows import WindowGrid
+from simulator.sphere.windows import WindowGrid
 
 __all__ = [
     "SCENES",

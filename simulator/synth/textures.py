@@ -11,7 +11,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.geometry import equirect_pixel_lonlat, lonlat_to_dir
+from simulator.sphere.geometry import equirect_pixel_lonlat, lonlat_to_dir
 
 __all__ = ["load_texture", "procedural_panorama"]
 

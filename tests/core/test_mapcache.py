@@ -8,11 +8,11 @@ import av
 import numpy as np
 import pytest
 
-from simulator import windows
+from simulator.sphere import windows
 from simulator.core import mapcache
 from simulator.cli import main
 from simulator.core.mapcache import cache_dir, cached_arrays
-from simulator.windows import WindowExtractor, WindowGrid
+from simulator.sphere.windows import WindowExtractor, WindowGrid
 
 SMALL = WindowGrid(
     yaw_step_deg=60, pitch_step_deg=30, pitch_min_deg=-30, pitch_max_deg=30, size=(24, 16)

@@ -1,7 +1,7 @@
 """The paper's sliding-window grid (section 3.3) and the extraction of every window of a frame.
 
 Window centres in degrees (yaw + right, pitch + up; windows have no roll); each window is a
-perspective view with exact FOVs (:func:`simulator.geometry.perspective_map`).
+perspective view with exact FOVs (:func:`simulator.sphere.geometry.perspective_map`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.geometry import (
+from simulator.sphere.geometry import (
     _PAD,
     _check_size,
     check_fov,

@@ -33,7 +33,7 @@ import math
 from dataclasses import dataclass
 
 from simulator.core.errors import InputError
-from simulator.geometry import check_fov
+from simulator.sphere.geometry import check_fov
 
 __all__ = ["HEADSETS", "Headset", "get_headset", "resolve_fov"]
 
@@ -155,7 +155,7 @@ def resolve_fov(
 
     At most one of ``headset``, ``fov_deg`` (square) and ``hfov_deg``/``vfov_deg`` may be
     given; ``vfov_deg`` defaults to ``hfov_deg``; nothing given -> ``default``. Explicit
-    FOVs follow :func:`simulator.geometry.check_fov` (the one FOV rule).
+    FOVs follow :func:`simulator.sphere.geometry.check_fov` (the one FOV rule).
     """
     given = [
         k

@@ -1,6 +1,6 @@
 """Lon/lat cells on the sphere, view frusta, and the solid angle of each cell inside a view.
 
-Conventions (SPEC.md, :mod:`simulator.geometry`): world +x right, +y up, +z forward
+Conventions (SPEC.md, :mod:`simulator.sphere.geometry`): world +x right, +y up, +z forward
 (lon = 0, lat = 0); lon = atan2(x, z) increases to the right, lat + up. Degrees at every
 public boundary (``*_deg``), radians inside.
 
@@ -25,9 +25,9 @@ from scipy import sparse
 from scipy.special import ellipe
 
 from simulator.core.errors import InputError
-from simulator.geometry import check_fov, dir_to_lonlat, head_rotation, perspective_rays
-from simulator.headsets import get_headset
-from simulator.windows import WindowGrid
+from simulator.sphere.geometry import check_fov, dir_to_lonlat, head_rotation, perspective_rays
+from simulator.sphere.headsets import get_headset
+from simulator.sphere.windows import WindowGrid
 
 __all__ = ["CellGrid", "Frustum", "viewport_weights", "window_pof"]
 
@@ -133,7 +133,7 @@ class Frustum:
     @classmethod
     def symmetric(cls, hfov_deg: float, vfov_deg: float | None = None) -> Frustum:
         """A centred ``hfov_deg x vfov_deg`` view: exact FOVs in degrees, checked by
-        :func:`simulator.geometry.check_fov` (the one FOV rule), and at most 179 deg (the
+        :func:`simulator.sphere.geometry.check_fov` (the one FOV rule), and at most 179 deg (the
         half-angle limit of a frustum)."""
         h, v = check_fov(hfov_deg, vfov_deg, source="viewport")
         for name, f in (("hfov", h), ("vfov", v)):
@@ -144,12 +144,12 @@ class Frustum:
     @classmethod
     def from_headset(cls, name: str, eye: str = "left") -> Frustum:
         """The exact (asymmetric) per-eye frustum of a headset profile
-        (:mod:`simulator.headsets`)."""
+        (:mod:`simulator.sphere.headsets`)."""
         return cls(*get_headset(name).half_angles_deg(eye))
 
     def for_eye(self, eye: str = "left") -> Frustum:
         """This (left-eye) frustum as ``eye`` sees it: the right eye mirrors left and right
-        (as headset profiles do, :meth:`simulator.headsets.Headset.half_angles_deg`)."""
+        (as headset profiles do, :meth:`simulator.sphere.headsets.Headset.half_angles_deg`)."""
         if eye == "right":
             return Frustum(self.right_deg, self.left_deg, self.down_deg, self.up_deg)
         return self
@@ -188,7 +188,7 @@ def viewport_weights(
     ----------
     cell_deg : float, degrees; the field's cell size
     rot : ndarray, shape (M, 3, 3) or (3, 3)
-        Head -> world rotation matrices (:func:`simulator.geometry.head_rotation`).
+        Head -> world rotation matrices (:func:`simulator.sphere.geometry.head_rotation`).
     frustum : Frustum
 
     Returns

@@ -1,4 +1,4 @@
-"""Tests of simulator.geometry: conventions, round trips, seam and poles, stereo, grid,
+"""Tests of simulator.sphere.geometry: conventions, round trips, seam and poles, stereo, grid,
 and agreement with ffmpeg's v360 on a real panorama (the full table: bench/v360_agreement.py)."""
 
 from __future__ import annotations
@@ -12,11 +12,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from simulator import geometry as g
+from simulator.sphere import geometry as g
 from simulator.core.errors import InputError
-from simulator.windows import WindowExtractor, WindowGrid, grid_preset
+from simulator.sphere.windows import WindowExtractor, WindowGrid, grid_preset
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 
 def _smooth_equirect(W: int, H: int, a=(0.3, 0.5, -0.4)) -> np.ndarray:
@@ -333,7 +333,7 @@ def test_rotate_equirect_yaw_is_column_roll():
     columns; the rotation must broadcast lon/lat grids (regression: it raised)."""
     from scipy.spatial.transform import Rotation
 
-    from simulator.geometry import rotate_equirect
+    from simulator.sphere.geometry import rotate_equirect
 
     rng = np.random.default_rng(3)
     img = (rng.random((32, 64)) * 255).astype(np.uint8)
@@ -343,7 +343,7 @@ def test_rotate_equirect_yaw_is_column_roll():
 
 
 def test_check_fov_one_rule():
-    from simulator.geometry import check_fov
+    from simulator.sphere.geometry import check_fov
 
     assert check_fov(107) == (107.0, 107.0)
     assert check_fov(90, 60) == (90.0, 60.0)
@@ -353,7 +353,7 @@ def test_check_fov_one_rule():
 
 
 def test_odd_width_equirect_is_refused_with_the_file_name():
-    from simulator.geometry import check_equirect_aspect
+    from simulator.sphere.geometry import check_equirect_aspect
 
     with pytest.raises(InputError, match="pano.png: equirect width must be even"):
         check_equirect_aspect(2049, 1024, source="pano.png")
