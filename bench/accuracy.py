@@ -36,7 +36,7 @@ import numpy as np
 
 from simulator.epof import compute_epof
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.gridfile import load_grid
+from simulator.media.gridfile import load_grid
 from simulator.headpath import synth as synth_headpath
 from simulator.preprocess import preprocess_video
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps

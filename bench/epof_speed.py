@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from simulator.epof import epof_from_grid, viewport_overlaps
-from simulator.gridfile import load_grid, save_grid
+from simulator.media.gridfile import load_grid, save_grid
 from simulator.sphere.windows import grid_preset
 
 FRAME_BUDGET_US = 1e6 / 90.0

@@ -30,7 +30,7 @@ import numpy as np
 from simulator.sphere.cells import Frustum
 from simulator.epof import ViewportQuery, viewport_overlaps
 from simulator.export import export_unity
-from simulator.gridfile import load_grid, require_field
+from simulator.media.gridfile import load_grid, require_field
 from simulator.preprocess import preprocess_sphere
 from simulator.readers import load_headpath
 from simulator.sphere.windows import grid_preset

@@ -26,7 +26,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from simulator import video
+from simulator.media import video
 from simulator.frames import render_frames
 from simulator.grf import GrfConfig
 from simulator.render import RenderConfig, create_context

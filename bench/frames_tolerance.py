@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from simulator.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs
-from simulator.video import iter_frames, probe
+from simulator.media.video import iter_frames, probe
 
 VIDEO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "MaryOculus.mp4"
 AT = "0.5,1.5,2.5,3.5,4.5"

@@ -20,7 +20,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
-from simulator import video
+from simulator.media import video
 from simulator.sphere import geometry
 from simulator.reference import v360_time_ms
 from simulator.sphere.windows import WindowExtractor, grid_preset

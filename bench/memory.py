@@ -26,7 +26,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
-from simulator import video
+from simulator.media import video
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 VIMSIM = [sys.executable, "-m", "simulator"]

@@ -30,7 +30,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from render_speed import head_angles, make_video  # bench/render_speed.py: the same clip and path
 
-from simulator import video
+from simulator.media import video
 from simulator.sphere.cells import CellGrid
 from simulator.core.choices import MITIGATIONS
 from simulator.grf import GrfConfig

@@ -27,9 +27,9 @@ from scipy.spatial.transform import Rotation
 from simulator.sphere import geometry
 from simulator.flow import DISFlow
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.gridfile import load_grid
+from simulator.media.gridfile import load_grid
 from simulator.preprocess import preprocess_video
-from simulator.video import VideoWriter
+from simulator.media.video import VideoWriter
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

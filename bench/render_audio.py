@@ -70,7 +70,7 @@ def main() -> int:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
     from simulator.grf import GrfConfig, comfort_rule
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig, create_context
     from simulator.viewing import render_viewing

@@ -41,7 +41,7 @@ import numpy as np
 from simulator.sphere.cells import CellGrid, window_pof
 from simulator.epof import compute_epof, viewport_epof
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.gridfile import load_grid, require_field
+from simulator.media.gridfile import load_grid, require_field
 from simulator.headpath import synth as synth_headpath
 from simulator.sphere.headsets import get_headset
 from simulator.preprocess import (
@@ -51,7 +51,7 @@ from simulator.preprocess import (
     preprocess_video,
 )
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
-from simulator.video import iter_frames
+from simulator.media.video import iter_frames
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

@@ -30,7 +30,7 @@ from simulator.preprocess import (
     preprocess_video,
 )
 from simulator.synth import SynthConfig, synthesize
-from simulator.video import iter_frames
+from simulator.media.video import iter_frames
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

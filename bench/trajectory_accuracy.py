@@ -37,7 +37,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from simulator.sphere.geometry import head_angles_deg
-from simulator.gridfile import load_grid
+from simulator.media.gridfile import load_grid
 from simulator.preprocess import preprocess_sphere
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 from simulator.synth.camera_path import CameraTrajectory, save_camera_csv

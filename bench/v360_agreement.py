@@ -22,7 +22,7 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 
-from simulator import video
+from simulator.media import video
 from simulator.sphere import geometry
 from simulator.reference import compare_with_v360, psnr, tile_displacement, v360_view
 

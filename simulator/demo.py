@@ -34,7 +34,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
-from simulator.gridfile import load_grid
+from simulator.media.gridfile import load_grid
 from simulator.headpath import save_headpath_csv
 from simulator.headpath import synth as synth_headpath
 from simulator.preprocess.paper import preprocess_video

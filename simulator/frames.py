@@ -32,7 +32,7 @@ from simulator.plan import grf_settings, plan_viewing
 from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
-from simulator.video import iter_frames, probe
+from simulator.media.video import iter_frames, probe
 
 __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_frames"]
 
@@ -97,7 +97,7 @@ def frame_index(time_s: float, fps: float) -> int:
 def decode_frames(path, indices) -> dict[int, NDArray[np.uint8]]:
     """Decode only the frames ``indices`` of a video (full stored frames, RGB uint8).
 
-    Frame numbers are decode order, as :func:`simulator.video.iter_frames` counts them,
+    Frame numbers are decode order, as :func:`simulator.media.video.iter_frames` counts them,
     found from presentation times (constant frame rate): for each wanted frame the
     decoder seeks to the key frame before it and decodes forward. A stream without
     timestamps, or a seek that lands past the frame, falls back to decoding from the

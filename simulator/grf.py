@@ -32,7 +32,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import OPACITY_SOURCES
 from simulator.core.errors import InputError
-from simulator.gridfile import GridFile
+from simulator.media.gridfile import GridFile
 
 __all__ = [
     "COMFORT_EASE_IN_S",

@@ -6,7 +6,7 @@ import numpy as np
 
 from simulator.epof.viewing import EpofResult
 from simulator.core.errors import InputError
-from simulator.video import MediaInfo, probe
+from simulator.media.video import MediaInfo, probe
 
 __all__ = ["check_right_eye", "csv_opacity", "frame_range"]
 

@@ -41,7 +41,7 @@ from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation
 from simulator.grf import GrainField, GrfConfig, cutout_alpha
-from simulator.lazyfield import LazyField, field_chunks
+from simulator.media.lazyfield import LazyField, field_chunks
 
 __all__ = ["Mitigation", "VisibleFlow", "cell_opacity", "parse_color", "visible_flow"]
 

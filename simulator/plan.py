@@ -19,12 +19,12 @@ from simulator.sphere.cells import Frustum
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.core.errors import InputError
 from simulator.grf import OpacityRule, grain_count
-from simulator.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
+from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.headpath import HeadPath
 from simulator.inputs import check_right_eye, csv_opacity, frame_range
 from simulator.readers import load_headpath
 from simulator.render.eye import RenderConfig
-from simulator.video import MediaInfo, probe
+from simulator.media.video import MediaInfo, probe
 
 __all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
 
@@ -33,7 +33,7 @@ __all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
 class ViewingPlan:
     """One viewing's inputs, checked, and its per-frame poses and GRF opacity.
 
-    info : the video's :class:`simulator.video.MediaInfo`
+    info : the video's :class:`simulator.media.video.MediaInfo`
     headpath : the head path; grid : the grid file or None
     frames : ndarray, shape (N,), the video frame numbers of the plan (``f0 .. f1 - 1``)
     times_s : ndarray, shape (N,), time of each frame ``i / fps`` (seconds)

@@ -22,7 +22,7 @@ from numpy.typing import NDArray
 
 from simulator.core.fileio import atomic_output
 from simulator.sphere.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
-from simulator.video import VideoWriter
+from simulator.media.video import VideoWriter
 
 __all__ = ["ReviewWriter", "frustum_outline_xy"]
 
@@ -90,7 +90,7 @@ class ReviewWriter:
     n_sheet : eye views on the contact sheet (evenly spaced times)
     preset, crf : x264 settings of the review video (ultrafast: it must cost little
         beside the eye videos)
-    audio : None, or a :class:`simulator.audio.AudioSource` carried into the review video
+    audio : None, or a :class:`simulator.media.audio.AudioSource` carried into the review video
     """
 
     def __init__(

@@ -10,14 +10,14 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.audio import audio_source
+from simulator.media.audio import audio_source
 from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import OpacityRule
-from simulator.gridfile import require_field
+from simulator.media.gridfile import require_field
 from simulator.headpath import HeadPath
-from simulator.lazyfield import take_rows
+from simulator.media.lazyfield import take_rows
 from simulator.mitigation import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
 from simulator.core.progress import Progress
@@ -87,7 +87,7 @@ def render_viewing(
     headpath : :class:`simulator.headpath.HeadPath`, or the path of a head path file
         (read with :func:`simulator.readers.load_headpath`, format detected)
     outdir : output folder (created)
-    grid : :class:`simulator.gridfile.GridFile`, a grid file's path, or None. With a grid
+    grid : :class:`simulator.media.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
     config : eye size, the frustum, GRF (``config.grf=None``: no grains) and the
         mitigation (``config.mitigation``: grf, vignette, grf+vignette, local-grf, none;
@@ -105,7 +105,7 @@ def render_viewing(
     right : the right eye's equirect file: ``video`` and ``right`` are then a stereo
         source of two per-eye files (same size, frame rate and frame count; layout mono)
     audio : copy the source's audio (of ``video``; the range's part) into every output
-        video (:mod:`simulator.audio`); False: silent outputs. A source without audio
+        video (:mod:`simulator.media.audio`); False: silent outputs. A source without audio
         gives silent outputs either way (``summary.json`` says which)
     review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and

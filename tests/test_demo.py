@@ -12,8 +12,8 @@ import pytest
 
 from simulator.cli import main
 from simulator.demo import DemoConfig, run_demo
-from simulator.gridfile import load_grid
-from simulator.video import probe
+from simulator.media.gridfile import load_grid
+from simulator.media.video import probe
 
 
 def _data_lines(path):

@@ -9,7 +9,7 @@ import pytest
 
 from simulator.sphere.cells import CellGrid, Frustum, window_pof
 from simulator.epof import EPOF_COLUMNS, read_epof_csv, viewport_epof
-from simulator.gridfile import load_grid, save_grid
+from simulator.media.gridfile import load_grid, save_grid
 from simulator.headpath import save_headpath_csv, synth
 from simulator.preprocess import SphereConfig, field_meta
 from simulator.sphere.windows import grid_preset
@@ -70,7 +70,7 @@ def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     """A grid of the right eye of a top-bottom video: the EPOF is over the right eye's
     frustum (the left's mirrored), exactly as viewport_epof gives it."""
     from simulator.render import RenderConfig
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
     from simulator.viewing import plan_viewing
 
     vid = tmp_path / "tb.mp4"
@@ -107,7 +107,7 @@ def test_render_records_settings_in_summary_and_csv(tmp_path):
         create_context()
     except InputError as e:
         pytest.skip(f"headless EGL absent ({e})")
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     vid = tmp_path / "v.mp4"
     with VideoWriter(vid, 30.0, (128, 64), preset="ultrafast") as wr:

@@ -17,7 +17,7 @@ from simulator.epof import read_epof_csv, viewport_overlaps
 from simulator.export import DATA_FILE, VERSION, export_unity, frame_at, read_export
 from simulator.export.unity import CS_FILES
 from simulator.sphere.geometry import head_rotation
-from simulator.gridfile import load_grid, save_grid
+from simulator.media.gridfile import load_grid, save_grid
 from simulator.preprocess import SphereConfig, field_meta
 from simulator.sphere.windows import grid_preset
 

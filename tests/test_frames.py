@@ -24,7 +24,7 @@ def _texture(shift: int = 0) -> np.ndarray:
 
 
 def _video(path: Path, shift: int = 0) -> Path:
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     base = _texture(shift)
     with VideoWriter(path, FPS, (256, 128), preset="ultrafast", crf=0) as w:
@@ -67,7 +67,7 @@ def golden(ctx, clip):
 def test_decode_frames_matches_sequential_decoding(real_dir):
     """Seek-based decoding against decoding every frame (three.js MaryOculus.mp4, real H.264)."""
     from simulator.frames import decode_frames
-    from simulator.video import iter_frames
+    from simulator.media.video import iter_frames
 
     p = real_dir / "equirect" / "threejs" / "MaryOculus.mp4"
     want = [0, 7, 64, 119]
@@ -104,7 +104,7 @@ def test_frames_equal_the_render_pass(ctx, clip, golden):
 
     from simulator.grf import GrfConfig
     from simulator.render import RenderConfig, render_view
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     frame = read_frame(clip["video"], 10)
     cfg = RenderConfig(eye_size=(96, 96), grf=GrfConfig())

@@ -149,7 +149,7 @@ def test_none_draws_nothing_and_default_is_grf(ctx, petra_small):
 def _half_moving_clip(path: Path, n: int = 6, fps: float = 30.0) -> None:
     """A 512x256 noise panorama whose eastern half (lon 0..180) slides east 4 px a frame
     (wrapping inside that half); the western half stands still."""
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     rng = np.random.default_rng(3)
     base = cv2.GaussianBlur(rng.integers(0, 256, (256, 512)).astype(np.uint8), (0, 0), 1.5)
@@ -163,7 +163,7 @@ def _half_moving_clip(path: Path, n: int = 6, fps: float = 30.0) -> None:
 
 @pytest.fixture(scope="module")
 def half_grid(tmp_path_factory):
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
     from simulator.sphere.windows import grid_preset
 
@@ -181,7 +181,7 @@ def half_grid(tmp_path_factory):
 
 def test_local_grf_coverage_follows_the_field(ctx, half_grid):
     from simulator.grf import OpacityRule
-    from simulator.gridfile import require_field
+    from simulator.media.gridfile import require_field
 
     _, grid = half_grid
     field, _cells = require_field(grid)
@@ -295,7 +295,7 @@ def test_golden(ctx, petra_small, out_dir, kind):
 
 @pytest.fixture(scope="module")
 def petra_small(real_dir):
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     img = read_frame(real_dir / "equirect" / "vrview" / "petra.jpg")
     return cv2.resize(img, (1024, 512), interpolation=cv2.INTER_AREA)

@@ -44,7 +44,7 @@ def test_rule_paper_is_the_clamp_and_eased_bounds_the_change():
 
 
 def _grid_and_path(tmp_path: Path, n: int = 6):
-    from simulator.gridfile import save_grid
+    from simulator.media.gridfile import save_grid
     from simulator.sphere.windows import WindowGrid
 
     g = WindowGrid()
@@ -99,7 +99,7 @@ def test_render_takes_epof_csv_opacity(tmp_path, capsys):
     except InputError as e:
         pytest.skip(f"headless EGL absent ({e})")
     from simulator.cli import main
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     vid = tmp_path / "v.mp4"
     with VideoWriter(vid, 10, (128, 64), preset="ultrafast") as w:

@@ -569,7 +569,7 @@ def test_sphere_field_streamed_equals_in_memory(base):
     """Sphere preprocess streams the field to an unnamed temporary file; the grid file it
     writes is bit-identical to the in-memory field (float16) and its window matrix."""
     from simulator.sphere.cells import window_pof
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.preprocess import SphereConfig
     from simulator.preprocess.sphere import field_from_video
     from simulator.sphere.windows import grid_preset
@@ -596,7 +596,7 @@ def _wait():
     Path(os.environ["READY"]).touch()
     time.sleep(60)
 if where == "video":
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
     _orig = VideoWriter.write
     def _slow(self, *a, **k):
         _orig(self, *a, **k)

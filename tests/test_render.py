@@ -47,7 +47,7 @@ def _no_gl_error(request):
 
 @pytest.fixture(scope="module")
 def petra_small(real_dir):
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     img = read_frame(real_dir / "equirect" / "vrview" / "petra.jpg")
     return cv2.resize(img, (1024, 512), interpolation=cv2.INTER_AREA)
@@ -111,7 +111,7 @@ AGREE_PSNR_DB = 35.0
     ],
 )
 def test_agrees_with_v360(ctx, v360, real_dir, pano, size, yaw, pitch, roll):
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     img = read_frame(real_dir / "equirect" / pano)
     W = img.shape[1]
@@ -340,7 +340,7 @@ def test_yuv420p_readback_matches_swscale(ctx, petra_small, grf):
 
 # ---------------------------------------------------------------------------- CLI
 def _tiny_video(path: Path, layout: str = "mono", n: int = 4, fps: int = 10) -> None:
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     x = np.linspace(0, 255, 256, dtype=np.uint8)
     base = np.repeat(np.repeat(x[None, :, None], 128, axis=0), 3, axis=2)
@@ -361,7 +361,7 @@ def _path_csv(path: Path, end_s: float) -> None:
 
 def test_cli_render_outputs(ctx, tmp_path):
     from simulator.cli import main
-    from simulator.video import probe, read_frame
+    from simulator.media.video import probe, read_frame
 
     vid = tmp_path / "tb.mp4"
     _tiny_video(vid, "top-bottom", n=4, fps=10)
@@ -395,7 +395,7 @@ def test_cli_render_outputs(ctx, tmp_path):
 
 def test_cli_render_mono_default_grf_off(ctx, tmp_path, capsys):
     from simulator.cli import main
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     vid = tmp_path / "m.mp4"
     _tiny_video(vid, n=3)
@@ -466,7 +466,7 @@ def test_cli_render_grid_from_another_video(ctx, tmp_path, capsys):
     from simulator.cli import main
 
     pytest.importorskip("simulator.preprocess")
-    from simulator.gridfile import save_grid
+    from simulator.media.gridfile import save_grid
     from simulator.sphere.windows import WindowGrid
 
     vid = tmp_path / "m.mp4"
@@ -570,7 +570,7 @@ def test_one_cpu_render_is_serial_and_the_same(ctx, tmp_path, layout):
     import threading
 
     import simulator.render as R
-    from simulator.video import iter_frames
+    from simulator.media.video import iter_frames
 
     vid = tmp_path / "v.mp4"
     _tiny_video(vid, layout, n=6)

@@ -156,7 +156,7 @@ def test_right_eye_file(ctx, tmp_path):
     _clip(right, gray=180, audio=None)
     out = tmp_path / "o"
     assert _render(tmp_path, left, out, "--right", str(right)) == 0
-    from simulator.video import iter_frames
+    from simulator.media.video import iter_frames
 
     ml = [float(f.mean()) for f in iter_frames(out / "left.mp4")]
     mr = [float(f.mean()) for f in iter_frames(out / "right.mp4")]

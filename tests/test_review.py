@@ -69,7 +69,7 @@ def test_render_review_writes_video_and_sheet(tmp_path):
     except InputError as e:
         pytest.skip(f"headless EGL absent ({e})")
     from simulator.cli import main
-    from simulator.video import VideoWriter, iter_frames, probe
+    from simulator.media.video import VideoWriter, iter_frames, probe
 
     vid = tmp_path / "v.mp4"
     with VideoWriter(vid, 10, (256, 128), preset="ultrafast") as w:

@@ -15,7 +15,7 @@ from simulator.sphere.cells import CellGrid, Frustum, viewport_weights, window_p
 from simulator.epof import ViewportQuery, viewport_epof
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.gridfile import load_grid, require_field, save_grid
+from simulator.media.gridfile import load_grid, require_field, save_grid
 from simulator.sphere.headsets import HEADSETS, get_headset, resolve_fov
 from simulator.preprocess import (
     FieldEstimator,
@@ -245,7 +245,7 @@ def test_grid_with_field_round_trip(tmp_path):
 
 
 def test_preprocess_sphere_writes_a_grid_file(tmp_path):
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     frames, _ = _rotating_frames(3, 30.0, (0, 1, 0))
     vid = tmp_path / "rot.mp4"
@@ -268,7 +268,7 @@ def test_preprocess_sphere_writes_a_grid_file(tmp_path):
 
 
 def _rot_video(path, n: int = 3):
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     frames, _ = _rotating_frames(n, 30.0, (0, 1, 0))
     with VideoWriter(path, 30.0, (512, 256)) as vw:

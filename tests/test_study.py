@@ -143,7 +143,7 @@ def test_study_outputs(ran, base, capsys):
     from PIL import Image
 
     from simulator.sphere.geometry import extract_view
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     r = mom[0]
     ref = extract_view(read_frame(base / "clip.mp4", int(r["frame"])), float(r["yaw_deg"]),

@@ -21,7 +21,7 @@ from simulator.synth import (
     synthesize,
     truth_path_for,
 )
-from simulator.video import probe, read_frame
+from simulator.media.video import probe, read_frame
 
 
 def _run(argv):
@@ -285,7 +285,7 @@ def test_cli_synth_writes_clip(tmp_path, capsys):
 @pytest.mark.parametrize("scene,bound", [("rotate", 0.05), ("forward", 0.05)])
 def test_preprocess_matches_truth_on_small_clip(tmp_path, scene, bound):
     """CI-sized version of bench/accuracy.py: DIS on a 384x192 clip, 8 x 3 windows."""
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.preprocess import preprocess_video
     from simulator.synth import window_truth_dps
     from simulator.sphere.windows import WindowGrid

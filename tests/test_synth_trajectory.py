@@ -26,7 +26,7 @@ from simulator.synth.trajectory import (
     synthesize_trajectory,
     trajectory_config,
 )
-from simulator.video import probe, read_frame
+from simulator.media.video import probe, read_frame
 
 HEADER = ",".join(CAMERA_COLUMNS)
 
@@ -398,7 +398,7 @@ def test_cli_writes_clip_covering_the_span(tmp_path, capsys):
 def test_sphere_mode_matches_truth_on_small_walk(tmp_path):
     """CI-sized version of bench/trajectory_accuracy.py: a turning walk, 512x256, sphere
     mode (DIS), window POF within 10 % median of the truth."""
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.preprocess import SphereConfig, preprocess_sphere
     from simulator.synth import window_truth_dps
     from simulator.sphere.windows import grid_preset

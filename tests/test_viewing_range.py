@@ -19,7 +19,7 @@ def _data_lines(path):
 
 def _ramp_video(path: Path, n: int = 10, fps: int = 10) -> None:
     """Frame i is a uniform gray of 20 + 20 i: its brightness names the frame."""
-    from simulator.video import VideoWriter
+    from simulator.media.video import VideoWriter
 
     with VideoWriter(path, fps, (128, 64), preset="ultrafast", crf=0) as w:
         for i in range(n):
@@ -35,7 +35,7 @@ def _path_csv(path: Path, end_s: float) -> None:
 
 def _partial_grid(path: Path, start: int, end: int, n_video: int, fps: float = 10.0) -> None:
     """A grid of frames start..end of a 128x64 video, random flow (no preprocessing run)."""
-    from simulator.gridfile import save_grid
+    from simulator.media.gridfile import save_grid
     from simulator.sphere.windows import WindowGrid
 
     g = WindowGrid()
@@ -49,7 +49,7 @@ def _partial_grid(path: Path, start: int, end: int, n_video: int, fps: float = 1
 
 
 def _means(path: Path) -> list[float]:
-    from simulator.video import iter_frames
+    from simulator.media.video import iter_frames
 
     return [float(f.mean()) for f in iter_frames(path)]
 
@@ -133,8 +133,8 @@ def test_render_bad_range_one_line_exit_2(ctx, tmp_path, capsys, rng):
 def test_render_layout_from_grid_meta(ctx, tmp_path, capsys):
     """No --layout: a stereo grid's layout (its meta) is used; both eye files by default."""
     from simulator.cli import main
-    from simulator.gridfile import save_grid
-    from simulator.video import VideoWriter
+    from simulator.media.gridfile import save_grid
+    from simulator.media.video import VideoWriter
     from simulator.sphere.windows import WindowGrid
 
     vid = tmp_path / "tb.mp4"

@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import warnings_to_stderr
     from simulator.commands.headpath import load_headpath_args
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
 
     for out in (args.output, args.plot):
         if out:

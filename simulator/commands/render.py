@@ -171,7 +171,7 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     from simulator.commands._progress import warnings_to_stderr
     from simulator.core.errors import InputError
     from simulator.grf import GrfConfig, grain_count
-    from simulator.gridfile import load_grid
+    from simulator.media.gridfile import load_grid
     from simulator.mitigation import Mitigation, parse_color
     from simulator.readers import load_headpath
     from simulator.render import RenderConfig

@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     """Write the view; InputError (exit 2, no output) on bad input."""
     from PIL import Image
 
-    from simulator import video
+    from simulator.media import video
     from simulator.sphere import geometry
     from simulator.core.fileio import atomic_output
     from simulator.core.resources import check_fits

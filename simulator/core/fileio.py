@@ -155,7 +155,7 @@ class PendingOutput:
     """One output file being written: checked, written to ``tmp``, then committed by rename.
 
     The one output-file helper every writer uses (:func:`atomic_output` for ``with``
-    blocks, :class:`simulator.video.VideoWriter` for encoders). Construction refuses
+    blocks, :class:`simulator.media.video.VideoWriter` for encoders). Construction refuses
     (InputError) an output that is the same file as an input of this run, a directory, a
     missing or read-only folder, and removes temporaries of the same target left by dead
     processes. The temporary name keeps the suffix (``.out.png`` ->

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 from simulator.sphere.cells import CellGrid, Frustum, _weights_band
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation
-from simulator.lazyfield import LazyField
+from simulator.media.lazyfield import LazyField
 
 __all__ = ["ViewportQuery", "viewport_epof"]
 
@@ -48,7 +48,7 @@ def viewport_epof(
     ----------
     field_dps : ndarray or LazyField, shape (T, n_lat, n_lon)
         Per-frame fields (deg/s), layout of the module docstring; a grid file's
-        :class:`~simulator.lazyfield.LazyField` is integrated chunk by chunk.
+        :class:`~simulator.media.lazyfield.LazyField` is integrated chunk by chunk.
     cell_deg : float, degrees
     yaw_deg, pitch_deg, roll_deg : array_like, shape (T,) or scalars, degrees
         Head orientation at each frame (yaw + right, pitch + up, roll + right ear down).

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
-from simulator.gridfile import GridFile
+from simulator.media.gridfile import GridFile
 from simulator.sphere.windows import WindowGrid
 
 __all__ = [

@@ -24,9 +24,9 @@ from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.grf import OpacityRule
-from simulator.gridfile import GridFile, require_field
+from simulator.media.gridfile import GridFile, require_field
 from simulator.headpath import HeadPath
-from simulator.lazyfield import take_rows
+from simulator.media.lazyfield import take_rows
 
 __all__ = [
     "EPOF_COLUMNS",

@@ -43,7 +43,7 @@ from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file, check_output_dir
 from simulator.grf import OpacityRule
-from simulator.gridfile import GridFile, content_hash, load_grid, require_field
+from simulator.media.gridfile import GridFile, content_hash, load_grid, require_field
 
 __all__ = [
     "CS_FILES",

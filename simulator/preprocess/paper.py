@@ -22,7 +22,7 @@ scalars:
     with sphere mode).
 
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
-:func:`simulator.gridfile.save_grid` (atomic: the grid file appears only when complete).
+:func:`simulator.media.gridfile.save_grid` (atomic: the grid file appears only when complete).
 
 Pipeline: a background thread decodes frame t+1 and extracts its windows (into a recycled
 buffer) while a thread pool computes pair t; for thread-safe backends each worker runs the
@@ -60,7 +60,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.sphere.geometry import perspective_rays
-from simulator.gridfile import content_hash, save_grid
+from simulator.media.gridfile import content_hash, save_grid
 from simulator.preprocess.common import (
     PreprocessInterrupted,
     check_output_dir,
@@ -68,7 +68,7 @@ from simulator.preprocess.common import (
     frame_range,
 )
 from simulator.core.progress import Counter, Progress
-from simulator.video import iter_frames, prefetch, probe
+from simulator.media.video import iter_frames, prefetch, probe
 from simulator.sphere.windows import WindowExtractor, WindowGrid
 
 __all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video", "reduce_stride"]

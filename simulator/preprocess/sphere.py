@@ -37,10 +37,10 @@ from simulator.sphere.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.gridfile import FieldSpool, content_hash, save_grid
+from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
 from simulator.core.progress import Counter, Progress
-from simulator.video import iter_frames, prefetch, probe
+from simulator.media.video import iter_frames, prefetch, probe
 from simulator.sphere.windows import WindowGrid
 
 __all__ = [

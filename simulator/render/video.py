@@ -1,6 +1,6 @@
 """Rendering whole videos: decode, render each eye, encode per-eye H.264 files.
 
-Frames are decoded once (:func:`simulator.video.prefetch`), rendered per eye
+Frames are decoded once (:func:`simulator.media.video.prefetch`), rendered per eye
 (:class:`simulator.render.eye.EyeRenderer`) and leave the GPU as yuv420p planes for the
 encoder. Output files are written to temporary names and renamed when complete.
 """
@@ -23,7 +23,7 @@ from simulator.core.fileio import atomic_output
 from simulator.sphere.geometry import head_rotation, split_eye
 from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
-from simulator.video import VideoWriter, iter_frames, prefetch, probe
+from simulator.media.video import VideoWriter, iter_frames, prefetch, probe
 
 __all__ = ["VideoRenderResult", "render_video"]
 
@@ -45,7 +45,7 @@ class VideoRenderResult:
 
 def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
     """Encode one frame already in yuv420p (``(h * 3 // 2, w)`` uint8, the layout of
-    :meth:`EyeRenderer.render` ``pix_fmt="yuv420p"``) with a ``simulator.video.VideoWriter``,
+    :meth:`EyeRenderer.render` ``pix_fmt="yuv420p"``) with a ``simulator.media.video.VideoWriter``,
     skipping its rgb24 -> yuv420p conversion (the stream is yuv420p: x264 takes it as is)."""
     import av
 
@@ -168,7 +168,7 @@ def render_video(
         per frame (:func:`simulator.mitigation.cell_opacity`); frames beyond N hold the last
     layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
         ``side-by-side`` (left eye left)
-    fps, n_frames : the video's rate and frame count (from :func:`simulator.video.probe`)
+    fps, n_frames : the video's rate and frame count (from :func:`simulator.media.video.probe`)
     start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
         (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
         ``start_frame + j``. Frames before it are decoded (not converted) and skipped.
@@ -184,7 +184,7 @@ def render_video(
         the render keeps one core busy, not more (a study's task declaring one CPU:
         tasks side by side then scale with the cores). llvmpipe's threads are the
         process's ``LP_NUM_THREADS``, read when Mesa loads.
-    audio : None, or a :class:`simulator.audio.AudioSource` (the source's audio, the
+    audio : None, or a :class:`simulator.media.audio.AudioSource` (the source's audio, the
         range's part) carried into every eye file
     right_path : the right eye's equirect file: ``video_path`` is then the left eye's (two
         per-eye files, both decoded in step; same size and frame count, checked by the caller)

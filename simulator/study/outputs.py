@@ -150,7 +150,7 @@ class _GridMap:
 
 def _grid_map(path: Path) -> _GridMap:
     """The window matrix of a cached grid (written by this study's preprocess and loaded by
-    its workers with :func:`simulator.gridfile.load_grid`); the field is not decompressed."""
+    its workers with :func:`simulator.media.gridfile.load_grid`); the field is not decompressed."""
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
         return _GridMap(z["pof_dps"], z["yaw_deg"], z["pitch_deg"], float(meta["fps"]),

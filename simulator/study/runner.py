@@ -27,8 +27,8 @@ from pathlib import Path
 from simulator import __version__
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_output_dir
-from simulator.gridfile import VERSION as GRID_VERSION
-from simulator.gridfile import content_hash
+from simulator.media.gridfile import VERSION as GRID_VERSION
+from simulator.media.gridfile import content_hash
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec

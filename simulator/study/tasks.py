@@ -27,7 +27,7 @@ from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
-from simulator.gridfile import GridFile, cells_from_meta, load_grid
+from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.headpath import HeadPath
 from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video

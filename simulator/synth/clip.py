@@ -26,7 +26,7 @@ from simulator.sphere.geometry import lonlat_to_dir
 from simulator.core.progress import Counter, Progress
 from simulator.synth.scenes import SynthConfig, SynthScene, make_scene
 from simulator.synth.textures import _bundled_texture_path
-from simulator.video import VideoWriter
+from simulator.media.video import VideoWriter
 
 __all__ = ["Truth", "load_truth", "synthesize", "truth_path_for"]
 

@@ -312,7 +312,7 @@ def v360():
 
 @pytest.mark.parametrize("yaw,pitch,roll", [(0, 0, 0), (-20, 10, 15), (180, -10, 0), (0, 0, -30)])
 def test_agrees_with_v360_on_petra(v360, real_dir, yaw, pitch, roll):
-    from simulator.video import read_frame
+    from simulator.media.video import read_frame
 
     img = read_frame(real_dir / "equirect" / "vrview" / "petra.jpg")
     r = v360.compare_with_v360(

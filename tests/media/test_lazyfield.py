@@ -8,12 +8,12 @@ import zipfile
 import numpy as np
 import pytest
 
-from simulator import lazyfield
+from simulator.media import lazyfield
 from simulator.sphere.cells import CellGrid, Frustum
 from simulator.epof.exact import viewport_epof
 from simulator.core.errors import InputError
-from simulator.gridfile import load_grid, require_field, save_grid
-from simulator.lazyfield import LazyField, take_rows
+from simulator.media.gridfile import load_grid, require_field, save_grid
+from simulator.media.lazyfield import LazyField, take_rows
 from simulator.mitigation import Mitigation, cell_opacity, visible_flow
 from simulator.sphere.windows import grid_preset
 

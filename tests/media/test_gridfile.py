@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.gridfile import VERSION, content_hash, load_grid, save_grid
-from simulator.video import MediaInfo
+from simulator.media.gridfile import VERSION, content_hash, load_grid, save_grid
+from simulator.media.video import MediaInfo
 from simulator.sphere.windows import grid_preset
 
 

@@ -319,7 +319,7 @@ class VideoWriter:
     fps : frame rate, frames/s (a float such as 29.97 is kept as an exact fraction)
     size : (width, height) pixels; even numbers (yuv420p)
     crf : x264 constant rate factor (lower = better quality)
-    audio : None, or a :class:`simulator.audio.AudioSource` (duck-typed: ``add_to(container)``)
+    audio : None, or a :class:`simulator.media.audio.AudioSource` (duck-typed: ``add_to(container)``)
         whose audio (range) is carried into the file
     threads : x264 encoder threads (None: x264's default, about 1.5 per core); a task that
         declares its CPUs (``vimsim study``) passes them

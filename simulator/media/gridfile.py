@@ -38,7 +38,7 @@ from numpy.typing import NDArray
 from simulator.sphere.cells import CellGrid
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
-from simulator.lazyfield import LazyField
+from simulator.media.lazyfield import LazyField
 from simulator.sphere.windows import WindowGrid
 
 __all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
@@ -88,7 +88,7 @@ class GridFile:
         self, info, *, source: str | None = None, frames: tuple[int, int] | None = None
     ) -> None:
         """Raise InputError unless this grid was made from the video described by ``info``
-        (a :class:`simulator.video.MediaInfo`): same stored size and frame rate, and a
+        (a :class:`simulator.media.video.MediaInfo`): same stored size and frame rate, and a
         frame count within one frame (container headers and decoders may differ by one).
 
         ``frames = (f0, f1)``: only video frames ``f0 <= i < f1`` are needed (a rendered
@@ -429,7 +429,7 @@ def cells_from_meta(meta: dict, *, source: str = "grid") -> CellGrid:
 
 def require_field(grid_file) -> tuple[NDArray[np.float32] | LazyField, CellGrid]:
     """``(field_dps (T, n_lat, n_lon), cells)`` of a loaded grid file: the grid file's
-    :class:`~simulator.lazyfield.LazyField` (read chunk by chunk; its chunks are float32)
+    :class:`~simulator.media.lazyfield.LazyField` (read chunk by chunk; its chunks are float32)
     or, for a field given in memory, a float32 array.
 
     Raises InputError (one line, with the command that makes one) if the grid has no

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.video import VideoWriter, iter_frames, prefetch, probe, read_frame
+from simulator.media.video import VideoWriter, iter_frames, prefetch, probe, read_frame
 
 
 def _write(path, n: int, size=(128, 64), fps: float = 30.0, seed: int = 0):
