@@ -25,7 +25,7 @@ from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from simulator.sphere import geometry
-from simulator.flow import DISFlow
+from simulator.flow.backends import DISFlow
 from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid
 from simulator.preprocess import preprocess_video

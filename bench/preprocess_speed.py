@@ -35,7 +35,7 @@ from PIL import Image
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
 from simulator.sphere import windows as windows_mod
-from simulator.flow import make_backend
+from simulator.flow.backends import make_backend
 from simulator.media.gridfile import content_hash
 from simulator.preprocess import WindowFlowReducer, reduce_stride
 from simulator.media.video import iter_frames, probe

@@ -58,7 +58,7 @@ PREPROCESS_METHODS: tuple[str, ...] = ("paper", "sphere")
 #: EPOF methods: ``auto`` = exact (sphere) when the grid holds a field, else paper.
 EPOF_METHODS: tuple[str, ...] = ("auto", "paper", "sphere")
 
-#: OpenCV DIS presets (:class:`simulator.flow.DISFlow`).
+#: OpenCV DIS presets (:class:`simulator.flow.backends.DISFlow`).
 DISPreset = Literal["ultrafast", "fast", "medium"]
 DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
 

@@ -2,7 +2,7 @@
 
 For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.sphere.windows.WindowGrid`
 is extracted from both frames (gray, bilinear, :class:`~simulator.sphere.windows.WindowExtractor`),
-the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
+the dense flow inside the window is computed (:mod:`simulator.flow.backends`) and reduced to two
 scalars:
 
 ``pof_px``  (window pixels / frame)
@@ -18,7 +18,7 @@ scalars:
     ``u = (x / w * 2 - 1) tan(hfov / 2)``, ``v = (1 - y / h * 2) tan(vfov / 2)`` on the
     plane ``z = 1``; flow targets outside the window still have a ray. The angle between
     a window's own rays does not depend on the window's orientation, so one set of
-    per-pixel constants serves every window (:class:`simulator.flow.RayAngles`, shared
+    per-pixel constants serves every window (:class:`simulator.flow.backends.RayAngles`, shared
     with sphere mode).
 
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
@@ -58,7 +58,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.sphere.geometry import perspective_rays
 from simulator.media.gridfile import content_hash, save_grid
 from simulator.preprocess.common import (
@@ -93,7 +93,7 @@ class WindowFlowReducer:
     hfov_deg, vfov_deg : float, degrees, the windows' exact FOVs
     stride : int >= 1, keyword-only
         Read the flow on every ``stride``-th pixel only (rows and columns ``stride // 2,
-        stride // 2 + stride, ...``, :class:`simulator.flow.RayAngles`): both sums run
+        stride // 2 + stride, ...``, :class:`simulator.flow.backends.RayAngles`): both sums run
         over those pixels (solid-angle weights renormalised over them). For backends that
         compute flow at a lower resolution and upsample it (DIS ultrafast and fast work at
         1/4 resolution, :func:`reduce_stride`), stride 2 reads the same field 4x faster.
@@ -101,7 +101,7 @@ class WindowFlowReducer:
     Call with ``flow`` ``(N, h, w, 2)`` float32 (window px / frame) and ``fps``; returns
     ``(dps, px)``, each ``(N,)`` float64: deg/s and px/frame.
 
-    The per-pixel angles are :class:`simulator.flow.RayAngles` (the formula sphere mode
+    The per-pixel angles are :class:`simulator.flow.backends.RayAngles` (the formula sphere mode
     uses too). Sums are float64 pairwise sums, independent of memory alignment and
     threads: results are bit-reproducible.
     """

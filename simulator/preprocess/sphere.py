@@ -29,7 +29,7 @@ from scipy import sparse
 
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.core.errors import InputError
-from simulator.flow import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.sphere.geometry import (
     dir_to_lonlat,
     equirect_remap_coords,
@@ -56,7 +56,7 @@ __all__ = [
 _CUBE = ((0.0, 0.0), (90.0, 0.0), (180.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (0.0, -90.0))
 
 
-#: A flow function or backend (:class:`simulator.flow.FlowBackend`): ``flow(prev, cur)`` with
+#: A flow function or backend (:class:`simulator.flow.backends.FlowBackend`): ``flow(prev, cur)`` with
 #: ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)`` float32 pixel flow ``(dx, dy)`` from prev
 #: to cur (x right, y down).
 FlowFn = Callable[[NDArray[np.uint8], NDArray[np.uint8]], NDArray[np.float32]]
@@ -226,7 +226,7 @@ class FieldEstimator:
     flow : str or FlowBackend or FlowFn
         Pixel flow between two stacks of tiles: a ``--flow`` text (``"dis"`` = OpenCV DIS
         ultrafast, ``"dis:fast"``, ``"farneback"``, ``"torch:MODEL.pt"``), a
-        :class:`simulator.flow.FlowBackend`, or any function of that signature.
+        :class:`simulator.flow.backends.FlowBackend`, or any function of that signature.
 
     Use :meth:`tiles` on each decoded gray frame, then :meth:`field` on consecutive tile
     stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.

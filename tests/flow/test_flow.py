@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.flow import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
+from simulator.flow.backends import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
 from simulator.sphere.geometry import perspective_rays
 
 
