@@ -32,7 +32,7 @@ from simulator.epof import ViewportQuery, viewport_overlaps
 from simulator.export import export_unity
 from simulator.media.gridfile import load_grid, require_field
 from simulator.preprocess import preprocess_sphere
-from simulator.readers import load_headpath
+from simulator.traces.readers import load_headpath
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

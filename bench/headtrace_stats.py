@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.headpath import CoarseSamplingWarning, synth
-from simulator.readers import detect_format, load_headpath
+from simulator.traces.path import CoarseSamplingWarning, synth
+from simulator.traces.readers import detect_format, load_headpath
 
 RATE = 10.0
 SPEED_PCT = (50, 75, 90, 95)

@@ -37,7 +37,7 @@ def main() -> int:
     from simulator.epof import compute_epof
     from simulator.grf import OpacityRule
     from simulator.media.gridfile import load_grid
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
 
     grid = load_grid(pano_grid())
     fps = float(grid.fps)

@@ -32,7 +32,7 @@ def main() -> int:
     args = ap.parse_args()
     from simulator.grf import GrfConfig, comfort_rule
     from simulator.media.gridfile import load_grid
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
     from simulator.render import RenderConfig, create_context
     from simulator.viewing import render_viewing
 

@@ -42,7 +42,7 @@ from simulator.sphere.cells import CellGrid, window_pof
 from simulator.epof import compute_epof, viewport_epof
 from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid, require_field
-from simulator.headpath import synth as synth_headpath
+from simulator.traces.path import synth as synth_headpath
 from simulator.sphere.headsets import get_headset
 from simulator.preprocess import (
     SphereConfig,

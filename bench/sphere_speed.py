@@ -174,7 +174,7 @@ def main(argv=None) -> int:
         print(f"  {name:<28}{v * 1000:8.2f}")
 
     # Exact-EPOF queries.
-    from simulator.headpath import synth as synth_headpath
+    from simulator.traces.path import synth as synth_headpath
 
     field = res["field"]
     q = ViewportQuery(cfg.cell_deg, Frustum.symmetric(107.0))

@@ -32,7 +32,7 @@ VIMSIM = [str(Path(sys.executable).with_name("vimsim"))]
 
 
 def setup(seconds: float) -> Path:
-    from simulator.headpath import save_headpath_csv, synth
+    from simulator.traces.path import save_headpath_csv, synth
     from simulator.synth import SynthConfig, synthesize
 
     OUT.mkdir(parents=True, exist_ok=True)

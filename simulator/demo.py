@@ -4,7 +4,7 @@ Steps, each printed with its wall-clock time:
 
 1. ``synth``: a short stereo (top-bottom) coaster clip with analytic ground truth
    (:mod:`simulator.synth`).
-2. ``headpath``: a seeded look-around head path (:func:`simulator.headpath.synth`).
+2. ``headpath``: a seeded look-around head path (:func:`simulator.traces.path.synth`).
 3. ``preprocess``: the POF matrix of the left eye (:func:`simulator.preprocess.preprocess_video`,
    DIS flow, the default 24 x 11 window grid at a small window size).
 4. ``epof``: EPOF and GRF opacity of the viewing (:func:`simulator.epof.compute_epof`).
@@ -35,8 +35,8 @@ from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.grf import GrfConfig
 from simulator.media.gridfile import load_grid
-from simulator.headpath import save_headpath_csv
-from simulator.headpath import synth as synth_headpath
+from simulator.traces.path import save_headpath_csv
+from simulator.traces.path import synth as synth_headpath
 from simulator.preprocess.paper import preprocess_video
 from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig

@@ -20,9 +20,9 @@ from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.core.errors import InputError
 from simulator.grf import OpacityRule, grain_count
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
-from simulator.headpath import HeadPath
+from simulator.traces.path import HeadPath
 from simulator.inputs import check_right_eye, csv_opacity, frame_range
-from simulator.readers import load_headpath
+from simulator.traces.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.media.video import MediaInfo, probe
 

@@ -16,7 +16,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.grf import OpacityRule
 from simulator.media.gridfile import require_field
-from simulator.headpath import HeadPath
+from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows
 from simulator.mitigation import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
@@ -84,8 +84,8 @@ def render_viewing(
     Parameters
     ----------
     video : path of the equirect video (mono or stereo, see ``layout``)
-    headpath : :class:`simulator.headpath.HeadPath`, or the path of a head path file
-        (read with :func:`simulator.readers.load_headpath`, format detected)
+    headpath : :class:`simulator.traces.path.HeadPath`, or the path of a head path file
+        (read with :func:`simulator.traces.readers.load_headpath`, format detected)
     outdir : output folder (created)
     grid : :class:`simulator.media.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.

@@ -8,12 +8,12 @@ import sys
 
 import pytest
 
-from simulator import readers
+from simulator.traces import readers
 from simulator.sphere import windows
 from simulator.core import choices
 from simulator.cli import COMMANDS, build_parser, main
 from simulator.grf import OPACITY_SOURCES
-from simulator.headpath import SYNTH_KINDS
+from simulator.traces.path import SYNTH_KINDS
 from simulator.synth import SCENES
 
 

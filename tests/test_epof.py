@@ -23,7 +23,7 @@ from simulator.epof import (
 from simulator.core.errors import InputError
 from simulator.grf import OpacityRule
 from simulator.media.gridfile import load_grid, save_grid
-from simulator.headpath import HeadPath, save_headpath_csv, synth
+from simulator.traces.path import HeadPath, save_headpath_csv, synth
 from simulator.reference import brute_overlaps
 from simulator.sphere.windows import WindowGrid, grid_preset
 

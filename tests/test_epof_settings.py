@@ -10,7 +10,7 @@ import pytest
 from simulator.sphere.cells import CellGrid, Frustum, window_pof
 from simulator.epof import EPOF_COLUMNS, read_epof_csv, viewport_epof
 from simulator.media.gridfile import load_grid, save_grid
-from simulator.headpath import save_headpath_csv, synth
+from simulator.traces.path import save_headpath_csv, synth
 from simulator.preprocess import SphereConfig, field_meta
 from simulator.sphere.windows import grid_preset
 

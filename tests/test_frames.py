@@ -86,7 +86,7 @@ def test_frames_index_and_determinism(ctx, clip, golden, tmp_path):
         "t0001.050_both.png",
         "t0001.900_both.png",
     ]
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
 
     yaw, pitch, _ = load_headpath(clip["path"]).sample_angles_deg(np.array([1.0]))
     assert index["frames"][1]["yaw_deg"] == pytest.approx(yaw[0])  # the pose of frame 10 (t=1 s)
@@ -108,7 +108,7 @@ def test_frames_equal_the_render_pass(ctx, clip, golden):
 
     frame = read_frame(clip["video"], 10)
     cfg = RenderConfig(eye_size=(96, 96), grf=GrfConfig())
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
 
     yaw, pitch, roll = load_headpath(clip["path"]).sample_angles_deg(np.array([1.0]))
     ref = render_view(ctx, frame, yaw[0], pitch[0], roll[0], config=cfg, opacity=0.8)

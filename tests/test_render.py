@@ -671,7 +671,7 @@ def test_cli_render_head_path_warning_is_one_line(ctx, tmp_path, capsys):
 def test_render_viewing_api_summary_written_last(ctx, tmp_path, monkeypatch):
     """The library entry point (no CLI): outputs renamed into place, summary.json last."""
     import simulator.render as R
-    from simulator.headpath import HeadPath
+    from simulator.traces.path import HeadPath
 
     vid = tmp_path / "m.mp4"
     _tiny_video(vid, n=3)

@@ -381,7 +381,7 @@ def test_headset_bad_input_and_resolve_fov():
 
 def test_compute_epof_uses_the_field(tmp_path):
     from simulator.epof import compute_epof
-    from simulator.headpath import synth
+    from simulator.traces.path import synth
 
     grid = grid_preset("default")
     f = _smooth_field(2, T=4)
@@ -417,7 +417,7 @@ def test_field_rows_grow_and_repeat_row_one(expected):
 def test_compute_epof_carries_an_asymmetric_headset_frustum(tmp_path):
     """The headset's per-eye frustum (not a centred view of the same FOV) reaches exact EPOF."""
     from simulator.epof import compute_epof
-    from simulator.headpath import synth
+    from simulator.traces.path import synth
 
     grid = grid_preset("default")
     f = _smooth_field(5, T=3)

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from simulator.cli import main
-from simulator.headpath import save_headpath_csv, synth
+from simulator.traces.path import save_headpath_csv, synth
 from simulator.study import VIEWING_COLUMNS
 
 

@@ -216,7 +216,7 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
     For commands reading a head path (``vimsim epof``, ``vimsim render``): add
     :func:`add_reader_options` to the parser and call this. InputError on bad input.
     """
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
 
     with warnings_to_stderr(prog):
         return load_headpath(
@@ -229,9 +229,9 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
 
 def run(args: argparse.Namespace) -> int:
     """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
-    from simulator import headpath as hp_mod
+    from simulator.traces import path as hp_mod
     from simulator.core.errors import InputError
-    from simulator.readers import load_headpath, load_keyframes
+    from simulator.traces.readers import load_headpath, load_keyframes
 
     with warnings_to_stderr("vimsim headpath"):
         if args.headpath_command == "synth":
@@ -258,7 +258,7 @@ def run(args: argparse.Namespace) -> int:
         if args.headpath_command == "convert" and args.user == "all":
             return _convert_all(args)
         if args.headpath_command == "convert" and args.columns:
-            from simulator.readers import load_columns
+            from simulator.traces.readers import load_columns
 
             hp = load_columns(
                 args.input,
@@ -284,8 +284,8 @@ def _convert_all(args: argparse.Namespace) -> int:
 
     from simulator.core.errors import InputError
     from simulator.core.fileio import check_not_input, check_output_dir
-    from simulator.headpath import save_headpath_csv
-    from simulator.readers import load_all_users
+    from simulator.traces.path import save_headpath_csv
+    from simulator.traces.readers import load_all_users
 
     src = Path(args.input)
     out = Path(args.output)

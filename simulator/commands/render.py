@@ -173,7 +173,7 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     from simulator.grf import GrfConfig, grain_count
     from simulator.media.gridfile import load_grid
     from simulator.mitigation import Mitigation, parse_color
-    from simulator.readers import load_headpath
+    from simulator.traces.readers import load_headpath
     from simulator.render import RenderConfig
     from simulator.core.resources import check_fits
 

@@ -72,10 +72,10 @@ MITIGATIONS: tuple[str, ...] = ("grf", "vignette", "grf+vignette", "local-grf", 
 #: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
 OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")
 
-#: Scripted head paths (:func:`simulator.headpath.synth`).
+#: Scripted head paths (:func:`simulator.traces.path.synth`).
 SYNTH_KINDS: tuple[str, ...] = ("static", "sweep", "sine", "look-around", "keyframes")
 
-#: Head-path file formats :func:`simulator.readers.load_headpath` reads (``auto`` detects
+#: Head-path file formats :func:`simulator.traces.readers.load_headpath` reads (``auto`` detects
 #: one of these from the content).
 HEADPATH_FORMATS: tuple[str, ...] = (
     "canonical",

@@ -25,7 +25,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.grf import OpacityRule
 from simulator.media.gridfile import GridFile, require_field
-from simulator.headpath import HeadPath
+from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows
 
 __all__ = [

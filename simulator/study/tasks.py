@@ -28,11 +28,11 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
-from simulator.headpath import HeadPath
+from simulator.traces.path import HeadPath
 from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
-from simulator.readers import load_all_users, load_headpath
+from simulator.traces.readers import load_all_users, load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.viewing import render_viewing

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from simulator.core.errors import InputError
-from simulator.headpath import HeadPath
-from simulator.readers.common import _check_finite, _check_increasing, _dedupe_times
+from simulator.traces.path import HeadPath
+from simulator.traces.readers.common import _check_finite, _check_increasing, _dedupe_times
 
 
 def _read_avtrack360(p: Path, video: str | None) -> HeadPath:

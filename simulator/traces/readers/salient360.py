@@ -9,8 +9,8 @@ from scipy.spatial.transform import Rotation
 
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation
-from simulator.headpath import HeadPath
-from simulator.readers.common import (
+from simulator.traces.path import HeadPath
+from simulator.traces.readers.common import (
     _check_finite,
     _check_increasing,
     _dedupe_times,

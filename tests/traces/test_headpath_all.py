@@ -8,7 +8,7 @@ import pytest
 
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.readers import load_all_users, load_headpath
+from simulator.traces.readers import load_all_users, load_headpath
 
 
 @pytest.fixture(scope="module")

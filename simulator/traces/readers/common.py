@@ -13,7 +13,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from simulator.core.errors import InputError
-from simulator.headpath import (
+from simulator.traces.path import (
     COARSE_STEP_DEG,
     CoarseSamplingWarning,
     HeadPath,

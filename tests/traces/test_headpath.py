@@ -13,14 +13,14 @@ from scipy.spatial.transform import Rotation
 from simulator.cli import main
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation
-from simulator.headpath import (
+from simulator.traces.path import (
     CoarseSamplingWarning,
     HeadPath,
     RadiansWarning,
     save_headpath_csv,
     synth,
 )
-from simulator.readers import detect_format, load_headpath, load_keyframes
+from simulator.traces.readers import detect_format, load_headpath, load_keyframes
 
 HT = "headtraces"
 

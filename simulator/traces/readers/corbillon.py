@@ -7,8 +7,8 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from simulator.headpath import HeadPath
-from simulator.readers.common import (
+from simulator.traces.path import HeadPath
+from simulator.traces.readers.common import (
     _check_finite,
     _check_increasing,
     _columns,

@@ -22,8 +22,8 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.headpath import HeadPath
-from simulator.readers.common import _check_increasing, _dedupe_times, _hint, _value
+from simulator.traces.path import HeadPath
+from simulator.traces.readers.common import _check_increasing, _dedupe_times, _hint, _value
 
 __all__ = ["COLUMN_KEYS", "load_columns", "parse_column_map"]
 

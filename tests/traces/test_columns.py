@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.readers import load_columns, load_headpath, parse_column_map
+from simulator.traces.readers import load_columns, load_headpath, parse_column_map
 
 
 def test_parse_column_map():

@@ -8,8 +8,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.headpath import HeadPath
-from simulator.readers.common import _check_finite, _check_increasing
+from simulator.traces.path import HeadPath
+from simulator.traces.readers.common import _check_finite, _check_increasing
 
 
 def _read_360vidstr(p: Path, user: int | None) -> HeadPath:

@@ -1,7 +1,7 @@
 """Readers of recorded head paths: vimsim's own formats and the public datasets, one module per family.
 
 :func:`load_headpath` reads any of :data:`FORMATS` (``auto`` detects the format from the
-content) into a :class:`simulator.headpath.HeadPath` in the project's conventions (degrees;
+content) into a :class:`simulator.traces.path.HeadPath` in the project's conventions (degrees;
 yaw + right, pitch + up, roll + right ear down; seconds from the video start). The mapping
 of each dataset's axes to ours is documented in ``docs/headpath.md`` and beside each reader.
 """
@@ -13,14 +13,14 @@ import os
 from simulator.core.choices import HEADPATH_FORMATS as FORMATS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.headpath import CANONICAL_COLUMNS, HeadPath
-from simulator.readers.avtrack360 import _read_avtrack360
-from simulator.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat
-from simulator.readers.columns import load_columns, parse_column_map
-from simulator.readers.common import _first_line, _warn_if_coarse
-from simulator.readers.corbillon import _read_corbillon, _read_corbillon_euler
-from simulator.readers.salient360 import _read_salient360_dyn, _read_salient360_static
-from simulator.readers.vidstr360 import _360vidstr_user, _parse_360vidstr, _read_360vidstr
+from simulator.traces.path import CANONICAL_COLUMNS, HeadPath
+from simulator.traces.readers.avtrack360 import _read_avtrack360
+from simulator.traces.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat
+from simulator.traces.readers.columns import load_columns, parse_column_map
+from simulator.traces.readers.common import _first_line, _warn_if_coarse
+from simulator.traces.readers.corbillon import _read_corbillon, _read_corbillon_euler
+from simulator.traces.readers.salient360 import _read_salient360_dyn, _read_salient360_static
+from simulator.traces.readers.vidstr360 import _360vidstr_user, _parse_360vidstr, _read_360vidstr
 
 __all__ = [
     "FORMATS",

@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from simulator.core.errors import InputError
-from simulator.headpath import CANONICAL_COLUMNS, HeadPath
-from simulator.readers.common import (
+from simulator.traces.path import CANONICAL_COLUMNS, HeadPath
+from simulator.traces.readers.common import (
     _check_finite,
     _check_increasing,
     _check_pitch,
