@@ -28,7 +28,7 @@ sys.path.insert(0, str(REPO))
 
 from simulator.media import video
 from simulator.frames import render_frames
-from simulator.grf import GrfConfig
+from simulator.mitigation.grf import GrfConfig
 from simulator.render import RenderConfig, create_context
 from simulator.viewing import render_viewing
 

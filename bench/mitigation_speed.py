@@ -6,7 +6,7 @@ Same 2048x1024 H.264 video (petra.jpg panning, 30 fps), same moving head path (y
 + pitch sine), same opacity ramp 0..1, mono video, x264 ``veryfast`` crf 18, wall clock
 with decode and encode, as ``vimsim render`` runs it (``simulator.render.render_video``),
 plus the visible-flow figures every render now computes
-(``simulator.mitigation.visible_flow``; sphere-mode field of the same size as a 4 deg
+(``simulator.mitigation.kinds.visible_flow``; sphere-mode field of the same size as a 4 deg
 grid's). local-grf gets a field whose eastern half moves, so its grains switch per cell.
 
 Rounds interleave the modes, in an order rotating from round to round (the machine is
@@ -33,8 +33,8 @@ from render_speed import head_angles, make_video  # bench/render_speed.py: the s
 from simulator.media import video
 from simulator.sphere.cells import CellGrid
 from simulator.core.choices import MITIGATIONS
-from simulator.grf import GrfConfig
-from simulator.mitigation import Mitigation, cell_opacity, visible_flow
+from simulator.mitigation.grf import GrfConfig
+from simulator.mitigation.kinds import Mitigation, cell_opacity, visible_flow
 from simulator.render import RenderConfig, create_context, render_video
 
 GOAL = 1.15

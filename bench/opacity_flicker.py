@@ -35,7 +35,7 @@ def main() -> int:
     import json
 
     from simulator.epof import compute_epof
-    from simulator.grf import OpacityRule
+    from simulator.mitigation.grf import OpacityRule
     from simulator.media.gridfile import load_grid
     from simulator.traces.readers import load_headpath
 

@@ -31,7 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
-from simulator.grf import GrfConfig
+from simulator.mitigation.grf import GrfConfig
 from simulator.reference import ffmpeg_exe
 from simulator.render import RenderConfig, create_context, render_video
 

@@ -33,7 +33,7 @@ from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.grf import GrfConfig
+from simulator.mitigation.grf import GrfConfig
 from simulator.media.gridfile import load_grid
 from simulator.traces.path import save_headpath_csv
 from simulator.traces.path import synth as synth_headpath

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.sphere.geometry import head_rotation, split_eye
-from simulator.grf import OpacityRule
+from simulator.mitigation.grf import OpacityRule
 from simulator.plan import grf_settings, plan_viewing
 from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig

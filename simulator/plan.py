@@ -18,7 +18,7 @@ import numpy as np
 from simulator.sphere.cells import Frustum
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.core.errors import InputError
-from simulator.grf import OpacityRule, grain_count
+from simulator.mitigation.grf import OpacityRule, grain_count
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.traces.path import HeadPath
 from simulator.inputs import check_right_eye, csv_opacity, frame_range

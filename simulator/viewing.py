@@ -14,11 +14,11 @@ from simulator.media.audio import audio_source
 from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
-from simulator.grf import OpacityRule
+from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import require_field
 from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows
-from simulator.mitigation import cell_opacity, visible_flow
+from simulator.mitigation.kinds import cell_opacity, visible_flow
 from simulator.plan import grf_settings, plan_viewing
 from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig
@@ -34,7 +34,7 @@ OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
 REVIEW_FILES = ("review.mp4", "sheet.png")
 
 #: Columns ``epof.csv`` of a render has after the EPOF columns: what reaches the eye
-#: (:func:`simulator.mitigation.visible_flow`).
+#: (:func:`simulator.mitigation.kinds.visible_flow`).
 VISIBLE_COLUMNS = ("visible_flow_dps", "visible_ratio", "blocked_share")
 
 
@@ -96,8 +96,8 @@ def render_viewing(
         of an EPOF CSV (its ``opacity`` column; it must have a row for every rendered
         frame, numbered as the video's frames); ignored when nothing is drawn and by
         local-grf (each cell's own flow drives it)
-    rule : the opacity rule of ``"auto"`` (:class:`simulator.grf.OpacityRule`; default
-        the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.grf.comfort_rule`)
+    rule : the opacity rule of ``"auto"`` (:class:`simulator.mitigation.grf.OpacityRule`; default
+        the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.mitigation.grf.comfort_rule`)
     method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a

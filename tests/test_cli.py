@@ -12,7 +12,7 @@ from simulator.traces import readers
 from simulator.sphere import windows
 from simulator.core import choices
 from simulator.cli import COMMANDS, build_parser, main
-from simulator.grf import OPACITY_SOURCES
+from simulator.mitigation.grf import OPACITY_SOURCES
 from simulator.traces.path import SYNTH_KINDS
 from simulator.synth import SCENES
 

@@ -21,7 +21,7 @@ from simulator.epof import (
     weighted_epof,
 )
 from simulator.core.errors import InputError
-from simulator.grf import OpacityRule
+from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import load_grid, save_grid
 from simulator.traces.path import HeadPath, save_headpath_csv, synth
 from simulator.reference import brute_overlaps

@@ -48,7 +48,7 @@ def clip(tmp_path_factory):
 
 def _frames(ctx, clip, out, *, video=None, path=None, grain=1.5, at="0.25,1.05,1.9"):
     from simulator.frames import render_frames
-    from simulator.grf import GrfConfig
+    from simulator.mitigation.grf import GrfConfig
     from simulator.render import RenderConfig
 
     cfg = RenderConfig(eye_size=(96, 96), grf=GrfConfig(grain_deg=grain))
@@ -102,7 +102,7 @@ def test_frames_equal_the_render_pass(ctx, clip, golden):
     """The PNG is what EyeRenderer draws for that frame and pose (brute force: one view)."""
     from PIL import Image
 
-    from simulator.grf import GrfConfig
+    from simulator.mitigation.grf import GrfConfig
     from simulator.render import RenderConfig, render_view
     from simulator.media.video import read_frame
 

@@ -19,7 +19,7 @@ import pytest
 
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import perspective_rays
-from simulator.grf import GrfConfig
+from simulator.mitigation.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
 from simulator.viewing import OUTDIR_FILES, render_viewing
 

@@ -66,10 +66,10 @@ def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def rule_from_args(args: argparse.Namespace):
-    """The :class:`simulator.grf.OpacityRule` the options ask for (InputError if
+    """The :class:`simulator.mitigation.grf.OpacityRule` the options ask for (InputError if
     ``--opacity-rule paper`` is combined with smoothing or easing)."""
     from simulator.core.errors import InputError
-    from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
+    from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
 
     given = [
         f"--{n.replace('_', '-')}"

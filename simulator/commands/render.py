@@ -170,9 +170,9 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     the opacity rule."""
     from simulator.commands._progress import warnings_to_stderr
     from simulator.core.errors import InputError
-    from simulator.grf import GrfConfig, grain_count
+    from simulator.mitigation.grf import GrfConfig, grain_count
     from simulator.media.gridfile import load_grid
-    from simulator.mitigation import Mitigation, parse_color
+    from simulator.mitigation.kinds import Mitigation, parse_color
     from simulator.traces.readers import load_headpath
     from simulator.render import RenderConfig
     from simulator.core.resources import check_fits

@@ -65,7 +65,7 @@ DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
 #: Flow backends as ``--flow`` spells them.
 FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
 
-#: What is drawn over the video (:mod:`simulator.mitigation`): the paper's grains, a
+#: What is drawn over the video (:mod:`simulator.mitigation.kinds`): the paper's grains, a
 #: tunneling vignette, both, grains only where the flow is high, or nothing.
 MITIGATIONS: tuple[str, ...] = ("grf", "vignette", "grf+vignette", "local-grf", "none")
 

@@ -23,7 +23,7 @@ from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
-from simulator.grf import OpacityRule
+from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import GridFile, require_field
 from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows

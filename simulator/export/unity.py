@@ -42,7 +42,7 @@ from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file, check_output_dir
-from simulator.grf import OpacityRule
+from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import GridFile, content_hash, load_grid, require_field
 
 __all__ = [
@@ -149,7 +149,7 @@ def export_unity(
         float32 for the POF matrix, the stored dtype of a field)
     hfov_deg, vfov_deg : float, degrees; viewport FOV, default the grid's window FOV
     rule : OpacityRule (default ``OpacityRule()``, the paper's 10th/90th percentiles, no
-        easing; the CLI's default is :func:`simulator.grf.comfort_rule`, as ``vimsim epof``);
+        easing; the CLI's default is :func:`simulator.mitigation.grf.comfort_rule`, as ``vimsim epof``);
         its thresholds are taken from the grid's flow (``source="grid"``); its smoothing and
         ease-in / ease-out times go into the header for the runtime's ``OpacityEasing``
     cache_bins : sphere mode: weight bins the runtime keeps (~16 kB each for 4 deg cells)

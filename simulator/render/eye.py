@@ -17,7 +17,7 @@ equirect frame:
   (llvmpipe's anisotropic filter speckles there; the equirect is oversampled in
   longitude near the poles anyway).
 
-Granulated rest frames (:mod:`simulator.grf`) are drawn in the same pass: world-fixed
+Granulated rest frames (:mod:`simulator.mitigation.grf`) are drawn in the same pass: world-fixed
 grain coverage, rendered once per renderer into an equirect texture from a lat-band
 bucket grid of the grains (shader storage buffers, ``shaders/grf_mask.frag``) and looked
 up per pixel, times the head-fixed cutout and the frame's opacity.
@@ -48,8 +48,8 @@ from simulator.sphere.cells import Frustum
 from simulator.core.choices import Eye
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import check_fov, head_rotation
-from simulator.grf import GrainField, GrfConfig
-from simulator.mitigation import Mitigation
+from simulator.mitigation.grf import GrainField, GrfConfig
+from simulator.mitigation.kinds import Mitigation
 from simulator.render.gl import _check_gl, _gl_limit, _program
 
 __all__ = ["EyeRenderer", "RenderConfig", "render_view"]
@@ -63,7 +63,7 @@ class RenderConfig:
     hfov_deg, vfov_deg : exact horizontal / vertical FOV, degrees (default 107 x 107), for
         a symmetric view; ignored when ``frustum`` is given
     grf : GRF parameters, or None for no grains
-    mitigation : :class:`simulator.mitigation.Mitigation`: what is drawn (default ``grf``:
+    mitigation : :class:`simulator.mitigation.kinds.Mitigation`: what is drawn (default ``grf``:
         the paper's grains); grains are drawn when it has grains and ``grf`` is set, the
         vignette when it has one
     frustum : :class:`simulator.sphere.cells.Frustum` of the **left** eye (the right eye mirrors
@@ -395,7 +395,7 @@ class EyeRenderer:
             limited range, 2 x 2 chroma means, as swscale's rgb24 -> yuv420p) into the
             planar layout of ``av.VideoFrame.from_ndarray(..., format="yuv420p")``
         cell_opacity : local-grf only: this frame's per-cell grain opacity ``(n_lat,
-            n_lon)`` (:func:`simulator.mitigation.cell_opacity`); None keeps the last one
+            n_lon)`` (:func:`simulator.mitigation.kinds.cell_opacity`); None keeps the last one
 
         Returns
         -------

@@ -165,7 +165,7 @@ def render_video(
         beyond N hold the last pose
     opacity : ndarray, shape (N,), GRF / vignette opacity 0..1 per frame
     cell_opacity : ndarray, shape (N, n_lat, n_lon), local-grf's per-cell grain opacity
-        per frame (:func:`simulator.mitigation.cell_opacity`); frames beyond N hold the last
+        per frame (:func:`simulator.mitigation.kinds.cell_opacity`); frames beyond N hold the last
     layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
         ``side-by-side`` (left eye left)
     fps, n_frames : the video's rate and frame count (from :func:`simulator.media.video.probe`)

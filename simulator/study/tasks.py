@@ -26,10 +26,10 @@ from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
-from simulator.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
+from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.traces.path import HeadPath
-from simulator.mitigation import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
+from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.traces.readers import load_all_users, load_headpath

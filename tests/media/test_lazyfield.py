@@ -14,7 +14,7 @@ from simulator.epof.exact import viewport_epof
 from simulator.core.errors import InputError
 from simulator.media.gridfile import load_grid, require_field, save_grid
 from simulator.media.lazyfield import LazyField, take_rows
-from simulator.mitigation import Mitigation, cell_opacity, visible_flow
+from simulator.mitigation.kinds import Mitigation, cell_opacity, visible_flow
 from simulator.sphere.windows import grid_preset
 
 CELL = 10.0
@@ -154,7 +154,7 @@ def test_viewport_query_cache_is_bounded_in_bytes():
 
 def test_opacity_fit_keeps_its_inputs():
     """The percentile fit works on one copy it partitions in place: inputs unchanged."""
-    from simulator.grf import OpacityRule
+    from simulator.mitigation.grf import OpacityRule
 
     e = np.random.default_rng(1).random(101) * 40
     e[7] = np.nan

@@ -407,7 +407,7 @@ namespace Vimsim
     }
 
     /// <summary>
-    /// The opacity easing of `vimsim epof` (simulator.grf.OpacityRule), causal, starting at the
+    /// The opacity easing of `vimsim epof` (simulator.mitigation.grf.OpacityRule), causal, starting at the
     /// first value: per video frame an exponential smoothing v += a (x - v), a = 1 - exp(-1 /
     /// (fps S)) (S = smoothing time constant, 0 = off), then a slew-rate limit on the eased
     /// value e: it rises by at most 1 / (fps easeIn) and falls by at most 1 / (fps easeOut) per

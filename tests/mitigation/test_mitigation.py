@@ -1,8 +1,8 @@
-"""Mitigations beyond the paper (simulator/mitigation.py): vignette geometry and local-grf
+"""Mitigations beyond the paper (simulator/mitigation/kinds.py): vignette geometry and local-grf
 coverage measured from rendered white frames, visible flow against a brute-force per-pixel
 computation on rendered frames, goldens per mode, the ``--mitigation`` CLI and its bad input.
 
-Goldens: ``VIMSIM_UPDATE_GOLDEN=1 pytest tests/test_mitigation.py -k golden`` rewrites
+Goldens: ``VIMSIM_UPDATE_GOLDEN=1 pytest tests/mitigation/test_mitigation.py -k golden`` rewrites
 tests/golden/mitigation_*.png (look at them first).
 """
 
@@ -20,11 +20,11 @@ import pytest
 from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.grf import GrfConfig
-from simulator.mitigation import Mitigation, cell_opacity, parse_color, visible_flow
+from simulator.mitigation.grf import GrfConfig
+from simulator.mitigation.kinds import Mitigation, cell_opacity, parse_color, visible_flow
 from simulator.render import RenderConfig, render_view
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "golden"
 WHITE = np.full((256, 512, 3), 255, np.uint8)
 FOV = 107.0
@@ -180,7 +180,7 @@ def half_grid(tmp_path_factory):
 
 
 def test_local_grf_coverage_follows_the_field(ctx, half_grid):
-    from simulator.grf import OpacityRule
+    from simulator.mitigation.grf import OpacityRule
     from simulator.media.gridfile import require_field
 
     _, grid = half_grid

@@ -4,7 +4,7 @@ A :class:`Mitigation` says what is drawn over the video (one of
 :data:`simulator.core.choices.MITIGATIONS`):
 
 * ``grf`` (default): the paper's world-fixed grains, alpha ``cutout(ecc) * opacity``
-  (:mod:`simulator.grf`);
+  (:mod:`simulator.mitigation.grf`);
 * ``vignette``: a head-fixed dynamic FOV restriction ("tunneling", Fernandes & Feiner
   2016). Its **aperture diameter**, in degrees of visual field around the view axis
   (as Meta's tunneling specifies it, so the look is the same on every headset), shrinks
@@ -40,7 +40,7 @@ from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import head_rotation
-from simulator.grf import GrainField, GrfConfig, cutout_alpha
+from simulator.mitigation.grf import GrainField, GrfConfig, cutout_alpha
 from simulator.media.lazyfield import LazyField, field_chunks
 
 __all__ = ["Mitigation", "VisibleFlow", "cell_opacity", "parse_color", "visible_flow"]

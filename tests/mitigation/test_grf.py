@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from simulator.core.errors import InputError
-from simulator.grf import GrainField, GrfConfig, cutout_alpha, grain_count
+from simulator.mitigation.grf import GrainField, GrfConfig, cutout_alpha, grain_count
 
 
 def _random_dirs(n: int, seed: int = 1) -> np.ndarray:

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.grf import OpacityRule, comfort_rule, ease
+from simulator.mitigation.grf import OpacityRule, comfort_rule, ease
 
 
 def _data_lines(path):
