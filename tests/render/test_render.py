@@ -3,7 +3,7 @@ measured from rendered frames, stereo, the ``vimsim render`` command and its bad
 
 GL tests run wherever headless EGL exists (CI installs libegl1 + libgl1-mesa-dri); they
 skip only when creating the EGL context fails. Goldens: ``VIMSIM_UPDATE_GOLDEN=1 pytest
-tests/test_render.py -k golden`` rewrites tests/golden/*.png (look at them first).
+tests/render/test_render.py -k golden`` rewrites tests/golden/*.png (look at them first).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ def _data_lines(path):
     return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
 
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "golden"
 
 
