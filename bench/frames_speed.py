@@ -5,9 +5,9 @@ Usage: .venv/bin/python bench/frames_speed.py [--seconds 40] [--eye 480] [--mome
 Same run, same H.264 video (petra.jpg panning, 1024x512, 30 fps, x264 default key frames),
 same head path and settings (GRF on at opacity 0.8, mono), wall clock, set-up included:
 
-* full: :func:`simulator.viewing.render_viewing` (what ``vimsim render`` runs: every
+* full: :func:`simulator.viewing.job.render_viewing` (what ``vimsim render`` runs: every
   frame decoded, rendered and encoded, x264 veryfast);
-* frames: :func:`simulator.frames.render_frames` at ``--moments`` times spread over the
+* frames: :func:`simulator.viewing.frames.render_frames` at ``--moments`` times spread over the
   video (seek-decoded, rendered, PNG).
 
 Prints both in seconds and the ratio frames / full; the goal (issue 20): at most 0.10.
@@ -27,10 +27,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from simulator.media import video
-from simulator.frames import render_frames
+from simulator.viewing.frames import render_frames
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import RenderConfig, create_context
-from simulator.viewing import render_viewing
+from simulator.viewing.job import render_viewing
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL = 0.10

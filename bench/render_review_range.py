@@ -34,7 +34,7 @@ def main() -> int:
     from simulator.media.gridfile import load_grid
     from simulator.traces.readers import load_headpath
     from simulator.render import RenderConfig, create_context
-    from simulator.viewing import render_viewing
+    from simulator.viewing.job import render_viewing
 
     gp = pano_grid()
     grid = load_grid(gp)

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
-from simulator.frames import FRAMES_JSON
+from simulator.viewing.frames import FRAMES_JSON
 
 __all__ = [
     "DEFAULT_MAX_DIFF",

@@ -8,7 +8,7 @@ Steps, each printed with its wall-clock time:
 3. ``preprocess``: the POF matrix of the left eye (:func:`simulator.preprocess.preprocess_video`,
    DIS flow, the default 24 x 11 window grid at a small window size).
 4. ``epof``: EPOF and GRF opacity of the viewing (:func:`simulator.epof.compute_epof`).
-5. ``render``: per-eye MP4s with the GRF overlay (:func:`simulator.viewing.render_viewing`,
+5. ``render``: per-eye MP4s with the GRF overlay (:func:`simulator.viewing.job.render_viewing`,
    what ``vimsim render`` runs).
 6. plots (EPOF and opacity over time; POF heat maps over yaw x pitch for a few frames
    and averaged, estimated beside the analytic truth), ``README.txt`` and
@@ -42,7 +42,7 @@ from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig
 from simulator.synth.clip import load_truth, synthesize
 from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps
-from simulator.viewing import render_viewing
+from simulator.viewing.job import render_viewing
 from simulator.sphere.windows import grid_preset
 
 __all__ = ["DemoConfig", "run_demo"]

@@ -25,7 +25,7 @@ from simulator.compare import (
     update_goldens,
 )
 from simulator.core.errors import InputError
-from simulator.frames import render_frames
+from simulator.viewing.frames import render_frames
 
 __all__ = ["UPDATE_ENV", "assert_frames_match", "render_frames"]
 

@@ -93,7 +93,7 @@ def test_demo_bad_output_dir(tmp_path, capsys):
 
 
 def test_demo_and_render_do_not_import_the_cli():
-    """Layering: the demo calls simulator.viewing.render_viewing, not ``vimsim render``;
+    """Layering: the demo calls simulator.viewing.job.render_viewing, not ``vimsim render``;
     neither module imports simulator.cli or simulator.commands (higher layers)."""
     import simulator.demo
     import simulator.render

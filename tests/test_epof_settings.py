@@ -71,7 +71,7 @@ def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     frustum (the left's mirrored), exactly as viewport_epof gives it."""
     from simulator.render import RenderConfig
     from simulator.media.video import VideoWriter
-    from simulator.viewing import plan_viewing
+    from simulator.viewing.job import plan_viewing
 
     vid = tmp_path / "tb.mp4"
     with VideoWriter(vid, 30.0, (128, 128), preset="ultrafast") as wr:

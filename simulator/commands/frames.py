@@ -1,6 +1,6 @@
 """``vimsim frames``: the eye views at chosen moments as lossless PNGs plus frames.json (visual regression tests).
 
-Parses the options (those of ``render``); the work is :func:`simulator.frames.render_frames`.
+Parses the options (those of ``render``); the work is :func:`simulator.viewing.frames.render_frames`.
 """
 
 from __future__ import annotations
@@ -44,10 +44,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Run :func:`simulator.frames.render_frames`; InputError -> exit 2."""
+    """Run :func:`simulator.viewing.frames.render_frames`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.commands.render import view_from_args
-    from simulator.frames import render_frames
+    from simulator.viewing.frames import render_frames
 
     hp, grid, config, note, layout, rule = view_from_args(args, "frames")
     with (

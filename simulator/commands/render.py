@@ -1,6 +1,6 @@
 """``vimsim render``: per-eye videos of what the viewer saw, with the GRF overlay.
 
-Parses the options; the work is :func:`simulator.viewing.render_viewing`.
+Parses the options; the work is :func:`simulator.viewing.job.render_viewing`.
 """
 
 from __future__ import annotations
@@ -319,9 +319,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Parse the options and run :func:`simulator.viewing.render_viewing`; InputError -> exit 2."""
+    """Parse the options and run :func:`simulator.viewing.job.render_viewing`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
-    from simulator.viewing import render_viewing
+    from simulator.viewing.job import render_viewing
 
     hp, grid, config, note, layout, rule = view_from_args(args)
     with (

@@ -175,7 +175,7 @@ def render_video(
     on_frame : None, or ``on_frame(equirect, eye_yuv420p)`` called for every rendered frame,
         in order, on a worker thread (overlapping rendering): the decoded equirect frame
         (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
-        its errors are raised here (e.g. :class:`simulator.review.ReviewWriter`).
+        its errors are raised here (e.g. :class:`simulator.viewing.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
     threads : the render's CPU budget. None: no bound (decoding and each eye's encoder
         overlap the drawing in threads of their own; FFmpeg and x264 pick their thread

@@ -35,7 +35,7 @@ from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.traces.readers import load_all_users, load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
-from simulator.viewing import render_viewing
+from simulator.viewing.job import render_viewing
 from simulator.sphere.windows import grid_preset
 
 __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]

@@ -21,7 +21,7 @@ from simulator.core.errors import InputError
 from simulator.sphere.geometry import perspective_rays
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
-from simulator.viewing import OUTDIR_FILES, render_viewing
+from simulator.viewing.job import OUTDIR_FILES, render_viewing
 
 
 def _data_lines(path):
@@ -705,7 +705,7 @@ def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_a
     """A re-run into an existing OUTDIR that fails must not leave the previous run's
     epof.csv/summary.json beside new (or no) MP4s; other files in OUTDIR are kept."""
     import simulator.render as R
-    import simulator.viewing
+    import simulator.viewing.job
     from simulator.cli import main
 
     vid = tmp_path / "m.mp4"
@@ -722,7 +722,7 @@ def test_failed_rerun_leaves_no_stale_outputs(ctx, tmp_path, monkeypatch, fail_a
     if fail_at == "render":
         monkeypatch.setattr(R.EyeRenderer, "render", boom)
     else:
-        monkeypatch.setattr(simulator.viewing, "write_epof_csv", boom)
+        monkeypatch.setattr(simulator.viewing.job, "write_epof_csv", boom)
     assert main(argv) == 1  # an internal error: one line, no traceback
     left = sorted(p.name for p in out.iterdir() if p.name != ".vimsim-manifest.json")
     assert "summary.json" not in left and "epof.csv" not in left and "notes.txt" in left

@@ -4,7 +4,7 @@ For visual regression tests (:mod:`simulator.compare`, :mod:`simulator.testing`)
 same inputs give byte-identical PNGs on the same machine. The frame shown at video time
 ``t`` (seconds) is frame ``floor(t * fps)`` (the one on screen during
 ``[i / fps, (i + 1) / fps)``); it is rendered with the head pose and GRF opacity that
-``vimsim render`` uses for that frame (:func:`simulator.plan.plan_viewing`), by the
+``vimsim render`` uses for that frame (:func:`simulator.viewing.plan.plan_viewing`), by the
 same GL eye renderer, read back as RGB (``render`` converts the same pass to yuv420p
 for x264). Only the needed frames are decoded: the decoder seeks to the key frame
 before each one.
@@ -28,7 +28,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.sphere.geometry import head_rotation, split_eye
 from simulator.mitigation.grf import OpacityRule
-from simulator.plan import grf_settings, plan_viewing
+from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.core.progress import Counter, Progress
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
@@ -227,7 +227,7 @@ def render_frames(
     Parameters
     ----------
     video, headpath, grid, config, opacity, layout, hold, rule, method : as
-        :func:`simulator.viewing.render_viewing` (``vimsim render``)
+        :func:`simulator.viewing.job.render_viewing` (``vimsim render``)
     at : times in seconds (list, or ``"1,2.5"``); or ``every``: a step in seconds
     ctx : moderngl.Context, or None to create one
 

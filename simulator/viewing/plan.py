@@ -1,7 +1,7 @@
 """What every frame of a viewing shows: its checked inputs, poses, EPOF and opacity (no GL, no files).
 
 :func:`plan_viewing` is the planning half of the one-viewing job, shared by ``vimsim render``
-(:func:`simulator.viewing.render_viewing`) and ``vimsim frames``: the video probed, the head
+(:func:`simulator.viewing.job.render_viewing`) and ``vimsim frames``: the video probed, the head
 path sampled at each frame's time ``i / fps`` (seconds; angles in degrees, yaw + right,
 pitch + up, roll + right ear down), the EPOF over ``config.frustum`` and the opacity that
 drives the mitigation.
@@ -21,7 +21,7 @@ from simulator.core.errors import InputError
 from simulator.mitigation.grf import OpacityRule, grain_count
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.traces.path import HeadPath
-from simulator.inputs import check_right_eye, csv_opacity, frame_range
+from simulator.viewing.inputs import check_right_eye, csv_opacity, frame_range
 from simulator.traces.readers import load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.media.video import MediaInfo, probe
@@ -107,7 +107,7 @@ def plan_viewing(
     the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
     (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
     EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
-    it to a time range (:func:`simulator.inputs.frame_range`). ``right``: the right eye's
+    it to a time range (:func:`simulator.viewing.inputs.frame_range`). ``right``: the right eye's
     equirect file (``video`` is then the left eye's; both mono, same size, frame rate and
     frame count). Raises InputError for a bad video, right-eye file, head path, grid,
     range or opacity.

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.plan import frame_range
+from simulator.viewing.plan import frame_range
 
 
 def _data_lines(path):

@@ -19,12 +19,12 @@ from simulator.media.gridfile import require_field
 from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows
 from simulator.mitigation.kinds import cell_opacity, visible_flow
-from simulator.plan import grf_settings, plan_viewing
+from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.core.progress import Progress
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
-from simulator.review import ReviewWriter
+from simulator.viewing.review import ReviewWriter
 
 __all__ = ["OUTDIR_FILES", "REVIEW_FILES", "VISIBLE_COLUMNS", "render_viewing"]
 
@@ -107,7 +107,7 @@ def render_viewing(
     audio : copy the source's audio (of ``video``; the range's part) into every output
         video (:mod:`simulator.media.audio`); False: silent outputs. A source without audio
         gives silent outputs either way (``summary.json`` says which)
-    review : also write :data:`REVIEW_FILES` (:class:`simulator.review.ReviewWriter`):
+    review : also write :data:`REVIEW_FILES` (:class:`simulator.viewing.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)

@@ -47,7 +47,7 @@ def clip(tmp_path_factory):
 
 
 def _frames(ctx, clip, out, *, video=None, path=None, grain=1.5, at="0.25,1.05,1.9"):
-    from simulator.frames import render_frames
+    from simulator.viewing.frames import render_frames
     from simulator.mitigation.grf import GrfConfig
     from simulator.render import RenderConfig
 
@@ -66,7 +66,7 @@ def golden(ctx, clip):
 
 def test_decode_frames_matches_sequential_decoding(real_dir):
     """Seek-based decoding against decoding every frame (three.js MaryOculus.mp4, real H.264)."""
-    from simulator.frames import decode_frames
+    from simulator.viewing.frames import decode_frames
     from simulator.media.video import iter_frames
 
     p = real_dir / "equirect" / "threejs" / "MaryOculus.mp4"
@@ -212,7 +212,7 @@ def test_cli_compare_bad_goldens(ctx, clip, golden, tmp_path, capsys):
 
 
 def test_failed_frames_run_leaves_no_pngs(ctx, clip, tmp_path, monkeypatch):
-    import simulator.frames as fr
+    import simulator.viewing.frames as fr
 
     calls = []
 

@@ -10,7 +10,7 @@ import pytest
 
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import equirect_pixel_lonlat, head_rotation, lonlat_to_dir
-from simulator.review import frustum_outline_xy
+from simulator.viewing.review import frustum_outline_xy
 
 W, H = 360, 180
 
