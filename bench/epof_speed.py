@@ -71,7 +71,7 @@ def main() -> int:
     print(
         f"batch: {qps:,.0f} queries/s ({1e6 / qps:.2f} us each); target {BATCH_TARGET:,.0f}/s, ratio {qps / BATCH_TARGET:.2f}"
     )
-    from simulator.reference import brute_overlaps
+    from simulator.testing.reference import brute_overlaps
 
     errs = []
     for _ in range(25):

@@ -11,7 +11,7 @@ moments (GRF on, opacity 0.8), run in two separate processes (fresh EGL contexts
 
 Prints, per case, the lowest PSNR, the largest mean absolute difference (8-bit levels)
 and the lowest SSIM over the frames, each beside the default thresholds
-(:data:`simulator.compare.DEFAULT_PSNR_DB`, :data:`~simulator.compare.DEFAULT_MAX_DIFF`).
+(:data:`simulator.testing.compare.DEFAULT_PSNR_DB`, :data:`~simulator.testing.compare.DEFAULT_MAX_DIFF`).
 The reference is the unchanged run: the ratio printed is each case's lowest PSNR over
 the default threshold (pass >= 1).
 """
@@ -30,7 +30,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from simulator.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs
+from simulator.testing.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs
 from simulator.media.video import iter_frames, probe
 
 VIDEO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "MaryOculus.mp4"

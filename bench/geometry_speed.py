@@ -22,7 +22,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
 from simulator.sphere import geometry
-from simulator.reference import v360_time_ms
+from simulator.testing.reference import v360_time_ms
 from simulator.sphere.windows import WindowExtractor, grid_preset
 
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"

@@ -29,7 +29,7 @@ REPO = Path(__file__).resolve().parents[1]
 from v360_agreement import panoramas, sees_pole
 
 from simulator.sphere.geometry import extract_view, head_rotation
-from simulator.reference import psnr, tile_displacement, v360_view
+from simulator.testing.reference import psnr, tile_displacement, v360_view
 from simulator.render import EyeRenderer, RenderConfig, create_context
 
 GOAL_PSNR_DB = 35.0
@@ -46,7 +46,7 @@ def compare(ctx, img, yaw, pitch, roll, *, size, fov) -> dict:
     CPU reference vs v360 (``psnr_cpu_v360``: the same Lagrange kernel without the
     renderer's mipmaps, so where ours is minified this shows what the prefilter accounts
     for), and the median tile displacement of ours vs v360 (``disp_px``,
-    simulator.reference.tile_displacement)."""
+    simulator.testing.reference.tile_displacement)."""
     W = img.shape[1]
     ref_img, ref_yaw, our_yaw = img, float(yaw), float(yaw)
     if yaw != 0:  # v360 drifts with yaw: look at yaw 0 of the panorama rolled by k columns

@@ -32,7 +32,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
 from simulator.mitigation.grf import GrfConfig
-from simulator.reference import ffmpeg_exe
+from simulator.testing.reference import ffmpeg_exe
 from simulator.render import RenderConfig, create_context, render_video
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"

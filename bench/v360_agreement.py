@@ -24,7 +24,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
 from simulator.sphere import geometry
-from simulator.reference import compare_with_v360, psnr, tile_displacement, v360_view
+from simulator.testing.reference import compare_with_v360, psnr, tile_displacement, v360_view
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL_PSNR_DB = 40.0

@@ -24,7 +24,7 @@ from simulator.core.errors import InputError
 from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import load_grid, save_grid
 from simulator.traces.path import HeadPath, save_headpath_csv, synth
-from simulator.reference import brute_overlaps
+from simulator.testing.reference import brute_overlaps
 from simulator.sphere.windows import WindowGrid, grid_preset
 
 

@@ -1,6 +1,6 @@
 """Eye views at chosen moments of a viewing, rendered as ``vimsim render`` would, to lossless PNGs plus ``frames.json``.
 
-For visual regression tests (:mod:`simulator.compare`, :mod:`simulator.testing`): the
+For visual regression tests (:mod:`simulator.testing.compare`, :mod:`simulator.testing.goldens`): the
 same inputs give byte-identical PNGs on the same machine. The frame shown at video time
 ``t`` (seconds) is frame ``floor(t * fps)`` (the one on screen during
 ``[i / fps, (i + 1) / fps)``); it is rendered with the head pose and GRF opacity that

@@ -92,7 +92,7 @@ def test_golden(ctx, petra_small, out_dir, yaw, pitch, roll, grf):
 # -------------------------------------------------------------------- v360 agreement
 @pytest.fixture(scope="module")
 def v360():
-    from simulator import reference
+    from simulator.testing.goldens import reference
 
     return reference
 

@@ -305,7 +305,7 @@ def test_window_extractor_equals_extract_view():
 # ------------------------------------------------------------ agreement with ffmpeg v360
 @pytest.fixture(scope="module")
 def v360():
-    from simulator import reference
+    from simulator.testing.goldens import reference
 
     return reference
 

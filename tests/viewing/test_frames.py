@@ -1,4 +1,4 @@
-"""vimsim frames / compare / simulator.testing: an unchanged setup passes, real changes fail with the frame named."""
+"""vimsim frames / compare / simulator.testing.goldens: an unchanged setup passes, real changes fail with the frame named."""
 
 from __future__ import annotations
 
@@ -117,7 +117,7 @@ def test_frames_equal_the_render_pass(ctx, clip, golden):
 
 
 def test_unchanged_setup_passes(ctx, clip, golden, tmp_path):
-    from simulator.testing import assert_frames_match
+    from simulator.testing.goldens import assert_frames_match
 
     _frames(ctx, clip, tmp_path / "new")
     rep = assert_frames_match(tmp_path / "new", golden)
@@ -126,7 +126,7 @@ def test_unchanged_setup_passes(ctx, clip, golden, tmp_path):
 
 @pytest.mark.parametrize("change", ["yaw", "grain", "colour"])
 def test_changes_fail_naming_the_frame(ctx, clip, golden, tmp_path, change):
-    from simulator.testing import assert_frames_match
+    from simulator.testing.goldens import assert_frames_match
 
     kw = {}
     if change == "yaw":  # 1 deg more yaw everywhere

@@ -2,7 +2,7 @@
 
 Example (a user's ``tests/test_look.py``; full text in ``docs/frames.md``)::
 
-    from simulator.testing import assert_frames_match, render_frames
+    from simulator.testing.goldens import assert_frames_match, render_frames
 
     def test_grade_unchanged(tmp_path):
         render_frames("clip.mp4", "path.csv", tmp_path / "new", at=[1, 5, 10], opacity=0.8)
@@ -17,7 +17,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from simulator.compare import (
+from simulator.testing.compare import (
     DEFAULT_MAX_DIFF,
     DEFAULT_PSNR_DB,
     CompareReport,
@@ -41,7 +41,7 @@ def assert_frames_match(
     max_diff: float = DEFAULT_MAX_DIFF,
     report_dir=None,
 ) -> CompareReport:
-    """Assert every frame of ``frames_dir`` matches its golden (:func:`simulator.compare.compare_dirs`).
+    """Assert every frame of ``frames_dir`` matches its golden (:func:`simulator.testing.compare.compare_dirs`).
 
     Raises AssertionError whose message has one line per failing frame, naming the
     frame, the measure against its threshold and the diff file; bad input (missing or
