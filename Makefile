@@ -19,7 +19,7 @@ sysdeps:
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends libegl1 libgl1-mesa-dri; \
 	fi
 	@# Mono C# compiler and runtime: the Unity export's C# runtime is compiled and checked
-	@# against the Python EPOF in make test (tests/test_export_unity.py).
+	@# against the Python EPOF in make test (tests/export/test_export_unity.py).
 	@if ! dpkg -s mono-mcs mono-runtime >/dev/null 2>&1; then \
 		echo "installing Debian packages mono-mcs mono-runtime (C# compiler for the Unity export check)"; \
 		$(SUDO) apt-get update -qq && \

@@ -35,12 +35,12 @@ from pathlib import Path
 import numpy as np
 
 from simulator.epof import compute_epof
-from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid
-from simulator.traces.path import synth as synth_headpath
 from simulator.preprocess import preprocess_video
-from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.sphere.windows import grid_preset
+from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
+from simulator.traces.path import synth as synth_headpath
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED = REPO.parent / "shared"

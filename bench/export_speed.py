@@ -27,13 +27,13 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.sphere.cells import Frustum
 from simulator.epof import ViewportQuery, viewport_overlaps
 from simulator.export import export_unity
 from simulator.media.gridfile import load_grid, require_field
 from simulator.preprocess import preprocess_sphere
-from simulator.traces.readers import load_headpath
+from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
+from simulator.traces.readers import load_headpath
 
 REPO = Path(__file__).resolve().parents[1]
 REAL = REPO.parent / "shared" / "data" / "real"

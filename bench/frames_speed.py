@@ -27,9 +27,9 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from simulator.media import video
-from simulator.viewing.frames import render_frames
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import RenderConfig, create_context
+from simulator.viewing.frames import render_frames
 from simulator.viewing.job import render_viewing
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"

@@ -30,8 +30,8 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from simulator.testing.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs
 from simulator.media.video import iter_frames, probe
+from simulator.testing.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs
 
 VIDEO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "MaryOculus.mp4"
 AT = "0.5,1.5,2.5,3.5,4.5"

@@ -22,8 +22,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
 from simulator.sphere import geometry
-from simulator.testing.reference import v360_time_ms
 from simulator.sphere.windows import WindowExtractor, grid_preset
+from simulator.testing.reference import v360_time_ms
 
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"
 ANCHOR_V360_MS = {(256, 256): 1.9, (1440, 1600): 29.8}

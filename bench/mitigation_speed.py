@@ -30,12 +30,12 @@ REPO = Path(__file__).resolve().parents[1]
 
 from render_speed import head_angles, make_video  # bench/render_speed.py: the same clip and path
 
-from simulator.media import video
-from simulator.sphere.cells import CellGrid
 from simulator.core.choices import MITIGATIONS
+from simulator.media import video
 from simulator.mitigation.grf import GrfConfig
 from simulator.mitigation.kinds import Mitigation, cell_opacity, visible_flow
 from simulator.render import RenderConfig, create_context, render_video
+from simulator.sphere.cells import CellGrid
 
 GOAL = 1.15
 

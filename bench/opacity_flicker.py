@@ -35,8 +35,8 @@ def main() -> int:
     import json
 
     from simulator.epof import compute_epof
-    from simulator.mitigation.grf import OpacityRule
     from simulator.media.gridfile import load_grid
+    from simulator.mitigation.grf import OpacityRule
     from simulator.traces.readers import load_headpath
 
     grid = load_grid(pano_grid())

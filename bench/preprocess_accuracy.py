@@ -24,12 +24,12 @@ import numpy as np
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from simulator.sphere import geometry
 from simulator.flow.backends import DISFlow
-from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid
-from simulator.preprocess import preprocess_video
 from simulator.media.video import VideoWriter
+from simulator.preprocess import preprocess_video
+from simulator.sphere import geometry
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]

@@ -34,11 +34,11 @@ import numpy as np
 from PIL import Image
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
-from simulator.sphere import windows as windows_mod
 from simulator.flow.backends import make_backend
 from simulator.media.gridfile import content_hash
-from simulator.preprocess import WindowFlowReducer, reduce_stride
 from simulator.media.video import iter_frames, probe
+from simulator.preprocess import WindowFlowReducer, reduce_stride
+from simulator.sphere import windows as windows_mod
 from simulator.sphere.windows import WindowExtractor, grid_preset
 
 GOAL_STEADY, GOAL_WHOLE, GOAL_START_S, GOAL_COLD_S = 0.75, 0.6, 2.0, 5.0

@@ -28,9 +28,9 @@ REPO = Path(__file__).resolve().parents[1]
 
 from v360_agreement import panoramas, sees_pole
 
+from simulator.render import EyeRenderer, RenderConfig, create_context
 from simulator.sphere.geometry import extract_view, head_rotation
 from simulator.testing.reference import psnr, tile_displacement, v360_view
-from simulator.render import EyeRenderer, RenderConfig, create_context
 
 GOAL_PSNR_DB = 35.0
 

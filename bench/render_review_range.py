@@ -30,10 +30,10 @@ def main() -> int:
     ap.add_argument("--eye-size", type=int, default=720)
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
-    from simulator.mitigation.grf import GrfConfig, comfort_rule
     from simulator.media.gridfile import load_grid
-    from simulator.traces.readers import load_headpath
+    from simulator.mitigation.grf import GrfConfig, comfort_rule
     from simulator.render import RenderConfig, create_context
+    from simulator.traces.readers import load_headpath
     from simulator.viewing.job import render_viewing
 
     gp = pano_grid()

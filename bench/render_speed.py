@@ -32,8 +32,8 @@ REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
 from simulator.mitigation.grf import GrfConfig
-from simulator.testing.reference import ffmpeg_exe
 from simulator.render import RenderConfig, create_context, render_video
+from simulator.testing.reference import ffmpeg_exe
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL_RATIO = 3.0

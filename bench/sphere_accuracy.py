@@ -38,21 +38,21 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from simulator.sphere.cells import CellGrid, window_pof
 from simulator.epof import compute_epof, viewport_epof
-from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid, require_field
-from simulator.traces.path import synth as synth_headpath
-from simulator.sphere.headsets import get_headset
+from simulator.media.video import iter_frames
 from simulator.preprocess import (
     SphereConfig,
     WindowFlowReducer,
     preprocess_sphere,
     preprocess_video,
 )
-from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
-from simulator.media.video import iter_frames
+from simulator.sphere.cells import CellGrid, window_pof
+from simulator.sphere.geometry import head_rotation, perspective_rays
+from simulator.sphere.headsets import get_headset
 from simulator.sphere.windows import grid_preset
+from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
+from simulator.traces.path import synth as synth_headpath
 
 REPO = Path(__file__).resolve().parents[1]
 PANO = REPO.parent / "shared" / "data" / "real" / "equirect" / "threejs" / "pano.mp4"

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.sphere.cells import Frustum, _window_matrices, window_pof
 from simulator.epof import ViewportQuery
+from simulator.media.video import iter_frames
 from simulator.preprocess import (
     FieldEstimator,
     SphereConfig,
@@ -29,9 +29,9 @@ from simulator.preprocess import (
     preprocess_sphere,
     preprocess_video,
 )
-from simulator.synth import SynthConfig, synthesize
-from simulator.media.video import iter_frames
+from simulator.sphere.cells import Frustum, _window_matrices, window_pof
 from simulator.sphere.windows import grid_preset
+from simulator.synth import SynthConfig, synthesize
 
 REPO = Path(__file__).resolve().parents[1]
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"

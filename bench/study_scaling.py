@@ -32,8 +32,8 @@ VIMSIM = [str(Path(sys.executable).with_name("vimsim"))]
 
 
 def setup(seconds: float) -> Path:
-    from simulator.traces.path import save_headpath_csv, synth
     from simulator.synth import SynthConfig, synthesize
+    from simulator.traces.path import save_headpath_csv, synth
 
     OUT.mkdir(parents=True, exist_ok=True)
     clip = OUT / f"coaster{seconds:g}s.mp4"

@@ -36,9 +36,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from simulator.sphere.geometry import head_angles_deg
 from simulator.media.gridfile import load_grid
 from simulator.preprocess import preprocess_sphere
+from simulator.sphere.geometry import head_angles_deg
+from simulator.sphere.windows import grid_preset
 from simulator.synth import SynthConfig, load_truth, make_scene, synthesize, window_truth_dps
 from simulator.synth.camera_path import CameraTrajectory, save_camera_csv
 from simulator.synth.trajectory import (
@@ -46,7 +47,6 @@ from simulator.synth.trajectory import (
     synthesize_trajectory,
     trajectory_config,
 )
-from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "bench" / "_out" / "trajectory"

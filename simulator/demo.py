@@ -29,21 +29,21 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
-from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.mitigation.grf import GrfConfig
-from simulator.media.gridfile import load_grid
-from simulator.traces.path import save_headpath_csv
-from simulator.traces.path import synth as synth_headpath
-from simulator.preprocess.paper import preprocess_video
 from simulator.core.progress import Progress
+from simulator.epof.viewing import compute_epof, write_epof_csv
+from simulator.media.gridfile import load_grid
+from simulator.mitigation.grf import GrfConfig
+from simulator.preprocess.paper import preprocess_video
 from simulator.render.eye import RenderConfig
+from simulator.sphere.geometry import head_rotation, perspective_rays
+from simulator.sphere.windows import grid_preset
 from simulator.synth.clip import load_truth, synthesize
 from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps
+from simulator.traces.path import save_headpath_csv
+from simulator.traces.path import synth as synth_headpath
 from simulator.viewing.job import render_viewing
-from simulator.sphere.windows import grid_preset
 
 __all__ = ["DemoConfig", "run_demo"]
 

@@ -8,13 +8,13 @@ import sys
 
 import pytest
 
-from simulator.traces import readers
-from simulator.sphere import windows
-from simulator.core import choices
 from simulator.cli import COMMANDS, build_parser, main
+from simulator.core import choices
 from simulator.mitigation.grf import OPACITY_SOURCES
-from simulator.traces.path import SYNTH_KINDS
+from simulator.sphere import windows
 from simulator.synth import SCENES
+from simulator.traces import readers
+from simulator.traces.path import SYNTH_KINDS
 
 
 def _choices(parser: argparse.ArgumentParser, *path: str) -> dict[str, tuple]:

@@ -568,10 +568,10 @@ def test_signal_cleans_up(base, long_video, tmp_path, which, sig):
 def test_sphere_field_streamed_equals_in_memory(base):
     """Sphere preprocess streams the field to an unnamed temporary file; the grid file it
     writes is bit-identical to the in-memory field (float16) and its window matrix."""
-    from simulator.sphere.cells import window_pof
     from simulator.media.gridfile import load_grid
     from simulator.preprocess import SphereConfig
     from simulator.preprocess.sphere import field_from_video
+    from simulator.sphere.cells import window_pof
     from simulator.sphere.windows import grid_preset
 
     g = load_grid(base / "S.npz")

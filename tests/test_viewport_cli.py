@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from simulator.sphere import geometry
 from simulator.cli import main
+from simulator.sphere import geometry
 
 
 @pytest.fixture()

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.core.choices import OPACITY_SOURCES
 from simulator.commands._types import percentile, seconds
+from simulator.core.choices import OPACITY_SOURCES
 
 __all__ = ["add_opacity_arguments", "rule_from_args"]
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.core.choices import FLOW_STATS
 from simulator.commands._types import nonneg_float
+from simulator.core.choices import FLOW_STATS
 
 __all__ = ["register", "run"]
 

@@ -56,7 +56,12 @@ def run(args: argparse.Namespace) -> int:
     """Compare; print one line per failing frame; 0 pass, 1 regression, 2 bad input."""
     from pathlib import Path
 
-    from simulator.testing.compare import DEFAULT_MAX_DIFF, DEFAULT_PSNR_DB, compare_dirs, update_goldens
+    from simulator.testing.compare import (
+        DEFAULT_MAX_DIFF,
+        DEFAULT_PSNR_DB,
+        compare_dirs,
+        update_goldens,
+    )
 
     psnr = DEFAULT_PSNR_DB if args.psnr is None else args.psnr
     mad = DEFAULT_MAX_DIFF if args.max_diff is None else args.max_diff

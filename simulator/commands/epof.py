@@ -5,9 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.core.choices import EPOF_METHODS
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, frustum_from_args, positive_int
+from simulator.core.choices import EPOF_METHODS
 
 __all__ = ["register", "run"]
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
 from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
+from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
 
 __all__ = ["add_reader_options", "load_headpath_args", "register", "run"]
 
@@ -229,8 +229,8 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
 
 def run(args: argparse.Namespace) -> int:
     """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
-    from simulator.traces import path as hp_mod
     from simulator.core.errors import InputError
+    from simulator.traces import path as hp_mod
     from simulator.traces.readers import load_headpath, load_keyframes
 
     with warnings_to_stderr("vimsim headpath"):

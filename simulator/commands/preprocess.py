@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.core.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
 from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float, seconds
+from simulator.core.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
 
 __all__ = ["register", "run"]
 

@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.core.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import (
     add_fov_arguments,
@@ -19,6 +18,7 @@ from simulator.commands._types import (
     size_wxh,
     x264_crf,
 )
+from simulator.core.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
 
 #: H.264 level 6.2's largest frame in 16x16 macroblocks (8192x4320 and the like).
 MAX_H264_MACROBLOCKS = 139264
@@ -170,12 +170,12 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     the opacity rule."""
     from simulator.commands._progress import warnings_to_stderr
     from simulator.core.errors import InputError
-    from simulator.mitigation.grf import GrfConfig, grain_count
-    from simulator.media.gridfile import load_grid
-    from simulator.mitigation.kinds import Mitigation, parse_color
-    from simulator.traces.readers import load_headpath
-    from simulator.render import RenderConfig
     from simulator.core.resources import check_fits
+    from simulator.media.gridfile import load_grid
+    from simulator.mitigation.grf import GrfConfig, grain_count
+    from simulator.mitigation.kinds import Mitigation, parse_color
+    from simulator.render import RenderConfig
+    from simulator.traces.readers import load_headpath
 
     frustum = frustum_from_args(args, (107.0, 107.0))
     w, h = args.eye_size

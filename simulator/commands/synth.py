@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.core.choices import CAMERA_INTERPS, SCENES, SYNTH_LAYOUTS
 from simulator.commands._types import nonneg_int, positive_float, size_wxh, x264_crf
+from simulator.core.choices import CAMERA_INTERPS, SCENES, SYNTH_LAYOUTS
 
 __all__ = ["register", "run"]
 

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.core.choices import EYES, INTERPS, LAYOUTS
 from simulator.commands._types import (
     add_fov_arguments,
     angle_deg,
@@ -12,6 +11,7 @@ from simulator.commands._types import (
     nonneg_int,
     size_wxh,
 )
+from simulator.core.choices import EYES, INTERPS, LAYOUTS
 from simulator.core.errors import InputError
 
 __all__ = ["DEFAULT_FOV_DEG", "DEFAULT_SIZE", "register", "run"]
@@ -89,10 +89,10 @@ def run(args: argparse.Namespace) -> int:
     """Write the view; InputError (exit 2, no output) on bad input."""
     from PIL import Image
 
-    from simulator.media import video
-    from simulator.sphere import geometry
     from simulator.core.fileio import atomic_output
     from simulator.core.resources import check_fits
+    from simulator.media import video
+    from simulator.sphere import geometry
 
     hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
     # rays (float64 x 3, twice), lon/lat, maps and the image: about 120 bytes per pixel

@@ -22,10 +22,10 @@ import math
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.sphere.cells import CellGrid, Frustum, _weights_band
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import head_rotation
 from simulator.media.lazyfield import LazyField
+from simulator.sphere.cells import CellGrid, Frustum, _weights_band
+from simulator.sphere.geometry import head_rotation
 
 __all__ = ["ViewportQuery", "viewport_epof"]
 

@@ -34,8 +34,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
 from simulator.media.gridfile import GridFile
+from simulator.sphere.geometry import check_fov, head_angles_deg, head_rotation, perspective_rays
 from simulator.sphere.windows import WindowGrid
 
 __all__ = [

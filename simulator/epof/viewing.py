@@ -18,15 +18,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.sphere.cells import Frustum
-from simulator.epof.exact import viewport_epof
-from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
-from simulator.mitigation.grf import OpacityRule
+from simulator.epof.exact import viewport_epof
+from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.media.gridfile import GridFile, require_field
-from simulator.traces.path import HeadPath
 from simulator.media.lazyfield import take_rows
+from simulator.mitigation.grf import OpacityRule
+from simulator.sphere.cells import Frustum
+from simulator.traces.path import HeadPath
 
 __all__ = [
     "EPOF_COLUMNS",

@@ -38,12 +38,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator import __version__
-from simulator.epof.exact import viewport_epof
-from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file, check_output_dir
-from simulator.mitigation.grf import OpacityRule
+from simulator.epof.exact import viewport_epof
+from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
 from simulator.media.gridfile import GridFile, content_hash, load_grid, require_field
+from simulator.mitigation.grf import OpacityRule
 
 __all__ = [
     "CS_FILES",

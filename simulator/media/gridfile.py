@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.sphere.cells import CellGrid
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.media.lazyfield import LazyField
+from simulator.sphere.cells import CellGrid
 from simulator.sphere.windows import WindowGrid
 
 __all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]

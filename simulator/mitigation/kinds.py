@@ -36,12 +36,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import head_rotation
-from simulator.mitigation.grf import GrainField, GrfConfig, cutout_alpha
 from simulator.media.lazyfield import LazyField, field_chunks
+from simulator.mitigation.grf import GrainField, GrfConfig, cutout_alpha
+from simulator.sphere.cells import CellGrid, Frustum
+from simulator.sphere.geometry import head_rotation
 
 __all__ = ["Mitigation", "VisibleFlow", "cell_opacity", "parse_color", "visible_flow"]
 

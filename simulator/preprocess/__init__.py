@@ -6,7 +6,6 @@ submodule says what it holds.
 
 from __future__ import annotations
 
-from simulator.sphere.cells import window_pof
 from simulator.preprocess.common import PreprocessInterrupted
 from simulator.preprocess.paper import (
     WindowFlowReducer,
@@ -22,6 +21,7 @@ from simulator.preprocess.sphere import (
     field_meta,
     preprocess_sphere,
 )
+from simulator.sphere.cells import window_pof
 
 __all__ = [
     "FieldEstimator",

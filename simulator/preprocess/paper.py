@@ -58,17 +58,17 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
+from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
-from simulator.sphere.geometry import perspective_rays
 from simulator.media.gridfile import content_hash, save_grid
+from simulator.media.video import iter_frames, prefetch, probe
 from simulator.preprocess.common import (
     PreprocessInterrupted,
     check_output_dir,
     common_meta,
     frame_range,
 )
-from simulator.core.progress import Counter, Progress
-from simulator.media.video import iter_frames, prefetch, probe
+from simulator.sphere.geometry import perspective_rays
 from simulator.sphere.windows import WindowExtractor, WindowGrid
 
 __all__ = ["WindowFlowReducer", "checkpoint_path", "preprocess_video", "reduce_stride"]

@@ -27,9 +27,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import sparse
 
-from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.core.errors import InputError
+from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.media.gridfile import FieldSpool, content_hash, save_grid
+from simulator.media.video import iter_frames, prefetch, probe
+from simulator.preprocess.common import check_output_dir, common_meta, frame_range
+from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
     equirect_remap_coords,
@@ -37,10 +41,6 @@ from simulator.sphere.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.media.gridfile import FieldSpool, content_hash, save_grid
-from simulator.preprocess.common import check_output_dir, common_meta, frame_range
-from simulator.core.progress import Counter, Progress
-from simulator.media.video import iter_frames, prefetch, probe
 from simulator.sphere.windows import WindowGrid
 
 __all__ = [

@@ -44,13 +44,13 @@ from typing import Literal
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.sphere.cells import Frustum
 from simulator.core.choices import Eye
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import check_fov, head_rotation
 from simulator.mitigation.grf import GrainField, GrfConfig
 from simulator.mitigation.kinds import Mitigation
 from simulator.render.gl import _check_gl, _gl_limit, _program
+from simulator.sphere.cells import Frustum
+from simulator.sphere.geometry import check_fov, head_rotation
 
 __all__ = ["EyeRenderer", "RenderConfig", "render_view"]
 

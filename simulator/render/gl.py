@@ -48,7 +48,7 @@ def load_shader_source(name: str, defines: dict[str, object] | None = None) -> s
     The injected block is followed by ``#line 2`` so that compiler line numbers match
     the file's.
     """
-    src = importlib.resources.files("simulator").joinpath("shaders", name).read_text()
+    src = importlib.resources.files("simulator").joinpath("render", "shaders", name).read_text()
     first, _, rest = src.partition("\n")
     if not first.startswith("#version"):
         raise ShaderError(f"shaders/{name}:1: first line must be #version; got {first!r}")

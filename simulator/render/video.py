@@ -20,10 +20,10 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.sphere.geometry import head_rotation, split_eye
 from simulator.core.progress import Counter, Progress
-from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.media.video import VideoWriter, iter_frames, prefetch, probe
+from simulator.render.eye import EyeRenderer, RenderConfig
+from simulator.sphere.geometry import head_rotation, split_eye
 
 __all__ = ["VideoRenderResult", "render_video"]
 

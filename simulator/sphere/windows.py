@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
+from simulator.core.mapcache import cached_arrays
 from simulator.sphere.geometry import (
     _PAD,
     _check_size,
@@ -25,7 +26,6 @@ from simulator.sphere.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.core.mapcache import cached_arrays
 
 __all__ = ["GRID_PRESETS", "WindowExtractor", "WindowGrid", "grid_preset"]
 

@@ -21,8 +21,8 @@ from pathlib import Path
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.sphere.headsets import resolve_fov
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
+from simulator.sphere.headsets import resolve_fov
 from simulator.traces.readers import FORMATS, detect_format
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]

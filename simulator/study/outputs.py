@@ -28,9 +28,9 @@ import scipy
 from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
-from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
+from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.sphere.geometry import extract_view, split_eye
 
 __all__ = [

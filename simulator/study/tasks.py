@@ -20,23 +20,23 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.sphere.cells import Frustum
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
-from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, json_text
-from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
-from simulator.traces.path import HeadPath
+from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
-from simulator.traces.readers import load_all_users, load_headpath
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
-from simulator.viewing.job import render_viewing
+from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
+from simulator.traces.path import HeadPath
+from simulator.traces.readers import load_all_users, load_headpath
+from simulator.viewing.job import render_viewing
 
 __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 

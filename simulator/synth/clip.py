@@ -22,11 +22,11 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.sphere.geometry import lonlat_to_dir
 from simulator.core.progress import Counter, Progress
+from simulator.media.video import VideoWriter
+from simulator.sphere.geometry import lonlat_to_dir
 from simulator.synth.scenes import SynthConfig, SynthScene, make_scene
 from simulator.synth.textures import _bundled_texture_path
-from simulator.media.video import VideoWriter
 
 __all__ = ["Truth", "load_truth", "synthesize", "truth_path_for"]
 

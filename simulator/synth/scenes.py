@@ -65,8 +65,8 @@ from simulator.sphere.geometry import (
     pad_equirect,
     perspective_rays,
 )
-from simulator.synth.textures import _MipTexture, load_texture
 from simulator.sphere.windows import WindowGrid
+from simulator.synth.textures import _MipTexture, load_texture
 
 __all__ = [
     "SCENES",

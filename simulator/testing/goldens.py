@@ -17,6 +17,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from simulator.core.errors import InputError
 from simulator.testing.compare import (
     DEFAULT_MAX_DIFF,
     DEFAULT_PSNR_DB,
@@ -24,7 +25,6 @@ from simulator.testing.compare import (
     compare_dirs,
     update_goldens,
 )
-from simulator.core.errors import InputError
 from simulator.viewing.frames import render_frames
 
 __all__ = ["UPDATE_ENV", "assert_frames_match", "render_frames"]

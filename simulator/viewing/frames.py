@@ -26,13 +26,13 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
-from simulator.sphere.geometry import head_rotation, split_eye
-from simulator.mitigation.grf import OpacityRule
-from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.core.progress import Counter, Progress
+from simulator.media.video import iter_frames, probe
+from simulator.mitigation.grf import OpacityRule
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.gl import create_context
-from simulator.media.video import iter_frames, probe
+from simulator.sphere.geometry import head_rotation, split_eye
+from simulator.viewing.plan import grf_settings, plan_viewing
 
 __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_frames"]
 

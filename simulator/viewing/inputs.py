@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from simulator.epof.viewing import EpofResult
 from simulator.core.errors import InputError
+from simulator.epof.viewing import EpofResult
 from simulator.media.video import MediaInfo, probe
 
 __all__ = ["check_right_eye", "csv_opacity", "frame_range"]

@@ -10,20 +10,20 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.media.audio import audio_source
-from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
-from simulator.mitigation.grf import OpacityRule
-from simulator.media.gridfile import require_field
-from simulator.traces.path import HeadPath
-from simulator.media.lazyfield import take_rows
-from simulator.mitigation.kinds import cell_opacity, visible_flow
-from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.core.progress import Progress
+from simulator.epof.viewing import EpofResult, write_epof_csv
+from simulator.media.audio import audio_source
+from simulator.media.gridfile import require_field
+from simulator.media.lazyfield import take_rows
+from simulator.mitigation.grf import OpacityRule
+from simulator.mitigation.kinds import cell_opacity, visible_flow
 from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
+from simulator.traces.path import HeadPath
+from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.viewing.review import ReviewWriter
 
 __all__ = ["OUTDIR_FILES", "REVIEW_FILES", "VISIBLE_COLUMNS", "render_viewing"]

@@ -15,16 +15,16 @@ from typing import Literal
 
 import numpy as np
 
-from simulator.sphere.cells import Frustum
-from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.core.errors import InputError
-from simulator.mitigation.grf import OpacityRule, grain_count
+from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
-from simulator.traces.path import HeadPath
-from simulator.viewing.inputs import check_right_eye, csv_opacity, frame_range
-from simulator.traces.readers import load_headpath
-from simulator.render.eye import RenderConfig
 from simulator.media.video import MediaInfo, probe
+from simulator.mitigation.grf import OpacityRule, grain_count
+from simulator.render.eye import RenderConfig
+from simulator.sphere.cells import Frustum
+from simulator.traces.path import HeadPath
+from simulator.traces.readers import load_headpath
+from simulator.viewing.inputs import check_right_eye, csv_opacity, frame_range
 
 __all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
 

@@ -21,8 +21,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.fileio import atomic_output
-from simulator.sphere.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
 from simulator.media.video import VideoWriter
+from simulator.sphere.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
 
 __all__ = ["ReviewWriter", "frustum_outline_xy"]
 

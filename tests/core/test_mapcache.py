@@ -8,10 +8,10 @@ import av
 import numpy as np
 import pytest
 
-from simulator.sphere import windows
-from simulator.core import mapcache
 from simulator.cli import main
+from simulator.core import mapcache
 from simulator.core.mapcache import cache_dir, cached_arrays
+from simulator.sphere import windows
 from simulator.sphere.windows import WindowExtractor, WindowGrid
 
 SMALL = WindowGrid(

@@ -8,13 +8,13 @@ import zipfile
 import numpy as np
 import pytest
 
-from simulator.media import lazyfield
-from simulator.sphere.cells import CellGrid, Frustum
-from simulator.epof.exact import viewport_epof
 from simulator.core.errors import InputError
+from simulator.epof.exact import viewport_epof
+from simulator.media import lazyfield
 from simulator.media.gridfile import load_grid, require_field, save_grid
 from simulator.media.lazyfield import LazyField, take_rows
 from simulator.mitigation.kinds import Mitigation, cell_opacity, visible_flow
+from simulator.sphere.cells import CellGrid, Frustum
 from simulator.sphere.windows import grid_preset
 
 CELL = 10.0

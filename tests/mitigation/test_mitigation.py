@@ -17,12 +17,12 @@ import cv2
 import numpy as np
 import pytest
 
-from simulator.sphere.cells import CellGrid, Frustum
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.mitigation.grf import GrfConfig
 from simulator.mitigation.kinds import Mitigation, cell_opacity, parse_color, visible_flow
 from simulator.render import RenderConfig, render_view
+from simulator.sphere.cells import CellGrid, Frustum
+from simulator.sphere.geometry import head_rotation, perspective_rays
 
 REPO = Path(__file__).resolve().parents[2]
 GOLDEN = REPO / "tests" / "golden"
@@ -180,8 +180,8 @@ def half_grid(tmp_path_factory):
 
 
 def test_local_grf_coverage_follows_the_field(ctx, half_grid):
-    from simulator.mitigation.grf import OpacityRule
     from simulator.media.gridfile import require_field
+    from simulator.mitigation.grf import OpacityRule
 
     _, grid = half_grid
     field, _cells = require_field(grid)
@@ -273,7 +273,7 @@ def test_visible_flow_matches_brute_force_on_rendered_frames(ctx, kind):
 
 
 # ------------------------------------------------------------------------- goldens
-GOLDEN_MAD = 1.5  # as tests/test_render.py: same Mesa gives 0
+GOLDEN_MAD = 1.5  # as tests/render/test_render.py: same Mesa gives 0
 
 
 @pytest.mark.parametrize("kind", ["vignette", "grf+vignette", "local-grf"])

@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import perspective_rays
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
+from simulator.sphere.geometry import perspective_rays
 from simulator.viewing.job import OUTDIR_FILES, render_viewing
 
 
@@ -92,7 +92,7 @@ def test_golden(ctx, petra_small, out_dir, yaw, pitch, roll, grf):
 # -------------------------------------------------------------------- v360 agreement
 @pytest.fixture(scope="module")
 def v360():
-    from simulator.testing.goldens import reference
+    from simulator.testing import reference
 
     return reference
 
@@ -240,8 +240,8 @@ def test_grains_are_world_fixed(ctx, petra_small):
 
 
 def test_parallax_only_with_grain_distance(ctx):
-    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
+    from simulator.sphere.geometry import head_rotation
 
     R = head_rotation(0, 0, 0).as_matrix()
     outs = {}
@@ -298,8 +298,8 @@ def test_eye_size_beyond_gl_limits(ctx):
 
 
 def test_stereo_eyes_sample_their_own_half(ctx):
-    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
+    from simulator.sphere.geometry import head_rotation
 
     r = EyeRenderer(ctx, RenderConfig(eye_size=(64, 64), grf=None))
     try:
@@ -319,8 +319,8 @@ def test_yuv420p_readback_matches_swscale(ctx, petra_small, grf):
     swscale's rgb24 -> yuv420p of the rgb24 render (what VideoWriter.write does)."""
     import av
 
-    from simulator.sphere.geometry import head_rotation
     from simulator.render import EyeRenderer, RenderConfig
+    from simulator.sphere.geometry import head_rotation
 
     r = EyeRenderer(ctx, RenderConfig(eye_size=(160, 96), grf=GrfConfig() if grf else None))
     try:
@@ -758,8 +758,8 @@ def test_mono_right_copy_is_atomic(ctx, tmp_path, monkeypatch):
 @pytest.mark.parametrize("bad", ["wide", None, float("nan"), float("inf"), 0.0, 180.0, -10.0])
 def test_render_config_fov_is_geometry_check_fov(bad):
     """RenderConfig applies the one FOV rule (geometry.check_fov): InputError, same words."""
-    from simulator.sphere.geometry import check_fov
     from simulator.render import RenderConfig
+    from simulator.sphere.geometry import check_fov
 
     with pytest.raises(InputError) as want:
         check_fov(bad, 90.0)
@@ -797,8 +797,8 @@ def test_asymmetric_frustum_reaches_the_renderer(ctx):
     """A headset's off-axis frustum moves the view axis off the image centre, mirrored in
     the right eye: the column showing lon = 0 (a dark meridian) sits where the frustum's
     tangents put it, ``tan(left) / (tan(left) + tan(right)) * width``."""
-    from simulator.sphere.cells import Frustum
     from simulator.render import EyeRenderer, RenderConfig
+    from simulator.sphere.cells import Frustum
 
     W, H, size = 1024, 512, 200
     img = np.full((H, W, 3), 255, np.uint8)

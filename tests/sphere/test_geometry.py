@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from simulator.sphere import geometry as g
 from simulator.core.errors import InputError
+from simulator.sphere import geometry as g
 from simulator.sphere.windows import WindowExtractor, WindowGrid, grid_preset
 
 REPO = Path(__file__).resolve().parents[2]
@@ -305,7 +305,7 @@ def test_window_extractor_equals_extract_view():
 # ------------------------------------------------------------ agreement with ffmpeg v360
 @pytest.fixture(scope="module")
 def v360():
-    from simulator.testing.goldens import reference
+    from simulator.testing import reference
 
     return reference
 

@@ -47,9 +47,9 @@ def clip(tmp_path_factory):
 
 
 def _frames(ctx, clip, out, *, video=None, path=None, grain=1.5, at="0.25,1.05,1.9"):
-    from simulator.viewing.frames import render_frames
     from simulator.mitigation.grf import GrfConfig
     from simulator.render import RenderConfig
+    from simulator.viewing.frames import render_frames
 
     cfg = RenderConfig(eye_size=(96, 96), grf=GrfConfig(grain_deg=grain))
     return render_frames(
@@ -66,8 +66,8 @@ def golden(ctx, clip):
 
 def test_decode_frames_matches_sequential_decoding(real_dir):
     """Seek-based decoding against decoding every frame (three.js MaryOculus.mp4, real H.264)."""
-    from simulator.viewing.frames import decode_frames
     from simulator.media.video import iter_frames
+    from simulator.viewing.frames import decode_frames
 
     p = real_dir / "equirect" / "threejs" / "MaryOculus.mp4"
     want = [0, 7, 64, 119]
@@ -102,9 +102,9 @@ def test_frames_equal_the_render_pass(ctx, clip, golden):
     """The PNG is what EyeRenderer draws for that frame and pose (brute force: one view)."""
     from PIL import Image
 
+    from simulator.media.video import read_frame
     from simulator.mitigation.grf import GrfConfig
     from simulator.render import RenderConfig, render_view
-    from simulator.media.video import read_frame
 
     frame = read_frame(clip["video"], 10)
     cfg = RenderConfig(eye_size=(96, 96), grf=GrfConfig())

@@ -16,14 +16,14 @@ from simulator.cli import main
 from simulator.epof import read_epof_csv, viewport_overlaps
 from simulator.export import DATA_FILE, VERSION, export_unity, frame_at, read_export
 from simulator.export.unity import CS_FILES
-from simulator.sphere.geometry import head_rotation
 from simulator.media.gridfile import load_grid, save_grid
 from simulator.preprocess import SphereConfig, field_meta
+from simulator.sphere.geometry import head_rotation
 from simulator.sphere.windows import grid_preset
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 CS_DIR = REPO / "simulator" / "export" / "unity"
-HARNESS = REPO / "tests" / "cs" / "EpofHarness.cs"
+HARNESS = REPO / "tests" / "export" / "cs" / "EpofHarness.cs"
 N_POSES = 1000  # random poses and times per mode (the issue: at least 1000)
 
 
@@ -356,7 +356,7 @@ def test_unity_euler_conversion(tmp_path, harness):
 def test_behaviour_compiles_against_unity_api_stub(tmp_path, harness):
     """The MonoBehaviour compiles with the core against a stub of the UnityEngine types it
     uses (the real UnityEngine is not installable here)."""
-    stub = REPO / "tests" / "cs" / "UnityEngineStub.cs"
+    stub = REPO / "tests" / "export" / "cs" / "UnityEngineStub.cs"
     r = subprocess.run(
         ["mcs", "-target:library", "-warnaserror+", f"-out:{tmp_path / 'b.dll'}",
          str(CS_DIR / "VimsimEpof.cs"), str(CS_DIR / "VimsimEpofBehaviour.cs"), str(stub)],

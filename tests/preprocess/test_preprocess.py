@@ -14,18 +14,18 @@ import pytest
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from simulator.sphere import geometry
 from simulator.cli import main
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.media.gridfile import load_grid
+from simulator.media.video import VideoWriter
 from simulator.preprocess import (
     PreprocessInterrupted,
     WindowFlowReducer,
     checkpoint_path,
     preprocess_video,
 )
-from simulator.media.video import VideoWriter
+from simulator.sphere import geometry
+from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.sphere.windows import grid_preset
 
 OBLIQUE = np.array([1.0, 2.0, 0.5]) / np.linalg.norm([1.0, 2.0, 0.5])
@@ -606,8 +606,8 @@ def test_fused_pipeline_equals_batch_path(tmp_path, videos, ref_long):
     for name in ("pof_dps", "pof_px"):
         assert np.array_equal(getattr(plain, name), getattr(ref_long, name)), name
     from simulator.flow.backends import make_backend
-    from simulator.preprocess import WindowFlowReducer, reduce_stride
     from simulator.media.video import iter_frames
+    from simulator.preprocess import WindowFlowReducer, reduce_stride
     from simulator.sphere.windows import WindowExtractor
 
     fr = [np.array(f) for f in iter_frames(videos["long"], fmt="gray")]

@@ -11,12 +11,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import simulator.preprocess.sphere
-from simulator.sphere.cells import CellGrid, Frustum, viewport_weights, window_pof
-from simulator.epof import ViewportQuery, viewport_epof
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import head_rotation, perspective_rays
+from simulator.epof import ViewportQuery, viewport_epof
 from simulator.media.gridfile import load_grid, require_field, save_grid
-from simulator.sphere.headsets import HEADSETS, get_headset, resolve_fov
 from simulator.preprocess import (
     FieldEstimator,
     SphereConfig,
@@ -25,6 +22,9 @@ from simulator.preprocess import (
     preprocess_sphere,
 )
 from simulator.preprocess.sphere import _FieldRows
+from simulator.sphere.cells import CellGrid, Frustum, viewport_weights, window_pof
+from simulator.sphere.geometry import head_rotation, perspective_rays
+from simulator.sphere.headsets import HEADSETS, get_headset, resolve_fov
 from simulator.sphere.windows import grid_preset
 
 CELL = 4.0

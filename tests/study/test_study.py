@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from simulator.cli import main
-from simulator.traces.path import save_headpath_csv, synth
 from simulator.study import VIEWING_COLUMNS
+from simulator.traces.path import save_headpath_csv, synth
 
 
 def _epof_rows(path) -> np.ndarray:
@@ -22,7 +22,7 @@ def _epof_rows(path) -> np.ndarray:
     return np.loadtxt(lines[1:], delimiter=",", ndmin=2)
 
 
-EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "study_example.csv"
+EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "study_example.csv"
 
 
 @pytest.fixture(scope="module")
@@ -142,8 +142,8 @@ def test_study_outputs(ran, base, capsys):
     # A thumbnail (found by seeking) is the viewport of that frame decoded from the start.
     from PIL import Image
 
-    from simulator.sphere.geometry import extract_view
     from simulator.media.video import read_frame
+    from simulator.sphere.geometry import extract_view
 
     r = mom[0]
     ref = extract_view(read_frame(base / "clip.mp4", int(r["frame"])), float(r["yaw_deg"]),

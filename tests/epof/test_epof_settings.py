@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from simulator.sphere.cells import CellGrid, Frustum, window_pof
 from simulator.epof import EPOF_COLUMNS, read_epof_csv, viewport_epof
 from simulator.media.gridfile import load_grid, save_grid
-from simulator.traces.path import save_headpath_csv, synth
 from simulator.preprocess import SphereConfig, field_meta
+from simulator.sphere.cells import CellGrid, Frustum, window_pof
 from simulator.sphere.windows import grid_preset
+from simulator.traces.path import save_headpath_csv, synth
 
 CELL = 6.0
 
@@ -69,8 +69,8 @@ def test_epof_csv_records_settings_and_top_k_method(tmp_path, capsys):
 def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     """A grid of the right eye of a top-bottom video: the EPOF is over the right eye's
     frustum (the left's mirrored), exactly as viewport_epof gives it."""
-    from simulator.render import RenderConfig
     from simulator.media.video import VideoWriter
+    from simulator.render import RenderConfig
     from simulator.viewing.job import plan_viewing
 
     vid = tmp_path / "tb.mp4"

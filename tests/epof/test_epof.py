@@ -12,6 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from simulator.cli import main
+from simulator.core.errors import InputError
 from simulator.epof import (
     EPOF_COLUMNS,
     compute_epof,
@@ -20,12 +21,11 @@ from simulator.epof import (
     viewport_overlaps,
     weighted_epof,
 )
-from simulator.core.errors import InputError
-from simulator.mitigation.grf import OpacityRule
 from simulator.media.gridfile import load_grid, save_grid
-from simulator.traces.path import HeadPath, save_headpath_csv, synth
-from simulator.testing.reference import brute_overlaps
+from simulator.mitigation.grf import OpacityRule
 from simulator.sphere.windows import WindowGrid, grid_preset
+from simulator.testing.reference import brute_overlaps
+from simulator.traces.path import HeadPath, save_headpath_csv, synth
 
 
 def _gridfile(tmp_path, grid: WindowGrid, pof, fps=30.0, name="g.npz", **extra):

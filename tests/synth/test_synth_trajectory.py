@@ -11,6 +11,7 @@ from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
 from simulator.core.errors import InputError
+from simulator.media.video import probe, read_frame
 from simulator.sphere.geometry import head_angles_deg
 from simulator.synth import SynthConfig, load_truth, synthesize, truth_path_for
 from simulator.synth.camera_path import (
@@ -26,7 +27,6 @@ from simulator.synth.trajectory import (
     synthesize_trajectory,
     trajectory_config,
 )
-from simulator.media.video import probe, read_frame
 
 HEADER = ",".join(CAMERA_COLUMNS)
 
@@ -400,8 +400,8 @@ def test_sphere_mode_matches_truth_on_small_walk(tmp_path):
     mode (DIS), window POF within 10 % median of the truth."""
     from simulator.media.gridfile import load_grid
     from simulator.preprocess import SphereConfig, preprocess_sphere
-    from simulator.synth import window_truth_dps
     from simulator.sphere.windows import grid_preset
+    from simulator.synth import window_truth_dps
 
     tr = _walk(seconds=0.2, step=0.05, turn_dps=30.0)
     video, tpath, cfg = synthesize_trajectory(tr, tmp_path / "w.mp4", fps=30, size=(512, 256))

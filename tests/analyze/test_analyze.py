@@ -24,7 +24,7 @@ from simulator.analyze import (
 from simulator.cli import main
 from simulator.core.errors import InputError
 
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "examples" / "study_example.csv"
 
 # --------------------------------------------------------------------------- SSQ

@@ -11,6 +11,7 @@ import pytest
 
 from simulator.cli import main
 from simulator.core.errors import InputError
+from simulator.media.video import probe, read_frame
 from simulator.sphere.geometry import lonlat_to_dir
 from simulator.synth import (
     SynthConfig,
@@ -21,7 +22,6 @@ from simulator.synth import (
     synthesize,
     truth_path_for,
 )
-from simulator.media.video import probe, read_frame
 
 
 def _run(argv):
@@ -287,8 +287,8 @@ def test_preprocess_matches_truth_on_small_clip(tmp_path, scene, bound):
     """CI-sized version of bench/accuracy.py: DIS on a 384x192 clip, 8 x 3 windows."""
     from simulator.media.gridfile import load_grid
     from simulator.preprocess import preprocess_video
-    from simulator.synth import window_truth_dps
     from simulator.sphere.windows import WindowGrid
+    from simulator.synth import window_truth_dps
 
     cfg = SynthConfig(
         scene, seconds=0.4, fps=10, size=(384, 192), axis=(1.0, 2.0, 0.5), omega_dps=40.0
