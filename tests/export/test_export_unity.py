@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import shutil
 import struct
 import subprocess
 from pathlib import Path
@@ -99,33 +98,6 @@ def _headpath_csv(path: Path, times, yaw, pitch, roll) -> Path:
         lines.append(",".join(repr(float(v)) for v in row))
     path.write_text("\n".join(lines) + "\n")
     return path
-
-
-@pytest.fixture(scope="session")
-def harness(tmp_path_factory) -> Path:
-    """The C# runtime and the test harness, compiled by Mono's mcs (make test installs it)."""
-    mcs, mono = shutil.which("mcs"), shutil.which("mono")
-    if mcs is None or mono is None:
-        pytest.skip(
-            "Mono's C# compiler (mcs) or runtime (mono) not found; `make sysdeps` installs "
-            "the Debian packages mono-mcs mono-runtime"
-        )
-    out = tmp_path_factory.mktemp("cs") / "harness.exe"
-    r = subprocess.run(
-        [
-            mcs,
-            "-optimize+",
-            "-warnaserror+",
-            f"-out:{out}",
-            str(CS_DIR / "VimsimEpof.cs"),
-            str(HARNESS),
-        ],
-        capture_output=True,
-        text=True,
-        check=False,
-    )
-    assert r.returncode == 0, r.stdout + r.stderr
-    return out
 
 
 def _mono(exe: Path, *args, check=True) -> subprocess.CompletedProcess:
