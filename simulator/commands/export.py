@@ -19,8 +19,9 @@ __all__ = ["register", "run"]
 _FORMATS = ("unity",)
 _METHODS = ("auto", "paper", "sphere")  # = simulator.export.unity.METHODS (light import)
 _DTYPES = ("auto", "float16", "float32")  # = simulator.export.unity.DTYPES
-#: What the exported overlay can draw (local-grf needs per-cell opacity the runtime lacks).
-_MITIGATIONS = ("grf", "vignette", "grf+vignette", "none")
+#: = simulator.core.choices.MITIGATIONS; local-grf is refused with its reason (the overlay
+#: draws one opacity per frame, not one per field cell).
+_MITIGATIONS = ("grf", "vignette", "grf+vignette", "local-grf", "none")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -95,6 +96,11 @@ def _overlay_from_args(args: argparse.Namespace):
         raise InputError(f"--grain-size must be degrees in (0, 30], e.g. 1.5; got {args.grain_size:g}")
     if not (0.0 < args.density < 1.0):
         raise InputError(f"--density must be a blocked fraction in (0, 1), e.g. 0.5; got {args.density:g}")
+    if args.mitigation == "local-grf":
+        raise InputError(
+            "--mitigation local-grf cannot be exported: the overlay draws one opacity per frame; "
+            "choose grf, vignette, grf+vignette or none"
+        )
     inner, outer = args.cutout
     if not (0.0 <= inner < outer <= 180.0):
         raise InputError(

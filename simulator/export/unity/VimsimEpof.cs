@@ -268,11 +268,13 @@ namespace Vimsim
             long off = (long)gs.Num("offset");
             var shape = gs.IntArray("shape");
             long bytes = b.Length - off;
-            if (off >= dataEnd && off <= b.Length && bytes < 12L * GrainCount && shape.Length == 2 && shape[0] == GrainCount)
+            if (off < dataEnd || off > b.Length)
+                throw new VimsimLoadException(src, "truncated: the data ends at " + dataEnd + " bytes, the grain layout starts at " + off + ", the file has " + b.Length);
+            if (bytes % 12 != 0)
                 throw new VimsimLoadException(src, "truncated: the grain layout needs " + (off + 12L * GrainCount) + " bytes, the file has " + b.Length);
-            if (shape.Length != 2 || shape[0] != GrainCount || shape[1] != 3 || off < dataEnd || bytes != 12L * GrainCount)
-                throw new VimsimLoadException(src, "header field grains: a layout of " + (off >= dataEnd && off <= b.Length ? (bytes / 4) + " floats" : "no bytes")
-                    + " for grf.n_grains = " + GrainCount + " (3 floats each); export again", "grains");
+            if (shape.Length != 2 || shape[0] != GrainCount || shape[1] != 3 || bytes != 12L * GrainCount)
+                throw new VimsimLoadException(src, "header field grains: a layout of " + (bytes / 12) + " grains for grf.n_grains = " + GrainCount
+                    + " (shape [" + string.Join(",", shape) + "]); export again", "grains");
             GrainCenters = new float[3 * GrainCount];
             Buffer.BlockCopy(b, (int)off, GrainCenters, 0, (int)bytes);
         }

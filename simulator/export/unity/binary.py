@@ -112,8 +112,8 @@ def check_mitigation_header(header: dict, p: Path, grain_floats: int | None) -> 
     if not (0.0 < aperture < 180.0) or not (0.0 <= feather <= 180.0):
         raise _bad(p, "vignette", f"aperture {aperture:g} / feather {feather:g} deg out of range")
     if shape != [n, 3] or (grain_floats is not None and grain_floats != 3 * n):
-        got = shape if grain_floats is None else f"{grain_floats} floats"
-        raise _bad(p, "grains", f"layout of {got}, expected {n} x 3 (grf.n_grains)")
+        got = f"shape {shape}" if grain_floats is None else f"{grain_floats // 3} grains"
+        raise _bad(p, "grains", f"a layout of {got} for grf.n_grains = {n}")
 
 
 def _parse(p: Path, b: bytes) -> tuple[dict, str, tuple[int, ...], int]:
@@ -155,11 +155,9 @@ def _load(path: str | os.PathLike) -> tuple[Path, bytes, dict, NDArray, NDArray]
     check_mitigation_header(header, p, None)
     if off + n > len(b) or g_off < off + n or g_off > len(b):
         raise InputError(f"{p}: truncated: data needs {off + n} bytes, the file has {len(b)}")
-    need = g_off + 12 * int(header["grf"]["n_grains"])
-    if len(b) < need:
+    if (len(b) - g_off) % 12:
+        need = g_off + 12 * int(header["grf"]["n_grains"])
         raise InputError(f"{p}: truncated: the grain layout needs {need} bytes, the file has {len(b)}")
-    if (len(b) - g_off) % 4:
-        raise InputError(f"{p}: padded: the grain layout is not whole float32s")
     check_mitigation_header(header, p, (len(b) - g_off) // 4)
     data = np.frombuffer(b, dt, count=math.prod(shape), offset=off).reshape(shape)
     grains = np.frombuffer(b, "<f4", offset=g_off).reshape(-1, 3)
