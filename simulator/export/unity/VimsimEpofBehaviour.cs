@@ -64,6 +64,9 @@ namespace Vimsim
         public VimsimPlaybackClock Clock { get { return clock; } }
 
         Task<VimsimEpof> loading;
+        Task<byte[]> masking;
+        int maskW;
+        double pixelAngle, tanV, tanH;
         VimsimPlaybackClock clock;
         Material overlayMaterial;
         Texture2D mask;
@@ -73,10 +76,23 @@ namespace Vimsim
         void Awake()
         {
             if (head == null && Camera.main != null) head = Camera.main.transform;
-            // Loaded on a worker thread: the paper-mode table takes ~0.3-0.8 s; the main thread goes on.
+            // The camera's pixel size and view (main thread), for the mask width and the vignette.
+            var cam = head != null ? head.GetComponent<Camera>() : Camera.main;
+            if (cam == null) cam = Camera.main;
+            float vfov = cam != null ? cam.fieldOfView : 90f, aspect = cam != null ? cam.aspect : 1f;
+            int pixels = cam != null ? cam.pixelHeight : 1440;
+            tanV = System.Math.Tan(vfov * System.Math.PI / 360.0);
+            tanH = tanV * aspect;
+            pixelAngle = 2.0 * tanV / System.Math.Max(1, pixels);
+            maskW = maskWidth > 0 ? maskWidth + (maskWidth % 2) : VimsimGrainMask.WidthFor(pixelAngle, SystemInfo.maxTextureSize);
+            // Loaded, and the grain mask built, on a worker thread (the paper-mode table takes
+            // ~0.3-0.8 s, a 4096-wide mask ~1 s): the main thread goes on.
             if (epofAsset != null) loading = VimsimEpof.FromBytesAsync(epofAsset.bytes, epofAsset.sourceName);
             else if (exportAsset != null) loading = VimsimEpof.FromBytesAsync(exportAsset.bytes, exportAsset.name);
             else loading = VimsimEpof.LoadAsync(System.IO.Path.Combine(Application.streamingAssetsPath, streamingAssetsFolder));
+            int w = maskW;
+            masking = loading.ContinueWith(t => Grains(t.Result.MitigationKind) ? VimsimGrainMask.Build(t.Result, w) : null,
+                                           TaskContinuationOptions.OnlyOnRanToCompletion);
             if (video != null)
             {
                 video.seekCompleted += OnRestart;
@@ -104,10 +120,13 @@ namespace Vimsim
             startTime = Time.time;
         }
 
+        static bool Grains(string kind) { return kind == "grf" || kind == "grf+vignette"; }
+
         bool Ready()
         {
             if (Runtime != null) return true;
             if (loading == null || !loading.IsCompleted) return false;
+            if (!loading.IsFaulted && !masking.IsCompleted) return false;
             if (loading.IsFaulted)
             {
                 var ex = loading.Exception.GetBaseException();
@@ -116,9 +135,16 @@ namespace Vimsim
                 enabled = false;
                 return false;
             }
+            if (masking.IsFaulted || masking.IsCanceled)
+            {
+                Debug.LogError("vimsim: the grain mask could not be built (" + (masking.Exception != null ? masking.Exception.GetBaseException().Message : "canceled") + ")");
+                loading = null;
+                enabled = false;
+                return false;
+            }
             Runtime = loading.Result;
             clock = Runtime.CreatePlaybackClock();
-            SetUpOverlay();
+            SetUpOverlay(masking.Result);
             return true;
         }
 
@@ -177,18 +203,13 @@ namespace Vimsim
             overlayMaterial.SetVector("_VimsimCutout", c);
         }
 
-        void SetUpOverlay()
+        void SetUpOverlay(byte[] maskBytes)
         {
             if (overlay == null) return;
             overlayMaterial = overlay.material; // this renderer's own instance
-            var cam = head != null ? head.GetComponent<Camera>() : Camera.main;
-            float vfov = cam != null ? cam.fieldOfView : 90f, aspect = cam != null ? cam.aspect : 1f;
-            int pixels = cam != null ? cam.pixelHeight : 1440;
-            double tv = System.Math.Tan(vfov * System.Math.PI / 360.0), th = tv * aspect;
-            double pixelAngle = 2.0 * tv / System.Math.Max(1, pixels);
             string kind = Runtime.MitigationKind;
-            bool grains = kind == "grf" || kind == "grf+vignette", vignette = kind == "vignette" || kind == "grf+vignette";
-            int w = maskWidth > 0 ? maskWidth + (maskWidth % 2) : VimsimGrainMask.WidthFor(pixelAngle, SystemInfo.maxTextureSize);
+            bool grains = Grains(kind), vignette = kind == "vignette" || kind == "grf+vignette";
+            int w = maskW;
             bool mips = VimsimGrainMask.UsesMips(pixelAngle, Runtime.CutoutInnerDeg, w / 2);
             if (grains)
             {
@@ -196,10 +217,11 @@ namespace Vimsim
                 mask.wrapModeU = TextureWrapMode.Repeat;
                 mask.wrapModeV = TextureWrapMode.Clamp;
                 mask.filterMode = mips ? FilterMode.Trilinear : FilterMode.Bilinear;
-                mask.LoadRawTextureData(VimsimGrainMask.Build(Runtime, w));
+                mask.LoadRawTextureData(maskBytes);
                 mask.Apply(mips, true); // mip levels box-filtered, as glGenerateMipmap in vimsim render
                 overlayMaterial.SetTexture("_VimsimGrainMask", mask);
             }
+            double th = tanH, tv = tanV;
             double rad = System.Math.PI / 180.0;
             overlayMaterial.SetVector("_VimsimCutout", new Vector4((float)(Runtime.CutoutInnerDeg * rad), (float)(Runtime.CutoutOuterDeg * rad), grains ? 1f : 0f, 0f));
             float rFull = (float)System.Math.Atan(System.Math.Sqrt(th * th + tv * tv)); // the view's corner
