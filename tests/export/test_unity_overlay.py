@@ -182,6 +182,7 @@ def test_overlay_matches_vimsim_render(ctx, harness, overlay_glsl, export_dir, e
     print(f"eye {eye}: worst PSNR {worst:.1f} dB")
 
 
+@pytest.mark.gl
 def test_grain_layout_and_mask_in_csharp_equal_vimsim(tmp_path, harness, export_dir, ctx):
     """The layout read by the C# runtime = the Python renderer's (1e-6 rad); the C# mask =
     vimsim's GL mask within one 8-bit step at almost every texel."""

@@ -168,3 +168,54 @@ def test_bad_grf_settings_are_refused_naming_the_field(tmp_path, harness, capsys
         err = capsys.readouterr().err
         assert rc == 2 and err.count("\n") == 1 and what in err, err
         assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+@pytest.fixture(scope="module")
+def behaviour_harness(tmp_path_factory, harness) -> Path:
+    """VimsimEpofBehaviour compiled with the UnityEngine stub and a driver calling its Awake /
+    Update as Unity does (``tests/export/cs/BehaviourHarness.cs``)."""
+    cs = Path(__file__).parent / "cs"
+    u = Path(__file__).resolve().parents[2] / "simulator" / "export" / "unity"
+    out = tmp_path_factory.mktemp("bh") / "bh.exe"
+    r = subprocess.run(["mcs", "-warnaserror+", f"-out:{out}", str(u / "VimsimEpof.cs"), str(u / "VimsimEpofBehaviour.cs"),
+                        str(u / "VimsimEpofAsset.cs"), str(cs / "UnityEngineStub.cs"), str(cs / "BehaviourHarness.cs")],
+                       capture_output=True, text=True, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    return out
+
+
+def test_behaviour_follows_the_video_player(tmp_path, behaviour_harness):
+    """The MonoBehaviour driven as Unity would (stub VideoPlayer, head looking at the frame's
+    centre): nothing before the player is prepared; 30 fps video at 90 Hz updates = vimsim
+    epof's opacity column (1e-6); paused: held; seek event: the easing restarts; a player at
+    60 fps is mapped through time (frame 32 -> 16, one warning); outside the export: NaN,
+    nothing drawn, one warning however often."""
+    T = 90
+    grid = _sphere_grid(tmp_path / "g.npz", T, 0)
+    path = tmp_path / "p.csv"
+    path.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n10,0,0,0\n")
+    assert main(["epof", str(grid), str(path), "-o", str(tmp_path / "e.csv")]) == 0
+    ref = read_epof_csv(tmp_path / "e.csv")
+    assert main(["export", str(grid), "-o", str(tmp_path / "x")]) == 0
+    rows = [(-1, 30.0, 0)] * 3  # not prepared
+    rows += [(f, 30.0, 3) for f in range(60) for _ in range(3)]  # playing, 90 Hz
+    rows += [(59, 30.0, 2)] * 5  # paused
+    rows += [(10, 30.0, 3 | 4)] + [(f, 30.0, 3) for f in range(11, 16)]  # a seek back
+    rows += [(32, 60.0, 3), (34, 60.0, 3)]  # a 60 fps player: frames 16, 17
+    rows += [(500, 30.0, 3), (501, 30.0, 3)]  # past the export
+    rec = np.array(rows, dtype=[("f", "<i8"), ("r", "<f4"), ("k", "<i4")])
+    (tmp_path / "s").write_bytes(struct.pack("<i", len(rec)) + rec.tobytes())
+    r = _mono(behaviour_harness, tmp_path / "x", tmp_path / "s", tmp_path / "o")
+    out = np.fromfile(tmp_path / "o", dtype=[("e", "<f4"), ("raw", "<f4"), ("eased", "<f4"), ("drawn", "<f4")])
+    assert np.isnan(out["eased"][:3]).all() and (out["drawn"][:3] == 0).all()
+    play = out[3 : 3 + 180]
+    assert np.abs(play["eased"][::3] - ref.opacity[:60]).max() <= 1e-6
+    assert (play["eased"][1::3] == play["eased"][::3]).all() and (play["drawn"] == play["eased"]).all()
+    paused = out[183:188]
+    assert (paused["eased"] == play["eased"][-1]).all()
+    seek = out[188]
+    assert seek["eased"] == seek["raw"] and abs(seek["e"] - ref.epof_dps[10]) <= 1e-5 * ref.epof_dps[10]
+    np.testing.assert_allclose(out["e"][194:196], ref.epof_dps[[16, 17]], rtol=1e-5)
+    assert np.isnan(out["eased"][196:]).all() and (out["drawn"][196:] == 0).all()
+    assert r.stdout.strip() == "warnings 2 errors 0", r.stdout + r.stderr
+    assert np.ptp(ref.opacity[:60]) > 0.2  # the easing is exercised

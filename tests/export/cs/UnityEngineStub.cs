@@ -66,13 +66,15 @@ namespace UnityEngine
     public static class SystemInfo { public static int maxTextureSize { get { return 16384; } } }
     public static class Time
     {
-        public static float time { get { return 0f; } }
+        public static float time { get { return TestTime; } }
+        public static float TestTime = 0f; // set by test harnesses
         public static float deltaTime { get { return 0f; } }
     }
     public static class Debug
-    {
-        public static void LogError(object message) { }
-        public static void LogWarning(object message) { }
+    {   // counted, so that a test harness can check what the behaviour logs
+        public static int Errors, Warnings;
+        public static void LogError(object message) { Errors++; System.Console.Error.WriteLine("error: " + message); }
+        public static void LogWarning(object message) { Warnings++; System.Console.Error.WriteLine("warning: " + message); }
     }
     public class TooltipAttribute : System.Attribute { public TooltipAttribute(string tooltip) { } }
     public class HideInInspectorAttribute : System.Attribute { }
