@@ -10,6 +10,14 @@ Shader "Vimsim/Overlay"
     Properties
     {
         [NoScaleOffset] _VimsimGrainMask ("Grain coverage (built at run time from the export)", 2D) = "black" {}
+        // Set every frame by VimsimEpofBehaviour (declared so that the SRP batcher sees UnityPerMaterial whole).
+        [HideInInspector] _VimsimHeadRight ("Head right", Vector) = (1, 0, 0, 0)
+        [HideInInspector] _VimsimHeadUp ("Head up", Vector) = (0, 1, 0, 0)
+        [HideInInspector] _VimsimHeadForward ("Head forward", Vector) = (0, 0, 1, 0)
+        [HideInInspector] _VimsimCutout ("Cutout inner, outer (rad), grains on, opacity", Vector) = (0.314159, 0.698132, 1, 0)
+        [HideInInspector] _VimsimVignette ("Vignette r_full, aperture_min / 2, feather (rad), on", Vector) = (1, 0.523599, 0.174533, 0)
+        [HideInInspector] _VimsimVignetteColor ("Vignette colour", Color) = (0, 0, 0, 1)
+        [HideInInspector] _VimsimMask ("Mask height, mips, yaw offset (rad)", Vector) = (2048, 0, 0, 0)
     }
 
     // Universal Render Pipeline
