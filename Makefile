@@ -11,7 +11,8 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 .PHONY: demo test setup sysdeps lint bench clean
 
 # Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser;
-# Mono's C# compiler for the Unity export (simulator/export/unity/*.cs).
+# Mono's C# compiler for the Unity export (simulator/export/unity/*.cs); glslang and
+# spirv-cross for its overlay shader (VimsimOverlay.hlsl).
 sysdeps:
 	@if ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
 		echo "installing Debian packages libegl1 libgl1-mesa-dri (headless EGL, llvmpipe)"; \
@@ -24,6 +25,13 @@ sysdeps:
 		echo "installing Debian packages mono-mcs mono-runtime (C# compiler for the Unity export check)"; \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends mono-mcs mono-runtime; \
+	fi
+	@# glslang (HLSL -> SPIR-V) and spirv-cross (SPIR-V -> GLSL): the Unity export's overlay shader
+	@# (VimsimOverlay.hlsl) is compiled and drawn against vimsim's renders in make test.
+	@if ! dpkg -s glslang-tools spirv-cross >/dev/null 2>&1; then \
+		echo "installing Debian packages glslang-tools spirv-cross (the Unity overlay shader check)"; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends glslang-tools spirv-cross; \
 	fi
 
 $(STAMP): pyproject.toml

@@ -41,7 +41,7 @@ VIDEO = REAL / "equirect" / "threejs" / "pano.mp4"
 TRACE = REAL / "headtraces" / "corbillon_mmsys18_multiviewpoint" / "user1_quaternion.txt"
 OUT = REPO / "bench" / "_out" / "export"
 CS = REPO / "simulator" / "export" / "unity" / "VimsimEpof.cs"
-HARNESS = REPO / "tests" / "cs" / "EpofHarness.cs"
+HARNESS = REPO / "tests" / "export" / "cs" / "EpofHarness.cs"
 GOAL_US = {"paper": 50.0, "sphere": 20.0}
 
 

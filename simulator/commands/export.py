@@ -6,13 +6,22 @@ from __future__ import annotations
 import argparse
 
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
-from simulator.commands._types import add_fov_arguments, fov_from_args
+from simulator.commands._types import (
+    add_fov_arguments,
+    fov_from_args,
+    nonneg_deg,
+    nonneg_int,
+    positive_float,
+)
 
 __all__ = ["register", "run"]
 
 _FORMATS = ("unity",)
 _METHODS = ("auto", "paper", "sphere")  # = simulator.export.unity.METHODS (light import)
 _DTYPES = ("auto", "float16", "float32")  # = simulator.export.unity.DTYPES
+#: = simulator.core.choices.MITIGATIONS; local-grf is refused with its reason (the overlay
+#: draws one opacity per frame, not one per field cell).
+_MITIGATIONS = ("grf", "vignette", "grf+vignette", "local-grf", "none")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,7 +35,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "UnityEngine dependency) with an optional MonoBehaviour DIR/VimsimEpofBehaviour.cs. "
         "The runtime gives the same EPOF as 'vimsim epof' for a video time and a head "
         "orientation (degrees: positive yaw turns right, positive pitch looks up, positive "
-        "roll tilts the head right ear down). See docs/unity.md.",
+        "roll tilts the head right ear down). The folder is a Unity package (package.json, "
+        "asmdef, importer) with the overlay shader (VimsimOverlay.hlsl/.shader: the grains and "
+        "vignette of vimsim render, from the grain layout and settings in the file) and a "
+        "prefab. See docs/unity.md.",
     )
     p.add_argument("grid", metavar="GRID.npz", help="grid file from vimsim preprocess")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created)")
@@ -50,7 +62,56 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
     add_opacity_arguments(p)  # the same rule options (and defaults: comfort) as vimsim epof
+    _add_overlay_arguments(p)
     p.set_defaults(func=run)
+
+
+def _add_overlay_arguments(p: argparse.ArgumentParser) -> None:
+    """The overlay's options, as vimsim render's (same names and defaults)."""
+    p.add_argument("--mitigation", choices=_MITIGATIONS, default="grf",
+                   help="what the overlay draws (default grf; as vimsim render --mitigation)")  # fmt: skip
+    p.add_argument("--seed", type=nonneg_int, default=0, metavar="N",
+                   help="seed of the grain layout (default 0)")  # fmt: skip
+    p.add_argument("--grain-size", type=float, default=1.5, metavar="DEG",
+                   help="grain diameter, degrees (default 1.5)")  # fmt: skip
+    p.add_argument("--density", type=float, default=0.5, metavar="F",
+                   help="blocked fraction of the view, 0..1 exclusive (default 0.5)")  # fmt: skip
+    p.add_argument("--cutout", type=float, nargs=2, default=(18.0, 40.0), metavar=("INNER", "OUTER"),
+                   help="cutout radii from the view centre, degrees (default 18 40)")  # fmt: skip
+    p.add_argument("--aperture-min", type=positive_float, default=60.0, metavar="DEG",
+                   help="vignette aperture diameter at opacity 1, degrees (default 60)")  # fmt: skip
+    p.add_argument("--feather", type=nonneg_deg, default=10.0, metavar="DEG",
+                   help="width of the vignette's soft edge, degrees (default 10)")  # fmt: skip
+    p.add_argument("--vignette-color", default="0,0,0", metavar="R,G,B",
+                   help="vignette colour, R,G,B 0..255 or #RRGGBB (default black)")  # fmt: skip
+
+
+def _overlay_from_args(args: argparse.Namespace):
+    """``(GrfConfig, Mitigation)``; one line naming the option for bad values."""
+    from simulator.core.errors import InputError
+    from simulator.mitigation.grf import GrfConfig
+    from simulator.mitigation.kinds import Mitigation, parse_color
+
+    if not (0.0 < args.grain_size <= 30.0):
+        raise InputError(f"--grain-size must be degrees in (0, 30], e.g. 1.5; got {args.grain_size:g}")
+    if not (0.0 < args.density < 1.0):
+        raise InputError(f"--density must be a blocked fraction in (0, 1), e.g. 0.5; got {args.density:g}")
+    if args.mitigation == "local-grf":
+        raise InputError(
+            "--mitigation local-grf cannot be exported: the overlay draws one opacity per frame; "
+            "choose grf, vignette, grf+vignette or none"
+        )
+    inner, outer = args.cutout
+    if not (0.0 <= inner < outer <= 180.0):
+        raise InputError(
+            f"--cutout INNER OUTER must satisfy 0 <= INNER < OUTER <= 180 degrees, e.g. 18 40; "
+            f"got {inner:g} {outer:g}"
+        )
+    grf = GrfConfig(grain_deg=args.grain_size, density=args.density, inner_deg=inner,
+                    outer_deg=outer, seed=args.seed)  # fmt: skip
+    mit = Mitigation(args.mitigation, aperture_min_deg=args.aperture_min,
+                     feather_deg=args.feather, color=parse_color(args.vignette_color))  # fmt: skip
+    return grf, mit
 
 
 def run(args: argparse.Namespace) -> int:
@@ -59,6 +120,7 @@ def run(args: argparse.Namespace) -> int:
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = rule_from_args(args)
+    grf, mitigation = _overlay_from_args(args)
     res = export_unity(
         args.grid,
         args.output,
@@ -67,6 +129,8 @@ def run(args: argparse.Namespace) -> int:
         hfov_deg=hfov,
         vfov_deg=vfov,
         rule=rule,
+        grf=grf,
+        mitigation=mitigation,
     )
     h = res.header
     shape = "x".join(str(s) for s in res.shape)
@@ -74,7 +138,8 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"wrote {res.out_dir}: {res.files[0].name} ({res.mode} mode, {res.dtype} {shape}, "
         f"{res.file_bytes / 1024:.0f} KiB; grid file {res.grid_bytes / 1024:.0f} KiB{rounding}), "
-        f"{', '.join(f.name for f in res.files[1:])}; viewport {h['viewport']['hfov_deg']:g} x "
+        f"a Unity package ({len(res.files) - 1} files: runtime, overlay shader, prefab; "
+        f"{res.n_grains} grains, {h['mitigation']}); viewport {h['viewport']['hfov_deg']:g} x "
         f"{h['viewport']['vfov_deg']:g} deg, opacity 0 at {h['opacity']['low_dps']:.3g}, 1 at "
         f"{h['opacity']['high_dps']:.3g} deg/s ({h['opacity']['name']} rule: ease-in "
         f"{h['opacity']['ease_in_s']:g} s, ease-out {h['opacity']['ease_out_s']:g} s, smoothing "

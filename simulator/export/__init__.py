@@ -1,8 +1,9 @@
 """Export for game engines: the POF matrix or the sphere-mode field with a runtime (Unity, C#).
 
 :mod:`simulator.export.unity` writes ``vimsim_epof.bin`` (a little-endian binary with a JSON
-header) and the C# runtime shipped in ``simulator/export/unity/*.cs``; ``docs/unity.md``
-documents the layout and the calls.
+header: flow, grain layout, GRF and vignette settings, range) and a Unity package around it
+(the C# runtime, the overlay shader, a prefab, an importer; the files shipped in
+``simulator/export/unity/``); ``docs/unity.md`` documents the layout and the calls.
 """
 
 from simulator.export.unity import (

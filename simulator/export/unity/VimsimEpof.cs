@@ -1,40 +1,48 @@
-// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 2).
+// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 3).
 // Written by `vimsim export GRID.npz -o DIR --format unity`; docs/unity.md in vimsim.
 // Plain C# (C# 6, .NET Framework 4.x / .NET Standard 2.0 profile): no UnityEngine here.
 //
-//   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin
-//   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s
-//   float opacity = e.Opacity(epof);                  // GRF opacity, 0..1 (the paper's rule)
-//   var ease = e.CreateEasing();                      // once; then per video frame:
-//   float shown = ease.Step(opacity);                 // the exported rule (default: comfort)
+//   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin (or LoadAsync)
+//   if (e.Covers(videoTimeS)) { ... }                 // the export has this time's frame
+//   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s; NaN outside the range
+//   float raw = e.RawOpacity(epof);                   // un-eased GRF opacity, 0..1 (the paper's rule)
+//   var clock = e.CreatePlaybackClock();              // then per rendered frame, with the player's frame:
+//   clock.Advance(videoFrame, yawDeg, pitchDeg, rollDeg);  // clock.EasedOpacity = vimsim epof's column
 //
 // Conventions, exactly as `vimsim epof`: angles in degrees; yaw + turns right (toward +lon),
 // pitch + looks up, roll + tilts the head right ear down, applied yaw, then pitch, then roll
 // (intrinsic); yaw = pitch = roll = 0 looks at the centre of the equirect frame. A time is
-// seconds from the video start; it shows video frame floor(time * fps + 1e-6) (clamped to the
-// frames of the export), the frame whose row `vimsim epof` writes for that frame's time.
+// seconds from the video start; it shows video frame floor(time * fps + 1e-6); the export covers
+// frames RangeStartFrame .. RangeEndFrame - 1 of a source of SourceFrameCount frames.
 // Numbers: the same computation as vimsim (paper mode: simulator.epof.ViewportOverlaps, its
-// overlap table built here at load; sphere mode: simulator.sphere.ViewportQuery). Not thread
-// safe (sphere mode caches weights): use one instance per thread.
+// overlap table built at load; sphere mode: simulator.sphere.ViewportQuery). The grain layout
+// (GrainCenters) is vimsim's (simulator.mitigation.grf.GrainField) and VimsimGrainMask.Build
+// draws it as vimsim's grf_mask.frag does. Not thread safe (caches): one instance per thread.
 using System;
 using System.Collections.Generic;
 using System.Globalization;
 using System.IO;
 using System.Text;
+using System.Threading.Tasks;
 
 namespace Vimsim
 {
-    /// <summary>A vimsim export could not be loaded: FilePath names the file, Problem says why.</summary>
+    /// <summary>A vimsim export could not be loaded: FilePath names the file, Problem says why
+    /// (for a bad header field, Field names it, e.g. "grf.density").</summary>
     public class VimsimLoadException : IOException
     {
         public string FilePath { get; private set; }
         public string Problem { get; private set; }
+        public string Field { get; private set; }
 
-        public VimsimLoadException(string path, string problem)
+        public VimsimLoadException(string path, string problem) : this(path, problem, null) { }
+
+        public VimsimLoadException(string path, string problem, string field)
             : base(path + ": " + problem)
         {
             FilePath = path;
             Problem = problem;
+            Field = field;
         }
     }
 
@@ -42,7 +50,7 @@ namespace Vimsim
     public sealed class VimsimEpof
     {
         /// <summary>The binary format version this runtime reads.</summary>
-        public const int FormatVersion = 2;
+        public const int FormatVersion = 3;
         /// <summary>File name of the data inside an export folder.</summary>
         public const string DataFileName = "vimsim_epof.bin";
         /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
@@ -56,6 +64,15 @@ namespace Vimsim
         /// <summary>Video frame number of the first row (0 unless the grid covers part of the video).</summary>
         public int StartFrame { get; private set; }
         public int FrameCount { get; private set; }
+        /// <summary>Exported range: frames RangeStartFrame (inclusive) .. RangeEndFrame (exclusive), and in seconds.</summary>
+        public int RangeStartFrame { get { return StartFrame; } }
+        public int RangeEndFrame { get { return StartFrame + FrameCount; } }
+        public double RangeStartS { get { return StartFrame / Fps; } }
+        public double RangeEndS { get { return (StartFrame + FrameCount) / Fps; } }
+        /// <summary>The source video's frame count and duration (s); SourceLengthKnown false: the grid's end.</summary>
+        public int SourceFrameCount { get; private set; }
+        public double SourceDurationS { get; private set; }
+        public bool SourceLengthKnown { get; private set; }
         /// <summary>Viewport FOV in degrees (exact, horizontal and vertical).</summary>
         public double HfovDeg { get; private set; }
         public double VfovDeg { get; private set; }
@@ -70,12 +87,29 @@ namespace Vimsim
         public double EaseOutS { get; private set; }
         /// <summary>Content hash of the source video ("sha256:...", as in the grid file).</summary>
         public string SourceVideoHash { get; private set; }
+        /// <summary>What the overlay draws: grf, vignette, grf+vignette or none (vimsim render --mitigation).</summary>
+        public string MitigationKind { get; private set; }
+        /// <summary>GRF: grain diameter (deg), blocked fraction, cutout radii (deg), seed of the layout.</summary>
+        public double GrainDeg { get; private set; }
+        public double GrainDensity { get; private set; }
+        public double CutoutInnerDeg { get; private set; }
+        public double CutoutOuterDeg { get; private set; }
+        public int GrainSeed { get; private set; }
+        public int GrainCount { get; private set; }
+        /// <summary>Grain centres, world unit vectors (x right, y up, z forward), 3 floats per grain.</summary>
+        public float[] GrainCenters { get; private set; }
+        /// <summary>Vignette: aperture diameter at opacity 1 (deg), soft-edge width (deg), colour (rgb 0..1).</summary>
+        public double VignetteApertureMinDeg { get; private set; }
+        public double VignetteFeatherDeg { get; private set; }
+        public float[] VignetteColor { get; private set; }
         /// <summary>The JSON header, verbatim.</summary>
         public string HeaderJson { get; private set; }
         public string SourcePath { get; private set; }
 
-        float[] data;     // paper mode: FrameCount x rowLength, deg/s
-        double[] prefix;  // sphere mode: per frame and cell row, the running sums P[0..NLon] (P[0] = 0)
+        float[] data;     // paper mode: FrameCount x rowLength, deg/s; sphere mode float32 field
+        ushort[] half;    // sphere mode float16 field, as stored (half the memory of float32)
+        double[] prefix;  // sphere mode: one frame's running sums per cell row, P[0..NLon] (P[0] = 0)
+        int prefixRow = -1;
         int rowLength;
         PaperModel paper;
         SphereModel sphere;
@@ -107,6 +141,19 @@ namespace Vimsim
             return FromBytes(bytes, path, hfovDeg, vfovDeg);
         }
 
+        /// <summary>Load on a worker thread (the paper-mode table takes ~0.3-0.8 s): the calling
+        /// (main) thread is not blocked; the task's exception is the VimsimLoadException.</summary>
+        public static Task<VimsimEpof> LoadAsync(string dirOrFile)
+        {
+            return Task.Run(() => Load(dirOrFile, 0.0, 0.0));
+        }
+
+        /// <summary>FromBytes on a worker thread (e.g. a VimsimEpofAsset's bytes).</summary>
+        public static Task<VimsimEpof> FromBytesAsync(byte[] bytes, string source)
+        {
+            return Task.Run(() => FromBytes(bytes, source, 0.0, 0.0));
+        }
+
         /// <summary>Parse an export from memory (e.g. a Unity TextAsset's bytes); source names it in errors.</summary>
         public static VimsimEpof FromBytes(byte[] bytes, string source)
         {
@@ -123,7 +170,7 @@ namespace Vimsim
             return e;
         }
 
-        void Parse(byte[] b, double hfovOverride, double vfovOverride)
+        Header ParsePrefix(byte[] b, out long hlen)
         {
             string src = SourcePath;
             if (b.Length < PrefixBytes)
@@ -132,9 +179,12 @@ namespace Vimsim
                 if (b[i] != Magic[i])
                     throw new VimsimLoadException(src, "not a vimsim export (no VIMSIMEP signature); make one with vimsim export GRID.npz -o DIR");
             int version = (int)ReadU32(b, 8);
+            if (version < FormatVersion)
+                throw new VimsimLoadException(src, "format version " + version + ", made by an older vimsim export (no grain layout, exported range or source length); "
+                    + "export again with vimsim export GRID.npz -o DIR --format unity and copy the new files (version " + FormatVersion + ")");
             if (version != FormatVersion)
                 throw new VimsimLoadException(src, "header of format version " + version + "; this VimsimEpof.cs reads version " + FormatVersion + ": use the VimsimEpof.cs exported with the data");
-            long hlen = ReadU32(b, 12);
+            hlen = ReadU32(b, 12);
             if (PrefixBytes + hlen > b.Length)
                 throw new VimsimLoadException(src, "truncated: the header needs " + (PrefixBytes + hlen) + " bytes, the file has " + b.Length);
             string json = Encoding.UTF8.GetString(b, PrefixBytes, (int)hlen);
@@ -151,12 +201,27 @@ namespace Vimsim
                 throw new VimsimLoadException(src, "header format is '" + hd.Str("format") + "', not vimsim-epof");
             if ((int)hd.Num("version") != FormatVersion)
                 throw new VimsimLoadException(src, "header of format version " + hd.Num("version") + "; this VimsimEpof.cs reads version " + FormatVersion);
+            return hd;
+        }
+
+        void ParseSettings(Header hd, double hfovOverride, double vfovOverride)
+        {
+            string src = SourcePath;
             Mode = hd.Str("mode");
             Fps = hd.Num("fps");
             StartFrame = (int)hd.Num("start_frame");
             FrameCount = (int)hd.Num("n_frames");
             if (!(Fps > 0) || FrameCount < 1)
                 throw new VimsimLoadException(src, "header has fps " + Fps + " and " + FrameCount + " frames; expected fps > 0 and >= 1 frame");
+            var rg = hd.Obj("range");
+            if ((int)rg.Num("start_frame") != StartFrame || (int)rg.Num("end_frame") != StartFrame + FrameCount)
+                throw new VimsimLoadException(src, "header field range: frames " + rg.Num("start_frame") + ".." + rg.Num("end_frame") + " do not match start_frame and n_frames", "range");
+            var so = hd.Obj("source");
+            SourceFrameCount = (int)so.Num("n_frames");
+            SourceDurationS = so.Num("duration_s");
+            SourceLengthKnown = so.Num("known") != 0;
+            if (SourceFrameCount < StartFrame + FrameCount)
+                throw new VimsimLoadException(src, "header field source.n_frames: " + SourceFrameCount + " is shorter than the exported range's end " + (StartFrame + FrameCount), "source.n_frames");
             var vp = hd.Obj("viewport");
             HfovDeg = hfovOverride > 0 ? hfovOverride : vp.Num("hfov_deg");
             VfovDeg = vfovOverride > 0 ? vfovOverride : (hfovOverride > 0 ? hfovOverride : vp.Num("vfov_deg"));
@@ -169,82 +234,161 @@ namespace Vimsim
             EaseInS = op.Num("ease_in_s");
             EaseOutS = op.Num("ease_out_s");
             if (!(SmoothingS >= 0 && EaseInS >= 0 && EaseOutS >= 0) || double.IsInfinity(SmoothingS + EaseInS + EaseOutS))
-                throw new VimsimLoadException(src, "header opacity times (smoothing_s, ease_in_s, ease_out_s) must be seconds >= 0");
+                throw new VimsimLoadException(src, "header opacity times (smoothing_s, ease_in_s, ease_out_s) must be seconds >= 0", "opacity");
             var video = hd.Obj("video");
             SourceVideoHash = video.Has("content_hash") ? video.Str("content_hash") : "";
+        }
 
+        void ParseMitigation(Header hd, byte[] b, long dataEnd)
+        {
+            string src = SourcePath;
+            MitigationKind = hd.Str("mitigation");
+            var g = hd.Obj("grf");
+            GrainDeg = g.Num("grain_deg");
+            GrainDensity = g.Num("density");
+            CutoutInnerDeg = g.Num("inner_deg");
+            CutoutOuterDeg = g.Num("outer_deg");
+            GrainSeed = (int)g.Num("seed");
+            GrainCount = (int)g.Num("n_grains");
+            if (!(GrainDensity > 0 && GrainDensity < 1))
+                throw new VimsimLoadException(src, "header field grf.density: " + GrainDensity + " is not a blocked fraction in (0, 1); export again", "grf.density");
+            if (!(CutoutInnerDeg >= 0 && CutoutInnerDeg < CutoutOuterDeg && CutoutOuterDeg <= 180))
+                throw new VimsimLoadException(src, "header fields grf.inner_deg, grf.outer_deg: cutout radii " + CutoutInnerDeg + ", " + CutoutOuterDeg
+                    + " are not 0 <= inner < outer <= 180 degrees; export again", "grf.inner_deg");
+            if (!(GrainDeg > 0 && GrainDeg <= 30))
+                throw new VimsimLoadException(src, "header field grf.grain_deg: " + GrainDeg + " is not degrees in (0, 30]", "grf.grain_deg");
+            var v = hd.Obj("vignette");
+            VignetteApertureMinDeg = v.Num("aperture_min_deg");
+            VignetteFeatherDeg = v.Num("feather_deg");
+            var col = v.DoubleArray("color");
+            if (!(VignetteApertureMinDeg > 0 && VignetteApertureMinDeg < 180) || !(VignetteFeatherDeg >= 0 && VignetteFeatherDeg <= 180) || col.Length != 3)
+                throw new VimsimLoadException(src, "header field vignette: aperture_min_deg in (0, 180), feather_deg in [0, 180] and 3 colour values expected", "vignette");
+            VignetteColor = new float[] { (float)col[0], (float)col[1], (float)col[2] };
+            var gs = hd.Obj("grains");
+            long off = (long)gs.Num("offset");
+            var shape = gs.IntArray("shape");
+            long bytes = b.Length - off;
+            if (off < dataEnd || off > b.Length)
+                throw new VimsimLoadException(src, "truncated: the data ends at " + dataEnd + " bytes, the grain layout starts at " + off + ", the file has " + b.Length);
+            if (bytes % 12 != 0)
+                throw new VimsimLoadException(src, "truncated: the grain layout needs " + (off + 12L * GrainCount) + " bytes, the file has " + b.Length);
+            if (shape.Length != 2 || shape[0] != GrainCount || shape[1] != 3 || bytes != 12L * GrainCount)
+                throw new VimsimLoadException(src, "header field grains: a layout of " + (bytes / 12) + " grains for grf.n_grains = " + GrainCount
+                    + " (shape [" + string.Join(",", shape) + "]); export again", "grains");
+            GrainCenters = new float[3 * GrainCount];
+            Buffer.BlockCopy(b, (int)off, GrainCenters, 0, (int)bytes);
+        }
+
+        void Parse(byte[] b, double hfovOverride, double vfovOverride)
+        {
+            string src = SourcePath;
+            long hlen;
+            var hd = ParsePrefix(b, out hlen);
+            ParseSettings(hd, hfovOverride, vfovOverride);
             var d = hd.Obj("data");
             string dtype = d.Str("dtype");
             int itemSize = dtype == "float16" ? 2 : dtype == "float32" ? 4 : 0;
-            if (itemSize == 0) throw new VimsimLoadException(src, "data dtype '" + dtype + "'; expected float16 or float32");
+            if (itemSize == 0) throw new VimsimLoadException(src, "data dtype '" + dtype + "'; expected float16 or float32", "data.dtype");
             var shape = d.IntArray("shape");
             if (shape.Length != 3 || shape[0] != FrameCount)
-                throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "]; expected [n_frames, rows, columns]");
+                throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "]; expected [n_frames, rows, columns]", "data.shape");
             long offset = (long)d.Num("offset");
             long count = (long)shape[0] * shape[1] * shape[2];
             long need = offset + count * itemSize;
             if (offset < PrefixBytes + hlen || need > b.Length)
                 throw new VimsimLoadException(src, "truncated: the data needs " + need + " bytes, the file has " + b.Length);
-            if (need != b.Length)
-                throw new VimsimLoadException(src, "file has " + (b.Length - need) + " bytes after the data; not a vimsim export as written");
+            ParseMitigation(hd, b, need);
             rowLength = shape[1] * shape[2];
-            data = new float[count];
             if (!BitConverter.IsLittleEndian) throw new PlatformNotSupportedException("VimsimEpof reads little-endian data on little-endian machines only");
-            if (itemSize == 4)
-                Buffer.BlockCopy(b, (int)offset, data, 0, (int)(count * 4));
+            if (Mode == "sphere" && itemSize == 2)
+            {   // kept as stored: 2 bytes a cell; each frame's running sums are made when it is queried
+                half = new ushort[count];
+                Buffer.BlockCopy(b, (int)offset, half, 0, (int)(count * 2));
+            }
             else
-                for (long i = 0; i < count; i++)
-                    data[i] = HalfToFloat((ushort)(b[offset + 2 * i] | (b[offset + 2 * i + 1] << 8)));
+            {
+                data = new float[count];
+                if (itemSize == 4)
+                    Buffer.BlockCopy(b, (int)offset, data, 0, (int)(count * 4));
+                else
+                    for (long i = 0; i < count; i++)
+                        data[i] = HalfToFloat((ushort)(b[offset + 2 * i] | (b[offset + 2 * i + 1] << 8)));
+            }
+            if (Mode == "paper") SetUpPaper(hd, shape);
+            else if (Mode == "sphere") SetUpSphere(hd, shape);
+            else throw new VimsimLoadException(src, "mode '" + Mode + "'; expected paper or sphere", "mode");
+        }
 
-            if (Mode == "paper")
-            {
-                var g = hd.Obj("grid");
-                var t = hd.Obj("overlap_table");
-                double[] yawDeg = g.DoubleArray("yaw_deg"), pitchDeg = g.DoubleArray("pitch_deg");
-                double[] num = { g.Num("yaw_step_deg"), g.Num("yaw_start_deg"), g.Num("hfov_deg"), g.Num("vfov_deg"),
-                    HfovDeg, VfovDeg, t.Num("pitch_step_deg"), t.Num("roll_step_deg"), t.Num("yaw_step_deg"),
-                    t.Num("rays"), t.Num("lat_step_deg"), t.Num("lon_step_deg") };
-                var key = new StringBuilder();
-                foreach (double x in yawDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
-                key.Append('|');
-                foreach (double x in pitchDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
-                key.Append('|');
-                foreach (double x in num) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
-                lock (PaperCache)
-                {   // the table depends on the grid and FOV only: built once per process for all videos
-                    if (!PaperCache.TryGetValue(key.ToString(), out paper))
-                    {
-                        paper = new PaperModel(yawDeg, pitchDeg, num[0], num[1], num[2], num[3], num[4], num[5],
-                            num[6], num[7], num[8], (int)num[9], num[10], num[11]);
-                        if (PaperCache.Count >= 4) PaperCache.Clear();
-                        PaperCache[key.ToString()] = paper;
-                    }
-                }
-                scratch = new double[paper.P * paper.Y];
-                if (shape[1] != paper.P || shape[2] != paper.Y)
-                    throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match the grid's " + paper.P + " x " + paper.Y + " windows");
-            }
-            else if (Mode == "sphere")
-            {
-                var f = hd.Obj("field");
-                sphere = new SphereModel(f.Num("cell_deg"), f.Num("query_step_deg"), HfovDeg, VfovDeg, (int)f.Num("cache_bins"));
-                if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
-                    throw new VimsimLoadException(src, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")");
-                // Running sums along each cell row (double: exact to ~1e-12 relative): a run of
-                // interior cells costs two reads, a cell P[j + 1] - P[j].
-                int nl = shape[2], rows = shape[0] * shape[1];
-                prefix = new double[(long)rows * (nl + 1)];
-                for (int r = 0; r < rows; r++)
+        void SetUpPaper(Header hd, int[] shape)
+        {
+            var g = hd.Obj("grid");
+            var t = hd.Obj("overlap_table");
+            double[] yawDeg = g.DoubleArray("yaw_deg"), pitchDeg = g.DoubleArray("pitch_deg");
+            double[] num = { g.Num("yaw_step_deg"), g.Num("yaw_start_deg"), g.Num("hfov_deg"), g.Num("vfov_deg"),
+                HfovDeg, VfovDeg, t.Num("pitch_step_deg"), t.Num("roll_step_deg"), t.Num("yaw_step_deg"),
+                t.Num("rays"), t.Num("lat_step_deg"), t.Num("lon_step_deg") };
+            var key = new StringBuilder();
+            foreach (double x in yawDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+            key.Append('|');
+            foreach (double x in pitchDeg) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+            key.Append('|');
+            foreach (double x in num) key.Append(x.ToString("R", CultureInfo.InvariantCulture)).Append(',');
+            lock (PaperCache)
+            {   // the table depends on the grid and FOV only: built once per process for all videos
+                if (!PaperCache.TryGetValue(key.ToString(), out paper))
                 {
-                    double acc = 0;
-                    int src0 = r * nl, dst = r * (nl + 1);
-                    prefix[dst] = 0;
-                    for (int j = 0; j < nl; j++) { acc += data[src0 + j]; prefix[dst + j + 1] = acc; }
+                    paper = new PaperModel(yawDeg, pitchDeg, num[0], num[1], num[2], num[3], num[4], num[5],
+                        num[6], num[7], num[8], (int)num[9], num[10], num[11]);
+                    if (PaperCache.Count >= 4) PaperCache.Clear();
+                    PaperCache[key.ToString()] = paper;
                 }
-                rowLength = shape[1] * (nl + 1);
-                data = null;
             }
-            else throw new VimsimLoadException(src, "mode '" + Mode + "'; expected paper or sphere");
+            scratch = new double[paper.P * paper.Y];
+            if (shape[1] != paper.P || shape[2] != paper.Y)
+                throw new VimsimLoadException(SourcePath, "data shape [" + string.Join(",", shape) + "] does not match the grid's " + paper.P + " x " + paper.Y + " windows", "data.shape");
+        }
+
+        void SetUpSphere(Header hd, int[] shape)
+        {
+            var f = hd.Obj("field");
+            sphere = new SphereModel(f.Num("cell_deg"), f.Num("query_step_deg"), HfovDeg, VfovDeg, (int)f.Num("cache_bins"));
+            if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
+                throw new VimsimLoadException(SourcePath, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")", "data.shape");
+            prefix = new double[shape[1] * (shape[2] + 1)];
+        }
+
+        /// <summary>Sphere mode: running sums along each cell row of one frame (double: exact to
+        /// ~1e-12 relative; a run of interior cells costs two reads), made when the frame is first
+        /// queried (the same sums as summing the whole field at load, one frame at a time).</summary>
+        double[] FramePrefix(int row)
+        {
+            if (row == prefixRow) return prefix;
+            int nl = sphere.NLon, rows = sphere.NLat;
+            long src0 = (long)row * rows * nl;
+            for (int r = 0; r < rows; r++)
+            {
+                double acc = 0;
+                long s = src0 + (long)r * nl;
+                int dst = r * (nl + 1);
+                prefix[dst] = 0;
+                if (half != null)
+                    for (int j = 0; j < nl; j++) { acc += HalfToFloat(half[s + j]); prefix[dst + j + 1] = acc; }
+                else
+                    for (int j = 0; j < nl; j++) { acc += data[s + j]; prefix[dst + j + 1] = acc; }
+            }
+            prefixRow = row;
+            return prefix;
+        }
+
+        /// <summary>Bytes the flow data holds in memory (sphere mode: the field as stored plus one
+        /// frame's sums; paper mode: float32 windows), for the footprint table of docs/unity.md.</summary>
+        public long DataBytes
+        {
+            get
+            {
+                long n = (half != null ? 2L * half.Length : 0) + (data != null ? 4L * data.Length : 0);
+                return n + (prefix != null ? 8L * prefix.Length : 0);
+            }
         }
 
         static uint ReadU32(byte[] b, int o)
@@ -288,9 +432,25 @@ namespace Vimsim
             return (int)f;
         }
 
-        /// <summary>EPOF in deg/s of the viewport (degrees) at a video time (s), as vimsim epof.</summary>
+        /// <summary>Whether the export has the frame shown at a time (s from the video start):
+        /// RangeStartFrame <= floor(t * fps + 1e-6) < RangeEndFrame; false for NaN or infinite.</summary>
+        public bool Covers(double timeS)
+        {
+            if (double.IsNaN(timeS) || double.IsInfinity(timeS)) return false;
+            return CoversFrame(Math.Floor(timeS * Fps + FrameEps));
+        }
+
+        /// <summary>Whether the export has a video frame.</summary>
+        public bool CoversFrame(double frame)
+        {
+            return frame >= StartFrame && frame < StartFrame + FrameCount;
+        }
+
+        /// <summary>EPOF in deg/s of the viewport (degrees) at a video time (s), as vimsim epof;
+        /// NaN where the export does not cover the time (Covers false; FrameAt clamps instead).</summary>
         public float Epof(double timeS, float yawDeg, float pitchDeg, float rollDeg)
         {
+            if (!Covers(timeS)) return float.NaN;
             return (float)EpofAtFrame(FrameAt(timeS), yawDeg, pitchDeg, rollDeg);
         }
 
@@ -302,25 +462,37 @@ namespace Vimsim
                 throw new ArgumentOutOfRangeException("frame", "frame " + frame + " outside " + StartFrame + ".." + (StartFrame + FrameCount - 1));
             if (double.IsNaN(yawDeg + pitchDeg + rollDeg) || double.IsInfinity(yawDeg + pitchDeg + rollDeg))
                 throw new ArgumentOutOfRangeException("yawDeg", "orientation must be finite degrees");
-            int off = row * rowLength;
-            return paper != null ? paper.Query(data, off, yawDeg, pitchDeg, rollDeg, scratch)
-                                 : sphere.Query(prefix, off, yawDeg, pitchDeg, rollDeg);
+            if (paper != null) return paper.Query(data, row * rowLength, yawDeg, pitchDeg, rollDeg, scratch);
+            return sphere.Query(FramePrefix(row), 0, yawDeg, pitchDeg, rollDeg);
         }
 
-        /// <summary>GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to OpacityHighDps, clamped.</summary>
-        public float Opacity(float epofDps)
+        /// <summary>Un-eased GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to
+        /// OpacityHighDps, clamped (vimsim epof --opacity-rule paper); NaN for NaN.</summary>
+        public float RawOpacity(float epofDps)
         {
+            if (float.IsNaN(epofDps)) return float.NaN;
             double lo = OpacityLowDps, hi = OpacityHighDps, e = epofDps;
             if (hi > lo) return (float)Math.Min(1.0, Math.Max(0.0, (e - lo) / (hi - lo)));
             return e > lo ? 1f : 0f; // constant flow: a step at the threshold
         }
 
+        /// <summary>Old name of RawOpacity (un-eased); the eased opacity is VimsimPlaybackClock.EasedOpacity.</summary>
+        [Obsolete("Opacity is the un-eased opacity: use RawOpacity, or VimsimPlaybackClock.EasedOpacity for the eased one")]
+        public float Opacity(float epofDps) { return RawOpacity(epofDps); }
+
         /// <summary>A stateful opacity easing with the exported rule (SmoothingS, EaseInS, EaseOutS;
-        /// all 0 = passthrough): feed it Opacity(Epof(...)) once per video frame (Step) or per
-        /// render frame (Update) for vimsim epof's opacity column.</summary>
+        /// all 0 = passthrough): feed it RawOpacity(Epof(...)) once per video frame (Step) for
+        /// vimsim epof's opacity column; CreatePlaybackClock does that from a player's frames.</summary>
         public OpacityEasing CreateEasing()
         {
             return new OpacityEasing(SmoothingS, Fps, EaseInS, EaseOutS);
+        }
+
+        /// <summary>A clock that steps the eased opacity once per video frame from a player's frame
+        /// numbers (holds on a repeated frame, resets on a seek or loop).</summary>
+        public VimsimPlaybackClock CreatePlaybackClock()
+        {
+            return new VimsimPlaybackClock(this);
         }
 
         /// <summary>Number of cached sphere-mode weight bins (0 in paper mode).</summary>
@@ -403,6 +575,196 @@ namespace Vimsim
         internal static long RoundEven(double x)
         {
             return (long)Math.Round(x, MidpointRounding.ToEven);
+        }
+    }
+
+    /// <summary>
+    /// The eased opacity of `vimsim epof`, stepped from a video player's frames (the clock of
+    /// VimsimEpofBehaviour). Call Advance(frame, pose) once per rendered frame with the video frame
+    /// the player shows: a new frame steps the easing once per video frame (frames skipped since
+    /// the last call, up to MaxCatchUpFrames, are stepped too, with the current pose); the same
+    /// frame holds everything (a paused player, a render rate above the video's); a frame before
+    /// the last one or more than MaxCatchUpFrames after it is a seek or a loop: the easing restarts
+    /// there, as a viewing that starts at that frame. Outside the exported range Epof, RawOpacity
+    /// and EasedOpacity are NaN, OutOfRange is true and the easing restarts on re-entry.
+    /// </summary>
+    public sealed class VimsimPlaybackClock
+    {
+        readonly VimsimEpof e;
+        readonly OpacityEasing easing;
+        bool started;
+
+        public VimsimPlaybackClock(VimsimEpof epof)
+        {
+            if (epof == null) throw new ArgumentNullException("epof");
+            e = epof;
+            easing = epof.CreateEasing();
+            MaxCatchUpFrames = Math.Max(1, (int)Math.Ceiling(epof.Fps / 2.0));
+            Reset();
+        }
+
+        /// <summary>The last video frame given to Advance (long.MinValue before the first).</summary>
+        public long Frame { get; private set; }
+        /// <summary>EPOF (deg/s), un-eased and eased opacity (0..1) of Frame; NaN outside the range.</summary>
+        public float Epof { get; private set; }
+        public float RawOpacity { get; private set; }
+        public float EasedOpacity { get; private set; }
+        /// <summary>The last frame was outside the exported range.</summary>
+        public bool OutOfRange { get; private set; }
+        /// <summary>Restarts of the easing after the first frame (seeks, loops, re-entries).</summary>
+        public int Restarts { get; private set; }
+        /// <summary>Largest forward jump (frames) stepped through frame by frame; larger: a seek.</summary>
+        public int MaxCatchUpFrames { get; set; }
+
+        /// <summary>Forget the history: the next Advance starts the easing (seek, loop, new video).</summary>
+        public void Reset()
+        {
+            easing.Reset();
+            started = false;
+            Frame = long.MinValue;
+            Epof = RawOpacity = EasedOpacity = float.NaN;
+        }
+
+        /// <summary>The frame the player shows, and the head pose (degrees); false outside the range.</summary>
+        public bool Advance(long frame, float yawDeg, float pitchDeg, float rollDeg)
+        {
+            if (!e.CoversFrame(frame))
+            {
+                if (started) Restarts++;
+                Reset();
+                Frame = frame;
+                OutOfRange = true;
+                return false;
+            }
+            OutOfRange = false;
+            if (started && frame == Frame) return true; // the same video frame: hold
+            long from = frame;
+            if (started && frame > Frame && frame - Frame <= MaxCatchUpFrames) from = Frame + 1;
+            else
+            {
+                if (started) Restarts++;
+                easing.Reset();
+            }
+            for (long f = from; f <= frame; f++)
+            {
+                double ep = e.EpofAtFrame((int)f, yawDeg, pitchDeg, rollDeg);
+                Epof = (float)ep;
+                RawOpacity = e.RawOpacity(Epof);
+                EasedOpacity = easing.Step(RawOpacity);
+            }
+            Frame = frame;
+            started = true;
+            return true;
+        }
+
+        /// <summary>Advance with a time (s from the video start): frame floor(t * fps + 1e-6).</summary>
+        public bool AdvanceTime(double timeS, float yawDeg, float pitchDeg, float rollDeg)
+        {
+            if (double.IsNaN(timeS) || double.IsInfinity(timeS)) return Advance(long.MinValue, yawDeg, pitchDeg, rollDeg);
+            return Advance((long)Math.Floor(timeS * e.Fps + VimsimEpof.FrameEps), yawDeg, pitchDeg, rollDeg);
+        }
+    }
+
+    /// <summary>
+    /// The grain coverage texture of the overlay (VimsimOverlay.hlsl's _VimsimGrainMask) from the
+    /// exported layout, as vimsim's grf_mask.frag renders it: an equirect of width W and height W / 2,
+    /// row 0 = north, column 0 at lon -180 deg; texel centre (x + 0.5, y + 0.5) is the direction
+    /// p at lon (x + 0.5) / W 360 - 180, lat 90 - (y + 0.5) / H 180 deg; coverage = 1 - prod over
+    /// grains (1 - clamp((chord - |p - c|) / (pi / H) + 1/2, 0, 1)), chord = 2 sin(radius / 2),
+    /// radius = grain_deg / 2: the union of discs with edges box-filtered one texel row wide.
+    /// </summary>
+    public static class VimsimGrainMask
+    {
+        /// <summary>Mask width for an eye whose largest pixel spans pixelAngleRad, as vimsim render:
+        /// texels no larger than a pixel, at least 512, at most min(8192, maxTextureSize), even.</summary>
+        public static int WidthFor(double pixelAngleRad, int maxTextureSize)
+        {
+            int w = (int)Math.Ceiling(2.0 * Math.PI / pixelAngleRad);
+            w = Math.Max(512, w + (w % 2));
+            return Math.Min(w, Math.Min(8192, maxTextureSize));
+        }
+
+        /// <summary>Whether the mask needs mip levels (a pixel where grains show is larger than a
+        /// texel row), as vimsim render: pixelAngle cos(inner - 1 deg) > 0.99 pi / H.</summary>
+        public static bool UsesMips(double pixelAngleRad, double cutoutInnerDeg, int height)
+        {
+            double reach = VimsimEpof.Rad(Math.Max(cutoutInnerDeg - 1.0, 0.0));
+            return pixelAngleRad * Math.Cos(reach) > 0.99 * Math.PI / height;
+        }
+
+        /// <summary>Coverage bytes (0..255, row 0 north), width x width / 2, of an export's grains.</summary>
+        public static byte[] Build(VimsimEpof e, int width)
+        {
+            return Build(e.GrainCenters, e.GrainDeg, width);
+        }
+
+        /// <summary>Coverage bytes of grains (3 floats each, world unit vectors) of diameter grainDeg.</summary>
+        public static byte[] Build(float[] centers, double grainDeg, int width)
+        {
+            if (width < 2 || width % 2 != 0) throw new ArgumentOutOfRangeException("width", "mask width must be even and >= 2");
+            int W = width, H = width / 2, n = centers.Length / 3;
+            double radius = VimsimEpof.Rad(grainDeg) / 2.0, fp = Math.PI / H;
+            float chord = (float)(2.0 * Math.Sin(radius / 2.0));
+            double reach = radius + fp;
+            var rowSin = new double[H]; var rowCos = new double[H];
+            for (int y = 0; y < H; y++) { double lat = Math.PI / 2 - (y + 0.5) * fp; rowSin[y] = Math.Sin(lat); rowCos[y] = Math.Cos(lat); }
+            var colSin = new double[W]; var colCos = new double[W];
+            for (int x = 0; x < W; x++) { double lon = (x + 0.5) / W * 2.0 * Math.PI - Math.PI; colSin[x] = Math.Sin(lon); colCos[x] = Math.Cos(lon); }
+            const int Band = 32; // rows per pass: memory W x 32 floats, not W x H
+            int nBands = (H + Band - 1) / Band;
+            var lists = new List<int>[nBands];
+            var y0s = new int[n]; var y1s = new int[n];
+            for (int g = 0; g < n; g++)
+            {
+                double lat = Math.Asin(Math.Max(-1.0, Math.Min(1.0, (double)centers[3 * g + 1])));
+                y0s[g] = Math.Max(0, (int)Math.Floor((Math.PI / 2 - (lat + reach)) / fp - 0.5));
+                y1s[g] = Math.Min(H - 1, (int)Math.Ceiling((Math.PI / 2 - (lat - reach)) / fp - 0.5));
+                for (int b = y0s[g] / Band; b <= y1s[g] / Band; b++) (lists[b] ?? (lists[b] = new List<int>())).Add(g);
+            }
+            var mask = new byte[(long)W * H];
+            var trans = new float[Band * W];
+            for (int b = 0; b < nBands; b++)
+            {
+                int yb = b * Band, ye = Math.Min(H, yb + Band);
+                for (int i = 0; i < trans.Length; i++) trans[i] = 1f;
+                if (lists[b] != null)
+                    foreach (int g in lists[b])
+                        Stamp(centers, g, Math.Max(yb, y0s[g]), Math.Min(ye - 1, y1s[g]), yb, W, reach, chord, (float)fp, rowSin, rowCos, colSin, colCos, trans);
+                for (int y = yb; y < ye; y++)
+                    for (int x = 0; x < W; x++)
+                        mask[(long)y * W + x] = (byte)(int)((1f - trans[(y - yb) * W + x]) * 255f + 0.5f);
+            }
+            return mask;
+        }
+
+        static void Stamp(float[] c, int g, int y0, int y1, int yb, int W, double reach, float chord, float fp,
+                          double[] rowSin, double[] rowCos, double[] colSin, double[] colCos, float[] trans)
+        {
+            float cx = c[3 * g], cy = c[3 * g + 1], cz = c[3 * g + 2];
+            double lon = Math.Atan2(cx, cz);
+            for (int y = y0; y <= y1; y++)
+            {
+                double cl = rowCos[y];
+                int x0, count;
+                if (cl <= Math.Sin(reach)) { x0 = 0; count = W; } // the cap reaches round the pole
+                else
+                {
+                    double dlon = Math.Asin(Math.Sin(reach) / cl) + 2.0 * Math.PI / W;
+                    x0 = (int)Math.Floor((lon - dlon + Math.PI) / (2.0 * Math.PI) * W - 0.5);
+                    int x1 = (int)Math.Ceiling((lon + dlon + Math.PI) / (2.0 * Math.PI) * W - 0.5);
+                    count = Math.Min(W, x1 - x0 + 1);
+                }
+                float sl = (float)rowSin[y], clf = (float)cl;
+                int row = (y - yb) * W;
+                for (int k = 0; k < count; k++)
+                {
+                    int x = ((x0 + k) % W + W) % W;
+                    float px = clf * (float)colSin[x] - cx, py = sl - cy, pz = clf * (float)colCos[x] - cz;
+                    float cov = (chord - (float)Math.Sqrt(px * px + py * py + pz * pz)) / fp + 0.5f;
+                    if (cov <= 0f) continue;
+                    trans[row + x] *= 1f - Math.Min(cov, 1f);
+                }
+            }
         }
     }
 

@@ -9,6 +9,11 @@
 //   table BIN OUT            OUT: the paper-mode overlap table, float32
 //   unity IN OUT             IN: int32 n, n x float32 (x, y, z, offset); OUT: n x float32 (yaw, pitch, roll)
 //   load BIN                 prints "ok MODE" or "VimsimLoadException|FILE|PROBLEM" (exit 3)
+//   clock BIN QUERIES OUT    a VimsimPlaybackClock fed the QUERIES in order, t = the player's video
+//                            frame: OUT n x (float32 epof, raw, eased, int32 flags: 1 in range, 2 restarted)
+//   covers BIN QUERIES OUT   OUT n x (int32 Covers(t), float32 Epof(t, pose))
+//   grains BIN OUT           OUT: the grain layout, n x 3 float32
+//   mask BIN WIDTH OUT       OUT: VimsimGrainMask.Build, width x width / 2 bytes, row 0 north
 //   bench BIN N SEED [QUERIES]  prints per-call microseconds, wall and CPU: random poses, the
 //                            same again, 500 of them with their weights cached, the QUERIES in
 //                            order from a fresh cache
@@ -43,6 +48,10 @@ static class EpofHarness
             case "table": return Table(a[1], a[2]);
             case "unity": return Unity(a[1], a[2]);
             case "load": return LoadOnly(a[1]);
+            case "clock": return Clock(a[1], a[2], a[3]);
+            case "covers": return Covers(a[1], a[2], a[3]);
+            case "grains": return Grains(a[1], a[2]);
+            case "mask": File.WriteAllBytes(a[3], VimsimGrainMask.Build(VimsimEpof.Load(a[1]), int.Parse(a[2]))); return 0;
             case "bench": return Bench(a[1], int.Parse(a[2]), int.Parse(a[3]), a.Length > 4 ? a[4] : null);
         }
         Console.Error.WriteLine("unknown command " + a[0]);
@@ -76,7 +85,7 @@ static class EpofHarness
             for (int i = 0; i < t.Length; i++)
             {
                 float v = e.Epof(t[i], y[i], p[i], r[i]);
-                bw.Write(v); bw.Write(e.Opacity(v)); bw.Write(e.FrameAt(t[i]));
+                bw.Write(v); bw.Write(e.RawOpacity(v)); bw.Write(e.FrameAt(t[i]));
             }
         Console.WriteLine("mode " + e.Mode);
         return 0;
@@ -104,10 +113,45 @@ static class EpofHarness
         using (var bw = new BinaryWriter(File.Create(outPath)))
             for (int i = 0; i < t.Length; i++)
             {
-                float o = e.Opacity(e.Epof(t[i], y[i], p[i], r[i]));
+                float o = e.RawOpacity(e.Epof(t[i], y[i], p[i], r[i]));
                 bw.Write(step.Step(o));
                 bw.Write(upd.Update(o, 1.0 / e.Fps));
             }
+        return 0;
+    }
+
+    static int Clock(string bin, string qpath, string outPath)
+    {
+        var e = VimsimEpof.Load(bin);
+        var clock = e.CreatePlaybackClock();
+        double[] t; float[] y, p, r;
+        ReadQueries(qpath, out t, out y, out p, out r);
+        using (var bw = new BinaryWriter(File.Create(outPath)))
+            for (int i = 0; i < t.Length; i++)
+            {
+                int restarts = clock.Restarts;
+                bool ok = clock.Advance((long)t[i], y[i], p[i], r[i]);
+                bw.Write(clock.Epof); bw.Write(clock.RawOpacity); bw.Write(clock.EasedOpacity);
+                bw.Write((ok ? 1 : 0) | (clock.Restarts != restarts ? 2 : 0));
+            }
+        return 0;
+    }
+
+    static int Covers(string bin, string qpath, string outPath)
+    {
+        var e = VimsimEpof.Load(bin);
+        double[] t; float[] y, p, r;
+        ReadQueries(qpath, out t, out y, out p, out r);
+        using (var bw = new BinaryWriter(File.Create(outPath)))
+            for (int i = 0; i < t.Length; i++) { bw.Write(e.Covers(t[i]) ? 1 : 0); bw.Write(e.Epof(t[i], y[i], p[i], r[i])); }
+        return 0;
+    }
+
+    static int Grains(string bin, string outPath)
+    {
+        var e = VimsimEpof.Load(bin);
+        using (var bw = new BinaryWriter(File.Create(outPath)))
+            foreach (float v in e.GrainCenters) bw.Write(v);
         return 0;
     }
 
@@ -146,7 +190,7 @@ static class EpofHarness
         }
         catch (VimsimLoadException ex)
         {
-            Console.WriteLine("VimsimLoadException|" + ex.FilePath + "|" + ex.Problem);
+            Console.WriteLine("VimsimLoadException|" + ex.FilePath + "|" + ex.Problem + "|" + ex.Field);
             return 3;
         }
     }
