@@ -17,7 +17,13 @@ from simulator.commands._types import (
     size_wxh,
     x264_crf,
 )
-from simulator.core.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
+from simulator.core.choices import (
+    EPOF_METHODS,
+    LAYOUTS,
+    MITIGATION_HELP,
+    MITIGATIONS,
+    X264_PRESETS,
+)
 
 __all__ = ["add_view_options", "register", "run", "view_from_args"]
 
@@ -64,10 +70,8 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--mitigation",
         choices=MITIGATIONS,
-        help="what is drawn over the video: grf (the paper's grains; the default, see --grf), "
-        "vignette (head-fixed tunneling: the aperture shrinks with the opacity), grf+vignette "
-        "(both, same opacity), local-grf (grains only where the flow is high: each "
-        "direction's own flow from a sphere-mode --grid), none",
+        help="what is drawn over the video: "
+        + ", ".join(f"{k} ({h})" for k, h in MITIGATION_HELP.items()),
     )
     p.add_argument(
         "--aperture-min",
