@@ -26,6 +26,7 @@ from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
+from simulator.media.source import Source
 from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.preprocess.paper import preprocess_video
@@ -47,6 +48,11 @@ _GL: list = []
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
 WEIGHT_CACHE_BYTES = 192 << 20
+
+
+def _source(video: dict) -> Source:
+    """The manifest video's checked :class:`simulator.media.source.Source`."""
+    return Source.open(video["path"], layout=video["layout"], eye=video["eye"])
 
 
 def _error_line(e: BaseException) -> str:
@@ -109,23 +115,19 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
             warnings.simplefilter("ignore")
             if video["method"] == "sphere":
                 preprocess_sphere(
-                    video["path"],
+                    _source(video),
                     output,
                     grid=grid,
                     config=SphereConfig(cell_deg=video["cell_deg"]),
                     flow=video["flow"],
-                    layout=video["layout"],
-                    eye=video["eye"],
                     progress=False,
                 )
             else:
                 preprocess_video(
-                    video["path"],
+                    _source(video),
                     output,
                     grid=grid,
                     flow=video["flow"],
-                    layout=video["layout"],
-                    eye=video["eye"],
                     resume=True,
                     threads=threads,
                     progress=False,
@@ -271,13 +273,12 @@ def render_task(
             mitigation=mitigation,
         )
         s = render_viewing(
-            video["path"],
+            Source.open(video["path"], layout=video["layout"]),
             hp,
             outdir,
             grid=grid,
             config=config,
             opacity=opts["opacity"],
-            layout=video["layout"],
             hold=opts["hold_last"],
             preset=opts["preset"],
             crf=opts["crf"],
