@@ -34,6 +34,7 @@ from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.core.progress import Progress
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.media.gridfile import load_grid
+from simulator.media.source import Source
 from simulator.mitigation.grf import GrfConfig
 from simulator.preprocess.paper import preprocess_video
 from simulator.render.eye import RenderConfig
@@ -224,9 +225,8 @@ def run_demo(
     # 3. Preprocess the left eye.
     grid_def = grid_preset("default", size=(cfg.window, cfg.window))
     gpath = out / "grid.npz"
-    preprocess_video(
-        video, gpath, grid=grid_def, flow="dis", layout="top-bottom", eye="left", progress=progress
-    )
+    source = Source.open(video, layout="top-bottom", eye="left")
+    preprocess_video(source, gpath, grid=grid_def, flow="dis", progress=progress)
     grid = load_grid(gpath)
     t0 = _step(
         log,
@@ -266,13 +266,12 @@ def run_demo(
     if cfg.render:
         try:
             render_viewing(
-                video,
+                source,
                 hpath,
                 out / "render",
                 grid=grid,
                 config=RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)),
                 opacity="auto",
-                layout="top-bottom",
                 progress=progress,
             )
         except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands

@@ -18,12 +18,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.core.choices import EYES
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
-from simulator.media.video import VideoWriter, iter_frames, prefetch, probe
+from simulator.media.source import as_source
+from simulator.media.video import VideoWriter, prefetch
 from simulator.render.eye import EyeRenderer, RenderConfig
-from simulator.sphere.geometry import head_rotation, split_eye
+from simulator.sphere.geometry import head_rotation
 
 __all__ = ["VideoRenderResult", "render_video"]
 
@@ -107,39 +109,15 @@ class _Worker:
             raise self.error
 
 
-def _decode(video_path: str, right_path: str | None, start: int, end: int, threads=None):
-    """Decoded frames ``start <= i < end`` (copies): of ``video_path``, or ``(left, right)``
-    pairs of two per-eye files; both files are closed on every exit."""
-    left = iter_frames(video_path, layout="mono", start=start, end=end, threads=threads)
-    if right_path is None:
-        try:
-            for f in left:
-                yield np.array(f)
-        finally:
-            left.close()
-        return
-    right = iter_frames(right_path, layout="mono", start=start, end=end, threads=threads)
-    try:
-        for fl in left:
-            fr = next(right, None)
-            if fr is None:
-                raise InputError(f"{right_path}: right eye ends before the left eye ({video_path})")
-            yield np.array(fl), np.array(fr)
-    finally:
-        left.close()
-        right.close()
-
-
 def render_video(
     ctx,
-    video_path: str,
+    source,
     out_paths: tuple[str | None, str | None],
     angles_deg: NDArray[np.float64],
     *,
     opacity: NDArray[np.float64] | None = None,
     cell_opacity: NDArray[np.float32] | None = None,
     config: RenderConfig = RenderConfig(),
-    layout: str = "mono",
     fps: float | None = None,
     n_frames: int | None = None,
     preset: str = "veryfast",
@@ -149,7 +127,6 @@ def render_video(
     start_frame: int = 0,
     on_frame=None,
     audio=None,
-    right_path: str | None = None,
     review_eye: str = "left",
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
@@ -157,7 +134,8 @@ def render_video(
     Parameters
     ----------
     ctx : moderngl.Context from :func:`create_context`
-    video_path : equirect video (or image: one frame)
+    source : the video: a :class:`simulator.media.source.Source` (mono or stereo layout, or
+        two per-eye files, both decoded in step) or a path (mono equirect; an image: one frame)
     out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename);
         None for an eye not wanted (at least one path)
     angles_deg : ndarray, shape (N, 3), float64
@@ -166,8 +144,6 @@ def render_video(
     opacity : ndarray, shape (N,), GRF / vignette opacity 0..1 per frame
     cell_opacity : ndarray, shape (N, n_lat, n_lon), local-grf's per-cell grain opacity
         per frame (:func:`simulator.mitigation.kinds.cell_opacity`); frames beyond N hold the last
-    layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
-        ``side-by-side`` (left eye left)
     fps, n_frames : the video's rate and frame count (from :func:`simulator.media.video.probe`)
     start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
         (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
@@ -186,8 +162,6 @@ def render_video(
         process's ``LP_NUM_THREADS``, read when Mesa loads.
     audio : None, or a :class:`simulator.media.audio.AudioSource` (the source's audio, the
         range's part) carried into every eye file
-    right_path : the right eye's equirect file: ``video_path`` is then the left eye's (two
-        per-eye files, both decoded in step; same size and frame count, checked by the caller)
     review_eye : the eye whose image ``on_frame`` gets when both are rendered
 
     A mono video with grains at infinity gives the same image to both eyes: it is
@@ -201,7 +175,8 @@ def render_video(
     (draw, yuv420p conversion and readback of both eyes), ``encode_wait`` (blocked on the encoders),
     ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
     """
-    info = probe(video_path)
+    source = as_source(source)
+    info, video_path = source.info, source.path
     fps = float(fps or info.fps)
     start_frame = int(start_frame)
     if not (0 <= start_frame < info.n_frames):
@@ -214,7 +189,7 @@ def render_video(
         raise InputError(f"{video_path}: no head orientations to render")
     op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
     rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
-    stereo = layout != "mono" or right_path is not None
+    stereo = source.stereo
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
     same = not stereo and (config.grains is None or config.grains.distance_m is None)
@@ -251,7 +226,9 @@ def render_video(
                 )
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
-                decoded = _decode(video_path, right_path, start_frame, start_frame + total, threads)
+                decoded = source.eye_frames(
+                    start=start_frame, end=start_frame + total, threads=threads
+                )
                 frames = stack.enter_context(
                     contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
@@ -261,16 +238,8 @@ def render_video(
                     t1 = time.perf_counter()
                     timings["decode_wait"] += t1 - t0
                     i = min(n, len(rots) - 1)
-                    if right_path is not None:
-                        renderer.upload(frame[0], "left")
-                        renderer.upload(frame[1], "right")
-                    elif stereo:
-                        renderer.upload(split_eye(frame, layout, "left", source=video_path), "left")
-                        renderer.upload(
-                            split_eye(frame, layout, "right", source=video_path), "right"
-                        )
-                    else:
-                        renderer.upload(frame, "left")
+                    for e, f in zip(EYES, frame):  # (left, right) or (mono,)
+                        renderer.upload(f, e)
                     t2 = time.perf_counter()
                     o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
                     co = None
@@ -293,12 +262,7 @@ def render_video(
                         wk.put(img)
                     if on_frame is not None:
                         k = eyes.index(review_eye) if review_eye in eyes else 0
-                        if right_path is not None:
-                            src = frame[0 if eyes[k] == "left" else 1]
-                        elif stereo:
-                            src = split_eye(frame, layout, eyes[k], source=video_path)
-                        else:
-                            src = frame
+                        src = frame[EYES.index(eyes[k]) if stereo else 0]
                         workers[-1].put((src, outs[k]))
                     t0 = time.perf_counter()
                     timings["upload"] += t2 - t1

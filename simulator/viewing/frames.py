@@ -23,13 +23,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.core.choices import EYES
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.core.progress import Counter, Progress
+from simulator.media.source import as_source
 from simulator.media.video import iter_frames, probe
 from simulator.render.eye import EyeRenderer
 from simulator.render.gl import create_context
-from simulator.sphere.geometry import head_rotation, split_eye
+from simulator.sphere.geometry import head_rotation
 from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.viewing.spec import ViewSpec
 
@@ -205,7 +207,7 @@ def _previous_files(out: Path) -> list[Path]:
 
 
 def render_frames(
-    video,
+    source,
     headpath,
     outdir,
     *,
@@ -213,7 +215,6 @@ def render_frames(
     every: float | None = None,
     grid=None,
     view: ViewSpec | None = None,
-    layout: str = "mono",
     ctx=None,
     progress: Progress | None = None,
     **view_fields,
@@ -222,7 +223,7 @@ def render_frames(
 
     Parameters
     ----------
-    video, headpath, grid, layout : as :func:`simulator.viewing.job.render_viewing`
+    source, headpath, grid : as :func:`simulator.viewing.job.render_viewing`
         (``vimsim render``)
     view : :class:`simulator.viewing.spec.ViewSpec` (what the eye sees), or its fields as
         keywords (``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``)
@@ -248,21 +249,22 @@ def render_frames(
             "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
             "grf, vignette, grf+vignette or none"
         )
+    source = as_source(source)
+    video = source.path
     plan = plan_viewing(
-        video,
+        source,
         headpath,
         grid=grid,
         view=view,
-        layout=layout,
     )
     info = plan.info
     times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
-    stereo = layout != "mono"
+    stereo = source.stereo
     parallax = config.grf is not None and config.grf.distance_m is not None
     eyes = ("left", "right") if stereo or parallax else ("both",)
     out = Path(outdir)
     grid_path = plan.grid.path if plan.grid is not None else None
-    inputs = {Path(p).resolve() for p in (video, grid_path) if p}
+    inputs = {Path(p).resolve() for p in (*source.files, grid_path) if p}
     if not isinstance(headpath, (str, os.PathLike)):
         headpath = plan.headpath.source or headpath
     if isinstance(headpath, (str, os.PathLike)):
@@ -284,6 +286,7 @@ def render_frames(
 
     idx = [frame_index(t, info.fps) for t in times]
     decoded = decode_frames(video, idx)
+    decoded_right = decode_frames(source.right, idx) if source.right is not None else None
     renderer = EyeRenderer(ctx, config)
     rows = []
     bar = Counter(progress, len(times))
@@ -291,12 +294,9 @@ def render_frames(
     writes: list[concurrent.futures.Future] = []
     try:
         for t, i in zip(times, idx):
-            frame = decoded[i]
-            if stereo:
-                for e in ("left", "right"):
-                    renderer.upload(split_eye(frame, layout, e, source=str(video)), e)
-            else:
-                renderer.upload(frame, "left")
+            for e in EYES if stereo else ("left",):
+                held = decoded_right if e == "right" and decoded_right is not None else decoded
+                renderer.upload(np.ascontiguousarray(source.eye_view(held[i], e)), e)
             yaw, pitch, roll = (float(v) for v in plan.angles_deg[i])
             R = head_rotation(yaw, pitch, roll).as_matrix()
             op = float(plan.opacity[i])
@@ -347,7 +347,9 @@ def render_frames(
         "frames_video": info.n_frames,
         "headpath": str(headpath) if isinstance(headpath, (str, os.PathLike)) else None,
         "grid": None if plan.grid is None else (plan.grid.path or None),
-        "layout": layout,
+        "layout": source.layout,
+        "right": source.right,
+        "projection": source.projection,
         "hold": hold,
         "renderer": {
             "eye_size": [w, h],

@@ -15,6 +15,7 @@ from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.media.audio import audio_source
 from simulator.media.gridfile import require_field
 from simulator.media.lazyfield import take_rows
+from simulator.media.source import as_source
 from simulator.mitigation.kinds import cell_opacity, visible_flow
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
@@ -49,13 +50,12 @@ def _ratio(num, den) -> float | None:
 
 
 def render_viewing(
-    video,
+    source,
     headpath,
     outdir,
     *,
     grid=None,
     view: ViewSpec | None = None,
-    layout: str = "mono",
     preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
@@ -65,7 +65,6 @@ def render_viewing(
     end_s: float | None = None,
     review: bool = False,
     eyes: str | None = None,
-    right=None,
     audio: bool = True,
     threads: int | None = None,
     **view_fields,
@@ -77,7 +76,8 @@ def render_viewing(
 
     Parameters
     ----------
-    video : path of the equirect video (mono or stereo, see ``layout``)
+    source : the video: a :class:`simulator.media.source.Source` (stereo layout, right-eye
+        file, projection; checked when opened) or a path (mono equirect)
     headpath : :class:`simulator.traces.path.HeadPath`, or the path of a head path file
         (read with :func:`simulator.traces.readers.load_headpath`, format detected)
     outdir : output folder (created)
@@ -97,15 +97,12 @@ def render_viewing(
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
         byte copy) and ``both`` for a stereo one
-    right : the right eye's equirect file: ``video`` and ``right`` are then a stereo
-        source of two per-eye files (same size, frame rate and frame count; layout mono)
     audio : copy the source's audio (of ``video``; the range's part) into every output
         video (:mod:`simulator.media.audio`); False: silent outputs. A source without audio
         gives silent outputs either way (``summary.json`` says which)
     review : also write :data:`REVIEW_FILES` (:class:`simulator.viewing.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
-    layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     preset, crf : x264 speed preset and quality
     threads : the render's CPU budget (:func:`simulator.render.render_video`; None: no
         bound; a study passes its task's declared CPUs, 1: one core, no pipeline threads)
@@ -139,19 +136,19 @@ def render_viewing(
         raise InputError(
             f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
         )
+    source = as_source(source)
+    video = source.path
     if eyes is None:
-        eyes = "left" if layout == "mono" and right is None else "both"
+        eyes = "both" if source.stereo else "left"
     if eyes not in ("left", "right", "both"):
         raise InputError(f"eyes must be left, right or both; got {eyes!r}")
     plan = plan_viewing(
-        video,
+        source,
         headpath,
         grid=grid,
         view=view,
-        layout=layout,
         start_s=start_s,
         end_s=end_s,
-        right=right,
     )
     info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label
     frames, times = plan.frames, plan.times_s
@@ -164,9 +161,8 @@ def render_viewing(
     # Only our own earlier outputs are removed (a failed run must not leave them beside new
     # ones); a file of one of our names that we did not write, or an input, is refused.
     folder = OutputFolder(outdir, OUTDIR_FILES + (REVIEW_FILES if review else ()), "render")
-    inputs = [video, *([] if isinstance(headpath, HeadPath) else [headpath])]
+    inputs = [*source.files, *([] if isinstance(headpath, HeadPath) else [headpath])]
     inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
-    inputs += [plan.right] if plan.right is not None else []
     if isinstance(opacity, str) and opacity != "auto":
         inputs.append(opacity)  # an EPOF CSV
     folder.check(inputs)  # before the GL context and any work
@@ -225,7 +221,7 @@ def render_viewing(
     try:
         result = render_video(
             ctx,
-            str(video),
+            source,
             (
                 str(out / "left.mp4") if eyes in ("left", "both") else None,
                 str(out / "right.mp4") if eyes in ("right", "both") else None,
@@ -234,7 +230,6 @@ def render_viewing(
             opacity=op,
             cell_opacity=cell_op,
             config=config,
-            layout=layout,
             fps=info.fps,
             n_frames=nf,
             preset=preset,
@@ -244,7 +239,6 @@ def render_viewing(
             start_frame=f0,
             on_frame=None if rev is None else rev.add_yuv,
             audio=aud,
-            right_path=plan.right,
             review_eye=plan.epof_eye,
         )
     except BaseException:
@@ -298,8 +292,9 @@ def render_viewing(
         "video": str(video),
         "headpath": hp.source or str(headpath),
         "grid": None if grid is None else (grid.path or None),
-        "layout": layout,
-        "right": plan.right,
+        "layout": source.layout,
+        "right": source.right,
+        "projection": source.projection,
         "eyes": eyes,
         "audio": audio_info,
         "fps": info.fps,

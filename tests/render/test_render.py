@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
+from simulator.media.source import Source
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
 from simulator.sphere.geometry import perspective_rays
@@ -552,11 +553,10 @@ def test_interrupted_render_leaves_no_mp4(ctx, tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         R.render_video(
             ctx,
-            str(vid),
+            Source.open(vid, layout="top-bottom"),
             outs,
             np.zeros((5, 3)),
             config=R.RenderConfig(eye_size=(32, 32), grf=None),
-            layout="top-bottom",
             progress=False,
         )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.mp4"]
@@ -588,7 +588,7 @@ def test_one_cpu_render_is_serial_and_the_same(ctx, tmp_path, layout):
         d = tmp_path / f"t{threads}"
         d.mkdir()
         outs = (str(d / "left.mp4"), str(d / "right.mp4"))
-        res = R.render_video(ctx, str(vid), outs, ang, opacity=np.full(6, 0.5), layout=layout,
+        res = R.render_video(ctx, Source.open(vid, layout=layout), outs, ang, opacity=np.full(6, 0.5),
                              config=R.RenderConfig(eye_size=(48, 32), grf=GrfConfig(seed=3)),
                              threads=threads, on_frame=on_frame, progress=False)  # fmt: skip
         assert res.n_frames == 6
