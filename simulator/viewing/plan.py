@@ -91,6 +91,53 @@ def grf_settings(grf) -> dict | None:
     }
 
 
+def _check_needs_grid(view: ViewSpec, grid) -> None:
+    """InputError when what is drawn needs a grid (or a sphere-mode field) not given."""
+    mit, grf = view.mitigation, view.grains
+    if mit.local and grf is not None and grid is None:
+        raise InputError(
+            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
+            f"with `{MAKE_FIELD_HINT}`"
+        )
+    if mit.local and grf is not None:
+        require_field(grid)  # local-grf on a paper-mode grid: one line with the hint
+    if view.drawn and view.opacity == "auto" and grid is None:
+        raise InputError(
+            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
+        )
+
+
+def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged):
+    """``(epof_dps, opacity, thresholds_dps, method)`` of the plan's ``frames`` (NaN, None,
+    NaN, None without a grid): the EPOF over ``frustum`` and the opacity of ``view.rule``."""
+    nf = len(frames)
+    if grid is None:
+        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None
+    rule, f0, f1 = view.rule, int(frames[0]), int(frames[-1]) + 1
+    # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
+    # and easing have their state at the range's start (cost ~ the range).
+    warm = 0
+    if ranged:
+        warm = int(np.ceil(fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s)))
+    res = compute_epof(
+        grid,
+        hp,
+        frustum=frustum,
+        hold=True if ranged else view.hold,
+        rule=rule,
+        method=view.method,
+        frames=(max(0, f0 - warm), f1) if ranged else None,
+    )
+    # Grid rows by video frame number (a grid may start later or lack the last frame).
+    rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+    return (
+        res.epof_dps[rows].astype(float),
+        res.opacity[rows].astype(float),
+        tuple(float(v) for v in res.thresholds_dps),
+        res.meta["method"],
+    )
+
+
 def plan_viewing(
     source,
     headpath,
@@ -115,10 +162,7 @@ def plan_viewing(
     opacity.
     """
     view = ViewSpec.given(view, **view_fields)
-    config, opacity, rule, hold = view.config, view.opacity, view.rule, view.hold
-    grf = config.grains
-    mit = config.mitigation
-    drawn = grf is not None or mit.vignette
+    config, opacity, hold, drawn = view.config, view.opacity, view.hold, view.drawn
     op_csv = None
     if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
         op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
@@ -148,51 +192,17 @@ def plan_viewing(
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
         op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
-    if mit.local and grf is not None and grid is None:
-        raise InputError(
-            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
-            f"with `{MAKE_FIELD_HINT}`"
-        )
-    if mit.local and grf is not None:
-        require_field(grid)  # local-grf on a paper-mode grid: one line with the hint
-    if drawn and opacity == "auto" and grid is None:
-        raise InputError(
-            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
-        )
+    _check_needs_grid(view, grid)
 
     # Per-frame head angles and opacity (EPOF rows when a grid is given).
     yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
-    epof_dps = np.full(nf, np.nan)
-    thresholds = (float("nan"), float("nan"))
-    op_auto = None
-    epof_method = None
     stereo = source.stereo
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
-    if grid is not None:
-        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
-        # and easing have their state at the range's start (cost ~ the range).
-        warm = 0
-        if ranged:
-            warm = int(
-                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
-            )
-        res = compute_epof(
-            grid,
-            hp,
-            frustum=epof_frustum,
-            hold=True if ranged else hold,
-            rule=rule,
-            method=view.method,
-            frames=(max(0, f0 - warm), f1) if ranged else None,
-        )
-        epof_method = res.meta["method"]
-        # Grid rows by video frame number (a grid may start later or lack the last frame).
-        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
-        epof_dps = res.epof_dps[rows].astype(float)
-        op_auto = res.opacity[rows].astype(float)
-        thresholds = tuple(float(v) for v in res.thresholds_dps)
+    epof_dps, op_auto, thresholds, epof_method = _epof_rows(
+        grid, hp, view, epof_frustum, frames, info.fps, ranged
+    )
     if not drawn:
         op = np.zeros(nf)
     elif op_csv is not None:
