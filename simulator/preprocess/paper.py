@@ -81,7 +81,7 @@ _CKPT_VERSION = 1
 
 #: Window sampling. Bilinear, not bicubic: 0.6x the extraction CPU and closer to the
 #: analytic rotation truth (bench/preprocess_accuracy.py, DIS ultrafast, median error
-#: yaw 15 deg/s 3.53 -> 3.17 %, oblique 15 deg/s 3.64 -> 3.16 %; docs/preprocess_speed.md).
+#: yaw 15 deg/s 3.53 -> 3.17 %, oblique 15 deg/s 3.64 -> 3.16 %; docs/paper_speed.md).
 _INTERP = "linear"
 
 

@@ -1,4 +1,4 @@
-"""EPOF CSVs and summary.json record the method, frustum and opacity rule; a stereo grid's eye picks the EPOF's frustum (issue 15)."""
+"""EPOF CSVs and summary.json record the method, frustum and opacity rule; a stereo grid's eye picks the EPOF's frustum."""
 
 from __future__ import annotations
 

@@ -98,7 +98,7 @@ def v360():
     return reference
 
 
-#: Issue 5 goal. Measured (bench/render_agreement.py, 1024 px, 107 deg): petra 37.5 dB
+#: The renderer's goal. Measured (bench/render_agreement.py, 1024 px, 107 deg): petra 37.5 dB
 #: at (0,0,0), 41.5 at 180; equirectangular.png 42-46 dB.
 AGREE_PSNR_DB = 35.0
 
@@ -280,6 +280,10 @@ def test_shader_compile_error_names_file_and_line(ctx, monkeypatch):
     ):
         EyeRenderer(ctx, RenderConfig(eye_size=(32, 32), grf=None))
     ctx.error  # noqa: B018 - reading clears a stale error from the failed compile
+    from simulator.core.errors import InputError, VimsimError
+
+    # under the package's exception root; an internal error, not the user's (exit 1)
+    assert issubclass(R.ShaderError, VimsimError) and not issubclass(R.ShaderError, InputError)
 
 
 def test_defines_after_version_keep_line_numbers():

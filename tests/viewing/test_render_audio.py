@@ -1,4 +1,4 @@
-"""render: the source's audio in the outputs (the range's part), --no-audio, and --right FILE (issue 15)."""
+"""render: the source's audio in the outputs (the range's part), --no-audio, and --right FILE."""
 
 from __future__ import annotations
 
