@@ -11,6 +11,7 @@ import sys
 import av
 import numpy as np
 import pytest
+from media_helpers import noise_frames, write_clip
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
@@ -356,11 +357,7 @@ def test_real_clips(tmp_path, real_dir, name, extra, capsys):
 
 # ----------------------------------------------------------------------- bad input
 def _video(path, n, size=(128, 64)):
-    rng = np.random.default_rng(0)
-    with VideoWriter(path, FPS, size) as vw:
-        for _ in range(n):
-            vw.write(rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8))
-    return path
+    return write_clip(path, noise_frames(n, size), FPS, preset="veryfast")
 
 
 def _zero_frame_video(path):
