@@ -24,6 +24,7 @@ from simulator.core.fileio import check_input_file
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.sphere.headsets import resolve_fov
 from simulator.traces.readers import FORMATS, detect_format
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
 
@@ -347,6 +348,8 @@ def _epof(m: Path, t) -> dict:
     return {
         "hfov_deg": h,
         "vfov_deg": v,
+        # as vimsim epof --headset: the headset's exact (asymmetric) per-eye frustum
+        "headset": e.get("headset", (str,)),
         "method": e.get("method", (str,), "auto", choices=("auto", "paper", "sphere")),
         "top_k": e.number("top_k", None, lo=1, integer=True),
         "hold_last": e.get("hold_last", (bool,), False),
@@ -414,6 +417,35 @@ def _grf(m: Path, t) -> dict:
     }
 
 
+#: The keys of each table that say what the eye sees in a render
+#: (:meth:`simulator.viewing.spec.ViewSpec.from_options`, as ``vimsim render``'s options).
+_VIEW_KEYS = {
+    "render": ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
+               "mitigation", "aperture_min", "feather", "vignette_color"),
+    "grf": _GRF_KEYS,
+    "epof": ("method", "low_pct", "high_pct", "opacity_source", "smooth", "ease_in",
+             "ease_out", "opacity_rule"),
+}  # fmt: skip
+
+
+def _view(m: Path, data: dict) -> dict:
+    """The render's view options: the ``[render]`` and ``[grf]`` tables and the opacity
+    rule of ``[epof]`` merged into one mapping of :data:`VIEW_OPTIONS` names (plain TOML
+    values, as shipped to a render task), checked by building the view once."""
+    options: dict = {"grid": True}  # every viewing of a study has its video's grid
+    where: dict = {}
+    for table, keys in _VIEW_KEYS.items():
+        t = data.get(table) or {}
+        for k in keys:
+            if k in t:
+                options[k], where[k] = t[k], table
+    try:
+        ViewSpec.from_options(options, label=lambda k: f"[{where.get(k, 'render')}] {k}")
+    except InputError as e:
+        raise InputError(f"{m}: {e}") from None
+    return options
+
+
 def load_manifest(path) -> Manifest:
     """Read and validate ``STUDY.toml``; InputError (one line: manifest, entry, problem)."""
     m = check_input_file(path, "study manifest")
@@ -430,13 +462,15 @@ def load_manifest(path) -> Manifest:
     st = _Entry(m, "[study]", data.get("study", {}), _STUDY_KEYS)
     videos = _videos(m, base, data.get("videos"))
     viewings = _viewings(m, base, data.get("viewings"), videos)
+    render = _render(m, data.get("render"))
+    render["view"] = _view(m, data)
     return Manifest(
         path=m.resolve(),
         name=st.get("name", (str,), m.stem),
         videos=videos,
         viewings=viewings,
         epof=_epof(m, data.get("epof")),
-        render=_render(m, data.get("render")),
+        render=render,
         grf=_grf(m, data.get("grf")),
         questionnaires=_questionnaires(m, base, data.get("questionnaires")),
         cache=st.path("cache", base, required=False),

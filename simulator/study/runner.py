@@ -229,7 +229,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
             if w.render:
                 submit(("render", v.id, w.id),
                        (tasks.render_task, _video_dict(v), str(grids[v.id]), _item(w),
-                        render_opts, manifest.grf, str(out / "render" / w.id)),
+                        render_opts, str(out / "render" / w.id)),
                        render_opts["cpus"])  # fmt: skip
 
     t0 = time.perf_counter()

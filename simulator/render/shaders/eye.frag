@@ -1,7 +1,7 @@
 #version 430 core
 // One eye's view of an equirectangular frame, with the granulated rest frame (GRF).
 //
-// Conventions (simulator/geometry.py): world and head frames +x right, +y up, +z forward;
+// Conventions (simulator/sphere/geometry.py): world and head frames +x right, +y up, +z forward;
 // lon = atan(x, z) (+ right), lat = asin(y) (+ up); equirect column x covers [x, x+1),
 // its centre x + 0.5 maps to lon = (x + 0.5) / W * 2 pi - pi; row 0 is the top (lat + pi/2).
 // The texture holds the frame as uploaded: texel row 0 = image row 0 (top), so
@@ -27,7 +27,7 @@
 //                  video; 0: level 0, bilinear (what that rule gives there anyway).
 //   GRAIN_PARALLAX grains at a finite distance (eye offset); 0: at infinity, the ray
 //                  from the eye is the view ray and the video's lon/lat are reused.
-//   LOCAL_GRF      local-grf (simulator/mitigation.py): the grain alpha follows the flow
+//   LOCAL_GRF      local-grf (simulator/mitigation/kinds.py): the grain alpha follows the flow
 //                  of the ray's field cell (u_cell_opacity, nearest) instead of u_opacity.
 //   VIGNETTE       the head-fixed tunneling vignette: alpha linear in eccentricity,
 //                  clamp((ecc - radius) / feather + 1/2, 0, 1), in u_vignette_color.
