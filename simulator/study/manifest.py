@@ -23,7 +23,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.sphere.headsets import resolve_fov
-from simulator.traces.readers import FORMATS, detect_format
+from simulator.traces.readers import FORMATS, n_users
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
 
@@ -189,12 +189,7 @@ def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
 def _n_users(trace: Path, fmt: str) -> tuple[str, int]:
     """(format, number of users) of a trace file; counts lines only (no parsing)."""
     check_input_file(trace, "head path")
-    f = detect_format(trace) if fmt == "auto" else fmt
-    if f != "360vidstr":
-        return f, 1
-    with open(trace, encoding="utf-8", errors="replace") as fh:
-        n = sum(1 for ln in fh if ln.strip())
-    return f, max(1, (n - 1) // 2)
+    return n_users(trace, fmt)
 
 
 def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
