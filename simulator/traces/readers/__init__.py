@@ -81,9 +81,9 @@ def load_headpath(
     """
     p = check_input_file(path, "head path")
     fmt = detect_format(p) if format == "auto" else format
-    if fmt not in FORMATS:
+    if fmt not in REGISTRY:
         raise InputError(
-            f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(FORMATS)}"
+            f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(REGISTRY)}"
         )
     hp = REGISTRY[fmt].read(p, video=video, user=user)
     _warn_if_coarse(hp)
@@ -111,7 +111,7 @@ def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, H
     p = check_input_file(path, "head path")
     fmt = detect_format(p) if format == "auto" else format
     if fmt not in REGISTRY:
-        raise InputError(f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(FORMATS)}")
+        raise InputError(f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(REGISTRY)}")
     read_all = REGISTRY[fmt].read_all
     if read_all is None:
         return {1: load_headpath(p, fmt)}
