@@ -38,7 +38,7 @@ _VIDEO_KEYS = (
     "window_size", "flow", "cell",
 )  # fmt: skip
 _VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition", "render")
-_QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions")
+_QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
@@ -329,6 +329,8 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
         "flow_stat": e.get("flow_stat", (str,), "mean", choices=("mean", "median", "sum")),
         "exclude_below": e.number("exclude_below", None, lo=0.0),
         "conditions": tuple(conds) if conds else None,
+        # The group-size-invariant K_OF by default; "paper" for the paper's formula.
+        "k_of": e.get("k_of", (str,), "invariant", choices=("invariant", "paper")),
     }
 
 

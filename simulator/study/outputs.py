@@ -34,6 +34,7 @@ from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.sphere.geometry import extract_view, split_eye
 
 __all__ = [
+    "confound_notes",
     "provocative_moments",
     "versions",
     "write_study_outputs",
@@ -280,15 +281,35 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:
         study = read_study(data, flow_stat=q["flow_stat"])
-        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"])
+        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"],
+                           k_of_formula=q.get("k_of", "invariant"),
+                           notes=confound_notes(table))  # fmt: skip
         info["files"] = [p.name for p in write_report(an, folder)]
         info["problems"] = list(study.problems)
         info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]
         info["comparisons"] = an.comparisons
+        info["notes"] = an.messages()
         info["error"] = None
     except InputError as e:
         info["error"] = str(e)
     return info
+
+
+def confound_notes(table: list[dict]) -> list[str]:
+    """A warning line when condition and video are confounded: no video was watched under
+    two conditions, so a difference between conditions may be one between videos."""
+    by_cond: dict[str, set[str]] = {}
+    for r in table:
+        if r["status"] == "ok" and r["condition"]:
+            by_cond.setdefault(r["condition"], set()).add(r["video"])
+    if len(by_cond) < 2:
+        return []
+    sets = list(by_cond.values())
+    if any(sets[i] & sets[j] for i in range(len(sets)) for j in range(i + 1, len(sets))):
+        return []
+    per = "; ".join(f"{c} on {', '.join(sorted(v))}" for c, v in by_cond.items())
+    return [f"WARNING: condition is confounded with video ({per}): a difference between "
+            "conditions may be one between videos"]  # fmt: skip
 
 
 def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list[dict]) -> dict:
