@@ -308,8 +308,8 @@ def confound_notes(table: list[dict]) -> list[str]:
     if any(sets[i] & sets[j] for i in range(len(sets)) for j in range(i + 1, len(sets))):
         return []
     per = "; ".join(f"{c} on {', '.join(sorted(v))}" for c, v in by_cond.items())
-    return [f"WARNING: condition is confounded with video ({per}): a difference between "
-            "conditions may be one between videos"]  # fmt: skip
+    line = f"WARNING: condition is confounded with video ({per}): a difference between "
+    return [line + "conditions may be one between videos"]
 
 
 def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list[dict]) -> dict:
