@@ -24,7 +24,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
-from simulator.epof.viewing import compute_epof, write_epof_csv
+from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
@@ -35,14 +35,14 @@ from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.traces.path import HeadPath
-from simulator.traces.readers import load_all_users, load_headpath
+from simulator.traces.readers import TraceFile, load_headpath
 from simulator.viewing.job import render_viewing
 
 __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 
 # Per worker process: kept between tasks (a pool or Ray worker runs many tasks).
 _GRIDS: dict[tuple, GridFile] = {}
-_TRACES: dict[tuple, dict[int, HeadPath]] = {}
+_TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
@@ -77,20 +77,16 @@ def _grid(path: str) -> GridFile:
 
 
 def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
-    """The head path of one viewing; a multi-user file is parsed once per worker."""
+    """The head path of one viewing, with its own warnings (the file's and its user's
+    sampling): a multi-user file is parsed once per worker."""
     if user is None:
         return load_headpath(path, fmt)
     key = (*_file_key(path), fmt)
     if key not in _TRACES:
         if len(_TRACES) > 8:
             _TRACES.clear()
-        _TRACES[key] = load_all_users(path, fmt)
-    users = _TRACES[key]
-    if user not in users:
-        if len(users) == 1 and user == 1:
-            return users[1]
-        raise InputError(f"{path}: no user {user}; the file holds {len(users)}")
-    return users[user]
+        _TRACES[key] = TraceFile(path, fmt)
+    return _TRACES[key].user(user)
 
 
 def preprocess_task(video: dict, output: str, threads: int) -> dict:
@@ -201,20 +197,24 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                hp = _trace(it["trace"], it["format"], it["user"])
-                res = compute_epof(
-                    grid,
-                    hp,
-                    hfov_deg=opts["hfov_deg"],
-                    vfov_deg=opts["vfov_deg"],
-                    top_k=opts["top_k"],
-                    rule=rule,
-                    hold=opts["hold_last"],
-                    method=opts["method"],
-                )
+                try:
+                    hp = _trace(it["trace"], it["format"], it["user"])
+                    res = compute_epof(
+                        grid,
+                        hp,
+                        hfov_deg=opts["hfov_deg"],
+                        vfov_deg=opts["vfov_deg"],
+                        top_k=opts["top_k"],
+                        rule=rule,
+                        hold=opts["hold_last"],
+                        method=opts["method"],
+                    )
+                finally:  # a failed viewing keeps the warnings of its input too
+                    rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
             write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
+            if it.get("plot"):
+                plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
             rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
-            rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
         except Exception as e:  # noqa: BLE001
             rec["status"] = _error_line(e)
         rec["seconds"] = time.perf_counter() - t0
@@ -284,6 +284,14 @@ def render_task(
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,
             ctx=_context(),
+            start_s=opts.get("start_s"),
+            end_s=opts.get("end_s"),
+            review=bool(opts.get("review")),
+            eyes=opts.get("eyes"),
+            audio=opts.get("audio", True),
+            # the study's EPOF rule and method, so the render's opacity is the EPOF CSV's
+            rule=_rule(opts["epof"]) if "epof" in opts else OpacityRule(),
+            method=opts["epof"]["method"] if "epof" in opts else "auto",
         )
         rec["frames_per_s"] = s.get("frames_per_s")
     except Exception as e:  # noqa: BLE001

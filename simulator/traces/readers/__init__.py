@@ -9,6 +9,7 @@ of each dataset's axes to ours is documented in ``docs/headpath.md`` and beside 
 from __future__ import annotations
 
 import os
+import warnings
 
 from simulator.core.choices import HEADPATH_FORMATS as FORMATS
 from simulator.core.errors import InputError
@@ -30,6 +31,7 @@ REGISTRY: dict[str, TraceFormat] = {
 __all__ = [
     "FORMATS",
     "REGISTRY",
+    "TraceFile",
     "detect_format",
     "load_all_users",
     "load_columns",
@@ -37,6 +39,7 @@ __all__ = [
     "load_keyframes",
     "n_users",
     "parse_column_map",
+    "sampling_warnings",
 ]
 
 
@@ -101,12 +104,51 @@ def load_keyframes(path: str | os.PathLike) -> HeadPath:
     return load_headpath(p, fmt)
 
 
-def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, HeadPath]:
+class TraceFile:
+    """A head path file parsed once for many viewings: each user's path, and each viewing
+    gets the warnings that belong to it (the file's own, and its user's sampling).
+
+    ``user(u)`` (None or 1 for a file of one trace) re-issues the file's warnings and the
+    user's sampling warning, so a caller catching warnings per viewing attributes them
+    right however many viewings share the parsed file.
+    """
+
+    def __init__(self, path: str | os.PathLike, format: str = "auto"):
+        p = check_input_file(path, "head path")
+        self.path, self.format = p, detect_format(p) if format == "auto" else format
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self.users = load_all_users(p, self.format, warn=False)
+        self.file_warnings = [(w.message, w.category) for w in caught]
+        self.multi = REGISTRY[self.format].read_all is not None
+
+    def user(self, u: int | None) -> HeadPath:
+        """User ``u``'s path (1-based; None: the file's only trace), warnings issued."""
+        for msg, cat in self.file_warnings:
+            warnings.warn(msg, cat, stacklevel=2)
+        k = 1 if u is None and len(self.users) == 1 else u
+        if k not in self.users:
+            raise InputError(f"{self.path}: no user {u}; the file holds {len(self.users)}")
+        if self.multi:
+            _warn_if_coarse(self.users[k])
+        return self.users[k]
+
+
+def sampling_warnings(hp: HeadPath) -> None:
+    """Warn (CoarseSamplingWarning) about ``hp``'s sampling, as the readers do for each path."""
+    _warn_if_coarse(hp)
+
+
+def load_all_users(
+    path: str | os.PathLike, format: str = "auto", *, warn: bool = True
+) -> dict[int, HeadPath]:
     """Every user of a head path file, read once: ``{user (1-based): HeadPath}``.
 
     360VidStr aggregated files hold many users (one pair of lines each); any other format
     holds one trace and gives ``{1: path}`` (read as :func:`load_headpath` reads it). A
     user whose samples are bad raises InputError naming the file and the user.
+    ``warn=False``: no sampling warnings here; :func:`sampling_warnings` gives one user's
+    (so that each warning belongs to the viewing of its user).
     """
     p = check_input_file(path, "head path")
     fmt = detect_format(p) if format == "auto" else format
@@ -116,7 +158,7 @@ def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, H
     if read_all is None:
         return {1: load_headpath(p, fmt)}
     out = read_all(p)
-    for hp in out.values():
+    for hp in out.values() if warn else ():
         _warn_if_coarse(hp)
     return out
 
