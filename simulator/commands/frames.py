@@ -49,7 +49,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands.render import view_from_args
     from simulator.viewing.frames import render_frames
 
-    hp, grid, config, note, layout, rule = view_from_args(args, "frames")
+    hp, grid, view, note, layout = view_from_args(args, "frames")
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,
@@ -61,12 +61,8 @@ def run(args: argparse.Namespace) -> int:
             at=args.at,
             every=args.every,
             grid=grid,
-            config=config,
-            opacity=args.opacity,
+            view=view,
             layout=layout,
-            hold=args.hold_last,
-            rule=rule,
-            method=args.method,
             progress=bar,
         )
     if note:

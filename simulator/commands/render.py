@@ -8,25 +8,22 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._opacity import add_opacity_arguments, rule_from_args
+from simulator.commands._opacity import add_opacity_arguments
 from simulator.commands._types import (
     add_fov_arguments,
-    frustum_from_args,
     nonneg_deg,
     nonneg_int,
     positive_float,
     size_wxh,
     x264_crf,
 )
-from simulator.core.choices import EPOF_METHODS, LAYOUTS, MITIGATIONS, X264_PRESETS
-
-#: H.264 level 6.2's largest frame in 16x16 macroblocks (8192x4320 and the like).
-MAX_H264_MACROBLOCKS = 139264
-#: Estimated bytes per eye pixel while rendering (framebuffers, read-back, encoder frames).
-BYTES_PER_EYE_PIXEL = 48
-#: Grains the mask pass takes, and their estimated bytes each (directions, buckets).
-MAX_GRAINS = 5_000_000
-BYTES_PER_GRAIN = 64
+from simulator.core.choices import (
+    EPOF_METHODS,
+    LAYOUTS,
+    MITIGATION_HELP,
+    MITIGATIONS,
+    X264_PRESETS,
+)
 
 __all__ = ["add_view_options", "register", "run", "view_from_args"]
 
@@ -73,10 +70,8 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--mitigation",
         choices=MITIGATIONS,
-        help="what is drawn over the video: grf (the paper's grains; the default, see --grf), "
-        "vignette (head-fixed tunneling: the aperture shrinks with the opacity), grf+vignette "
-        "(both, same opacity), local-grf (grains only where the flow is high: each "
-        "direction's own flow from a sphere-mode --grid), none",
+        help="what is drawn over the video: "
+        + ", ".join(f"{k} ({h})" for k, h in MITIGATION_HELP.items()),
     )
     p.add_argument(
         "--aperture-min",
@@ -165,74 +160,27 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
 
 
 def view_from_args(args: argparse.Namespace, command: str = "render"):
-    """``(headpath, grid, config, note, layout, rule)`` from :func:`add_view_options`'
-    options: the one frustum, the GRF, the stereo layout (the grid's when not given) and
-    the opacity rule."""
+    """``(headpath, grid, view, note, layout)`` from :func:`add_view_options`' options:
+    the :class:`simulator.viewing.spec.ViewSpec` (the one builder of what the eye sees,
+    shared with studies), the inputs, and the stereo layout (the grid's when not given)."""
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.core.errors import InputError
-    from simulator.core.resources import check_fits
     from simulator.media.gridfile import load_grid
-    from simulator.mitigation.grf import GrfConfig, grain_count
-    from simulator.mitigation.kinds import Mitigation, parse_color
-    from simulator.render import RenderConfig
     from simulator.traces.readers import load_headpath
+    from simulator.viewing.spec import ViewSpec
 
-    frustum = frustum_from_args(args, (107.0, 107.0))
-    w, h = args.eye_size
-    if command == "render":  # frames writes PNGs: any size the GL limits allow
-        if w % 2 or h % 2:
-            raise InputError(f"--eye-size {w}x{h}: H.264 needs even numbers, e.g. 480x480")
-        if -(-w // 16) * -(-h // 16) > MAX_H264_MACROBLOCKS or max(w, h) > 8192:
-            raise InputError(
-                f"--eye-size {w}x{h}: beyond H.264's largest frame (level 6.2: 8192x4320); "
-                "e.g. 2048x2048"
-            )
-    check_fits(2 * w * h * BYTES_PER_EYE_PIXEL, f"--eye-size {w}x{h}")
-    if not (0.0 < args.grain_size < 90.0):
-        raise InputError(f"--grain-size must be degrees in (0, 90); got {args.grain_size}")
-    if not (0.0 < args.density < 1.0):
-        raise InputError(f"--density must be in (0, 1); got {args.density}")
-    mitigation = Mitigation(
-        args.mitigation or "grf",
-        aperture_min_deg=args.aperture_min,
-        feather_deg=args.feather,
-        color=parse_color(args.vignette_color),
-    )
+    # frames writes PNGs: any size the GL limits allow; render encodes H.264
+    view = ViewSpec.from_options(args, video=command == "render")
     with warnings_to_stderr(f"vimsim {command}"):
         hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
-        rule = rule_from_args(args)
     meta_layout = grid.meta.get("layout") if grid is not None else None
     layout = args.layout or (meta_layout if meta_layout in LAYOUTS else None) or "mono"
-
-    # GRF on/off: on with --grid or a numeric --opacity unless --grf says otherwise.
-    grf_on = args.grf == "on" or (args.grf is None and (grid is not None or args.opacity != "auto"))
-    if args.mitigation is not None:  # an explicit mitigation draws what it names
-        grf_on = args.grf != "off" and mitigation.grains
     note = None
-    if args.mitigation is None and args.grf is None and not grf_on:
+    if args.mitigation is None and args.grf is None and view.grains is None:
         note = "GRF off: no --grid and no --opacity given (give --grid GRID.npz or --opacity 0..1 to overlay it)"
     if args.layout is None and layout != "mono":
         note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
-    grf = None
-    if grf_on:
-        grf = GrfConfig(
-            grain_deg=args.grain_size,
-            density=args.density,
-            inner_deg=args.cutout[0],
-            outer_deg=args.cutout[1],
-            seed=args.seed,
-            distance_m=args.grain_distance,
-        )
-        n = grain_count(grf)
-        if n > MAX_GRAINS:
-            raise InputError(
-                f"--grain-size {args.grain_size:g} with --density {args.density:g} needs {n} "
-                f"grains (at most {MAX_GRAINS}); choose a larger --grain-size, e.g. 0.5"
-            )
-        check_fits(n * BYTES_PER_GRAIN, f"--grain-size {args.grain_size:g}")
-    config = RenderConfig(eye_size=args.eye_size, frustum=frustum, grf=grf, mitigation=mitigation)
-    return hp, grid, config, note, layout, rule
+    return hp, grid, view, note, layout
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -323,7 +271,7 @@ def run(args: argparse.Namespace) -> int:
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.viewing.job import render_viewing
 
-    hp, grid, config, note, layout, rule = view_from_args(args)
+    hp, grid, view, note, layout = view_from_args(args)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
@@ -333,18 +281,14 @@ def run(args: argparse.Namespace) -> int:
             hp,
             args.output,
             grid=grid,
-            config=config,
-            opacity=args.opacity,
+            view=view,
             layout=layout,
-            hold=args.hold_last,
             preset=args.preset,
             crf=args.crf,
             progress=bar,
             note=note,
             start_s=args.start,
             end_s=args.end,
-            rule=rule,
-            method=args.method,
             review=args.review,
             eyes=args.eyes,
             right=args.right,

@@ -22,6 +22,7 @@ __all__ = [
     "INTERPS",
     "LAYOUTS",
     "MITIGATIONS",
+    "MITIGATION_HELP",
     "OPACITY_SOURCES",
     "PREPROCESS_METHODS",
     "SCENES",
@@ -65,9 +66,18 @@ DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
 #: Flow backends as ``--flow`` spells them.
 FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
 
-#: What is drawn over the video (:mod:`simulator.mitigation.kinds`): the paper's grains, a
-#: tunneling vignette, both, grains only where the flow is high, or nothing.
-MITIGATIONS: tuple[str, ...] = ("grf", "vignette", "grf+vignette", "local-grf", "none")
+#: What is drawn over the video, each kind with its one-line help (``--mitigation``, the
+#: study's ``mitigation``); what each draws and lets through is its entry in
+#: :data:`simulator.mitigation.kinds.KINDS` (same names, same order).
+MITIGATION_HELP: dict[str, str] = {
+    "grf": "the paper's grains; the default, see --grf",
+    "vignette": "head-fixed tunneling: the aperture shrinks with the opacity",
+    "grf+vignette": "both, same opacity",
+    "local-grf": "grains only where the flow is high: each direction's own flow from a "
+    "sphere-mode --grid",
+    "none": "nothing",
+}
+MITIGATIONS: tuple[str, ...] = tuple(MITIGATION_HELP)
 
 #: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
 OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")

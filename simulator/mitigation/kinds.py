@@ -31,24 +31,102 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.media.lazyfield import LazyField, field_chunks
 from simulator.mitigation.grf import GrainField, GrfConfig, cutout_alpha
 from simulator.sphere.cells import CellGrid, Frustum
 from simulator.sphere.geometry import head_rotation
 
-__all__ = ["Mitigation", "VisibleFlow", "cell_opacity", "parse_color", "visible_flow"]
+__all__ = [
+    "KINDS",
+    "Kind",
+    "Mitigation",
+    "VisibleFlow",
+    "cell_opacity",
+    "parse_color",
+    "visible_flow",
+]
 
 #: Default smallest aperture, degrees of visual field (see docs/mitigation.md).
 APERTURE_MIN_DEG = 60.0
 #: Default soft-edge width, degrees.
 FEATHER_DEG = 10.0
+
+
+@dataclass(frozen=True)
+class Kind:
+    """One mitigation kind, its whole definition (an entry of :data:`KINDS`).
+
+    name : as ``--mitigation`` spells it (:data:`simulator.core.choices.MITIGATION_HELP`
+        gives its help line)
+    grains, vignette : flags: it draws the world-fixed grains / the head-fixed vignette
+    local : flag: the grain opacity is each cell's own, from a sphere-mode field
+        (:func:`cell_opacity`), not the frame's
+    defines : the eye shader's defines it switches on (``shaders/eye.frag``), e.g.
+        ``VIGNETTE``; ``grain_defines`` likewise, only while grains are drawn
+    alpha : its alpha rule, as docs/mitigation.md states it
+    visible : its visible-flow rule: ``visible(rays) -> visibility`` of every sampled ray
+        of one frame (:class:`_Rays`: ``rays.grains(alpha)``, ``rays.vignette()``, the
+        frame's and the cells' grain alpha), ``1 - alpha`` of what is drawn, multiplied
+    """
+
+    name: str
+    alpha: str
+    visible: Callable[[_Rays], object]
+    grains: bool = False
+    vignette: bool = False
+    local: bool = False
+    defines: tuple[str, ...] = ()
+    grain_defines: tuple[str, ...] = ()
+
+
+#: Every mitigation kind, by name, in :data:`simulator.core.choices.MITIGATIONS`' order:
+#: a new kind is one entry here (and its name and help line in ``core/choices.py``).
+KINDS: dict[str, Kind] = {
+    k.name: k
+    for k in (
+        Kind(
+            "grf",
+            "cutout(ecc) * opacity on grain pixels",
+            lambda r: r.grains(r.frame_grain_alpha()),
+            grains=True,
+        ),
+        Kind(
+            "vignette",
+            "clamp((ecc - r(opacity)) / feather + 1/2, 0, 1)",
+            lambda r: r.vignette(),
+            vignette=True,
+            defines=("VIGNETTE",),
+        ),
+        Kind(
+            "grf+vignette",
+            "visibility multiplies: (1 - a_grain)(1 - a_vignette)",
+            lambda r: r.grains(r.frame_grain_alpha()) * r.vignette(),
+            grains=True,
+            vignette=True,
+            defines=("VIGNETTE",),
+        ),
+        Kind(
+            "local-grf",
+            "cutout(ecc) * rule(f_cell) on grain pixels",
+            lambda r: r.grains(r.cell_grain_alpha()),
+            grains=True,
+            local=True,
+            grain_defines=("LOCAL_GRF",),
+        ),
+        Kind("none", "0", lambda r: 1.0),
+    )
+}
+#: Every define a kind may switch on (each is 0 in the shader unless its kind's).
+SHADER_DEFINES: tuple[str, ...] = tuple(
+    sorted({d for k in KINDS.values() for d in (*k.defines, *k.grain_defines)})
+)
 
 
 def parse_color(text: str) -> tuple[float, float, float]:
@@ -84,9 +162,9 @@ class Mitigation:
     color: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if self.kind not in MITIGATIONS:
+        if self.kind not in KINDS:
             raise InputError(
-                f"unknown mitigation {self.kind!r}; expected one of {', '.join(MITIGATIONS)}"
+                f"unknown mitigation {self.kind!r}; expected one of {', '.join(KINDS)}"
             )
         a, f = float(self.aperture_min_deg), float(self.feather_deg)
         if not (math.isfinite(a) and 0.0 < a < 180.0):
@@ -103,17 +181,28 @@ class Mitigation:
         object.__setattr__(self, "color", c)
 
     @property
+    def entry(self) -> Kind:
+        """The kind's entry of :data:`KINDS`."""
+        return KINDS[self.kind]
+
+    @property
     def grains(self) -> bool:
         """Grains are drawn (``grf``, ``grf+vignette``, ``local-grf``)."""
-        return self.kind in ("grf", "grf+vignette", "local-grf")
+        return self.entry.grains
 
     @property
     def vignette(self) -> bool:
-        return self.kind in ("vignette", "grf+vignette")
+        return self.entry.vignette
 
     @property
     def local(self) -> bool:
-        return self.kind == "local-grf"
+        return self.entry.local
+
+    def shader_defines(self, grains: bool) -> dict[str, int]:
+        """The eye shader's mitigation defines (:data:`SHADER_DEFINES`), 0 or 1;
+        ``grains``: grains are drawn (a GRF is configured)."""
+        on = {*self.entry.defines, *(self.entry.grain_defines if grains else ())}
+        return {d: int(d in on) for d in SHADER_DEFINES}
 
     def check_view(self, frustum: Frustum) -> None:
         """InputError unless the aperture lies inside the view: ``aperture_min < hfov``."""
@@ -222,6 +311,49 @@ def _grain_tree(grf: GrfConfig):
     return cKDTree(gf.centers), 2.0 * math.sin(gf.radius_rad / 2.0)
 
 
+class _Rays:
+    """The sampled rays of the view in one frame: what a kind's visible-flow rule reads
+    (:attr:`Kind.visible`). Grains are at infinity (stereo parallax is ignored)."""
+
+    def __init__(self, mitigation: Mitigation, frustum: Frustum, dirs, grf: GrfConfig | None):
+        self.m, self.frustum = mitigation, frustum
+        self.ecc = np.arccos(np.clip(dirs[:, 2], -1.0, 1.0))  # radians from the view axis
+        self.cut = None  # grain cutout alpha per ray; None: no grains drawn
+        if mitigation.grains and grf is not None:
+            self.cut = cutout_alpha(np.degrees(self.ecc), grf)
+            self.tree, self.chord = _grain_tree(grf)
+            self.near = self.cut > 0
+        self.frame(0.0, None, None, None)
+
+    def frame(self, opacity: float, world, idx, cell_row) -> None:
+        """This frame's opacity, world ray directions, cell index of each ray and the
+        cells' grain opacity (local-grf)."""
+        self.opacity, self.world, self.idx, self.cell_row = opacity, world, idx, cell_row
+
+    def vignette(self):
+        """Visibility ``1 - alpha`` through the vignette at this frame's opacity."""
+        return 1.0 - self.m.vignette_alpha(self.ecc, self.opacity, self.frustum)
+
+    def frame_grain_alpha(self):
+        """Grain alpha of the frame's opacity: ``cutout(ecc) * opacity`` (None: no grains)."""
+        return None if self.cut is None else self.cut * self.opacity
+
+    def cell_grain_alpha(self):
+        """Grain alpha of each ray's cell: ``cutout(ecc) * cell opacity`` (None: no grains)."""
+        return None if self.cut is None else self.cut * self.cell_row[self.idx]
+
+    def grains(self, alpha):
+        """Visibility ``1 - alpha * covered`` (``covered``: the ray hits a grain disc)."""
+        if alpha is None:
+            return 1.0
+        cov = np.zeros(len(self.ecc))
+        near = self.near
+        if np.any(near) and np.any(alpha[near] > 0):
+            dist, _ = self.tree.query(self.world[near], k=1, distance_upper_bound=self.chord)
+            cov[near] = dist <= self.chord
+        return 1.0 - alpha * cov
+
+
 def visible_flow(
     mitigation: Mitigation,
     frustum: Frustum,
@@ -252,7 +384,8 @@ def visible_flow(
         local-grf
     samples : the view is sampled at ``samples x samples`` pixel-centre rays
 
-    Each ray's visibility is ``(1 - grain_alpha * covered) * (1 - vignette_alpha)``;
+    Each ray's visibility is the kind's rule (:attr:`Kind.visible`), e.g.
+    ``(1 - grain_alpha * covered) * (1 - vignette_alpha)`` for grf+vignette;
     ``covered``: the ray hits a grain disc (grains at infinity; stereo parallax is
     ignored). ``ratio = sum(f v w) / sum(f w)`` over rays (``f`` flow, ``v`` visibility,
     ``w`` solid angle); where the viewport's flow is 0 it is ``sum(v w) / sum(w)``.
@@ -262,14 +395,8 @@ def visible_flow(
     op = np.broadcast_to(np.asarray(opacity, float), (N,))
     epof = np.broadcast_to(np.asarray(epof_dps, float), (N,))
     dirs, sa = view_samples(frustum, samples)
-    ecc = np.arccos(np.clip(dirs[:, 2], -1.0, 1.0))
-    kind = mitigation
-    grains = kind.grains and grf is not None  # grf None: no grains drawn
-    if grains:
-        cut = cutout_alpha(np.degrees(ecc), grf)
-        tree, chord = _grain_tree(grf)
-        near = cut > 0
-    if grains and kind.local and cell_op is None:
+    rays = _Rays(mitigation, frustum, dirs, grf)
+    if rays.cut is not None and mitigation.local and cell_op is None:
         raise InputError("local-grf needs a sphere-mode field (--grid made with --method sphere)")
     cells = CellGrid(cell_deg) if cell_deg is not None else None
     rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
@@ -282,18 +409,9 @@ def visible_flow(
             lon = np.arctan2(world[:, 0], world[:, 2])
             lat = np.arcsin(np.clip(world[:, 1], -1.0, 1.0))
             idx = cells.index(lon, lat)
-        vis = 1.0 - kind.vignette_alpha(ecc, op[t], frustum)
-        if grains:
-            if kind.local:
-                c = cell_op[min(t, len(cell_op) - 1)].reshape(-1)
-                k = cut * c[idx]
-            else:
-                k = cut * op[t]
-            cov = np.zeros(len(sa))
-            if np.any(near) and np.any(k[near] > 0):
-                dist, _ = tree.query(world[near], k=1, distance_upper_bound=chord)
-                cov[near] = dist <= chord
-            vis = vis * (1.0 - k * cov)
+        row = None if cell_op is None else cell_op[min(t, len(cell_op) - 1)].reshape(-1)
+        rays.frame(op[t], world, idx, row)
+        vis = mitigation.entry.visible(rays)
         wsum = sa.sum()
         blocked[t] = 1.0 - float((vis * sa).sum() / wsum)
         if field_dps is not None and idx is not None:

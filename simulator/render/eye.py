@@ -231,8 +231,7 @@ class EyeRenderer:
             "GRF": int(grf is not None),
             "GRAIN_LOD": int(grain_lod),
             "GRAIN_PARALLAX": int(grf is not None and grf.distance_m is not None),
-            "LOCAL_GRF": int(grf is not None and mit.local),
-            "VIGNETTE": int(mit.vignette),
+            **mit.shader_defines(grains=grf is not None),  # the kind's (mitigation.kinds.KINDS)
         }
         self._cell_tex = None  # local-grf: per-cell grain opacity, uploaded per frame
         # Keyed by MIPMAP; the general variant (cubic or trilinear per pixel) is built now,

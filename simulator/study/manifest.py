@@ -23,6 +23,7 @@ from simulator.core.fileio import check_input_file
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.study.entry import Entry, user_numbers
 from simulator.traces.readers import FORMATS, n_users
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
 
@@ -36,11 +37,12 @@ _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
     "window_size", "flow", "cell",
 )  # fmt: skip
+_GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
                 "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
                 "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
-#: Render options a viewing may set for itself (over [render]); cpus is the study's.
-_VIEWING_RENDER_KEYS = tuple(k for k in _RENDER_KEYS if k != "cpus")
+#: Render options a viewing may set for itself (over [render] and [grf]); cpus is the study's.
+_VIEWING_RENDER_KEYS = (*(k for k in _RENDER_KEYS if k != "cpus"), *_GRF_KEYS)
 _VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition",
                  "render", "plot", *_VIEWING_RENDER_KEYS)  # fmt: skip
 _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
@@ -48,7 +50,6 @@ _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
 )  # fmt: skip
-_GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
 
@@ -210,17 +211,20 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
     return set(chosen)
 
 
-def _viewing_render_opts(e: Entry, m: Path, where: str, base: dict) -> dict:
-    """[render] with the viewing's own render keys over it, validated as [render] is."""
+def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict) -> dict:
+    """The study's render options with the viewing's own keys over them, checked as
+    ``[render]`` is (its view by the one builder, :meth:`ViewSpec.from_options`)."""
     own = {k: e.t[k] for k in _VIEWING_RENDER_KEYS if k in e.t}
     if not own:
-        return _render(m, base)
-    merged = dict(base)
-    if own.keys() & {"fov", "hfov", "vfov", "headset"}:
-        for k in ("fov", "hfov", "vfov", "headset"):
-            merged.pop(k, None)
-    merged.update(own)
-    return _render(m, merged, f"{where}: render options")
+        return render
+    table = dict(data.get("render") or {})
+    if own.keys() & _FOV_KEYS:
+        for k in _FOV_KEYS:
+            table.pop(k, None)
+    table.update({k: v for k, v in own.items() if k in _RENDER_KEYS})
+    opts = _render(m, table, f"{where}: render options")
+    opts["view"] = _view(m, data, own, where)
+    return opts
 
 
 def _expand_traces(e: Entry, pattern: str, base: Path) -> list[Path]:
@@ -253,7 +257,9 @@ def _viewing_ids(e: Entry, trace: Path, u, n: int, vid: str, condition: str) -> 
     return vw_id, participant
 
 
-def _viewings(m: Path, base: Path, tables, videos, render_table: dict) -> tuple[ViewingSpec, ...]:
+def _viewings(
+    m: Path, base: Path, tables, videos, data: dict, render: dict
+) -> tuple[ViewingSpec, ...]:
     if not isinstance(tables, list) or not tables:
         raise InputError(
             f"{m}: no [[viewings]] entries; expected at least one with video and trace"
@@ -274,12 +280,12 @@ def _viewings(m: Path, base: Path, tables, videos, render_table: dict) -> tuple[
         if user is not None and user != "all":
             user_numbers(e, "user", user)  # a bad spec is named before any file is read
         condition = e.get("condition", (str,), "")
-        render = e.get("render", (bool, int, str, list), False)
+        render_spec = e.get("render", (bool, int, str, list), False)
         plot = e.get("plot", (bool,), False)
-        ropts = _viewing_render_opts(e, m, where, render_table)
+        ropts = _viewing_render_opts(e, m, where, data, render)
         for trace in _expand_traces(e, pattern, base):
             users, n = _users_of(e, trace, fmt, user)
-            rendered = _render_users(e, render, users)
+            rendered = _render_users(e, render_spec, users)
             for u in users:
                 vw_id, participant = _viewing_ids(e, trace, u, n, vid, condition)
                 if vw_id in seen:
@@ -331,6 +337,8 @@ def _epof(m: Path, t) -> dict:
     return {
         "hfov_deg": h,
         "vfov_deg": v,
+        # as vimsim epof --headset: the headset's exact (asymmetric) per-eye frustum
+        "headset": e.get("headset", (str,)),
         "method": e.get("method", (str,), "auto", choices=("auto", "paper", "sphere")),
         "top_k": e.number("top_k", None, lo=1, integer=True),
         "hold_last": e.get("hold_last", (bool,), False),
@@ -415,6 +423,44 @@ def _grf(m: Path, t) -> dict:
     }
 
 
+_FOV_KEYS = {"fov", "hfov", "vfov", "headset"}
+
+#: The keys of each table that say what the eye sees in a render
+#: (:meth:`simulator.viewing.spec.ViewSpec.from_options`, as ``vimsim render``'s options).
+_VIEW_KEYS = {
+    "render": ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
+               "mitigation", "aperture_min", "feather", "vignette_color"),
+    "grf": _GRF_KEYS,
+    "epof": ("method", "low_pct", "high_pct", "opacity_source", "smooth", "ease_in",
+             "ease_out", "opacity_rule"),
+}  # fmt: skip
+
+
+def _view(m: Path, data: dict, own: dict | None = None, own_where: str = "") -> dict:
+    """The render's view options: the ``[render]`` and ``[grf]`` tables and the opacity
+    rule of ``[epof]`` merged into one mapping of :data:`VIEW_OPTIONS` names (plain TOML
+    values, as shipped to a render task), checked by building the view once. ``own``: a
+    viewing's own render and grain keys over the tables (named ``own_where`` in errors)."""
+    options: dict = {"grid": True}  # every viewing of a study has its video's grid
+    where: dict = {}
+    for table, keys in _VIEW_KEYS.items():
+        t = data.get(table) or {}
+        for k in keys:
+            if k in t:
+                options[k], where[k] = t[k], f"[{table}]"
+    own = own or {}
+    if own.keys() & _FOV_KEYS:  # a viewing's FOV replaces the table's, whichever spelling
+        for k in _FOV_KEYS:
+            options.pop(k, None)
+    for k in own.keys() & set(_VIEW_KEYS["render"] + _VIEW_KEYS["grf"]):
+        options[k], where[k] = own[k], own_where
+    try:
+        ViewSpec.from_options(options, label=lambda k: f"{where.get(k, '[render]')} {k}")
+    except InputError as e:
+        raise InputError(f"{m}: {e}") from None
+    return options
+
+
 def load_manifest(path) -> Manifest:
     """Read and validate ``STUDY.toml``; InputError (one line: manifest, entry, problem)."""
     m = check_input_file(path, "study manifest")
@@ -430,9 +476,9 @@ def load_manifest(path) -> Manifest:
     base = m.resolve().parent
     st = Entry(m, "[study]", data.get("study", {}), _STUDY_KEYS)
     videos = _videos(m, base, data.get("videos"))
-    render_table = data.get("render") or {}
-    render = _render(m, render_table)  # checked first: viewings build on it
-    viewings = _viewings(m, base, data.get("viewings"), videos, render_table)
+    render = _render(m, data.get("render"))  # checked first: viewings build on it
+    render["view"] = _view(m, data)
+    viewings = _viewings(m, base, data.get("viewings"), videos, data, render)
     return Manifest(
         path=m.resolve(),
         name=st.get("name", (str,), m.stem),

@@ -288,9 +288,8 @@ class _Scheduler:
                         (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof")), 1)  # fmt: skip
         for w in mine:
             if w.render:
-                opts = {**w.render_opts, "epof": self.m.epof}
                 self.submit(("render", v.id, w.id),
-                            (tasks.render_task, _video_dict(v), grid, _item(w), opts, self.m.grf,
+                            (tasks.render_task, _video_dict(v), grid, _item(w), w.render_opts,
                              str(self.out / "render" / w.id)),
                             self.m.render["cpus"])  # fmt: skip
 

@@ -26,17 +26,16 @@ from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
-from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
-from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
+from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
-from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.traces.path import HeadPath
 from simulator.traces.readers import TraceFile, load_headpath
 from simulator.viewing.job import render_viewing
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 
@@ -180,10 +179,14 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
     try:
         grid = _grid(grid_path)
         rule = _rule(opts)
+        # As vimsim epof: a headset's exact per-eye frustum, else the FOVs (the grid's)
+        frustum = Frustum.from_headset(opts["headset"]) if opts.get("headset") else None
         if grid.field_dps is not None and opts["method"] != "paper":
             # One worker serves every viewing of this video: let exact EPOF keep the
             # weights of more orientation bins (bounded, not growing with the video).
-            fr = Frustum.symmetric(*viewport_fov(grid, opts["hfov_deg"], opts["vfov_deg"]))
+            fr = frustum or Frustum.symmetric(
+                *viewport_fov(grid, opts["hfov_deg"], opts["vfov_deg"])
+            )
             shared_query(cells_from_meta(grid.meta).cell_deg, fr).set_cache_bytes(
                 WEIGHT_CACHE_BYTES
             )
@@ -202,8 +205,9 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                     res = compute_epof(
                         grid,
                         hp,
-                        hfov_deg=opts["hfov_deg"],
-                        vfov_deg=opts["vfov_deg"],
+                        hfov_deg=None if frustum else opts["hfov_deg"],
+                        vfov_deg=None if frustum else opts["vfov_deg"],
+                        frustum=frustum,
                         top_k=opts["top_k"],
                         rule=rule,
                         hold=opts["hold_last"],
@@ -230,55 +234,31 @@ def _context():
     return _GL[0]
 
 
-def render_task(
-    video: dict, grid_path: str, item: dict, opts: dict, grf: dict, outdir: str
-) -> dict:
-    """Render one viewing into ``outdir`` (:func:`simulator.render.render_viewing`:
-    ``left.mp4``, ``right.mp4``, ``epof.csv``, ``summary.json`` last). ``opts["cpus"]``
-    llvmpipe threads unless ``LP_NUM_THREADS`` is set. Returns ``id``, ``status``,
-    ``seconds``, ``frames_per_s``."""
+def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str) -> dict:
+    """Render one viewing into ``outdir`` (:func:`simulator.viewing.job.render_viewing`:
+    ``left.mp4``, ``right.mp4``, ``epof.csv``, ``summary.json`` last) with the view of
+    ``opts["view"]`` (the manifest's view options, built by
+    :meth:`simulator.viewing.spec.ViewSpec.from_options` as ``vimsim render`` builds its
+    own); ``start_s``/``end_s``, ``review``, ``eyes``, ``audio`` as ``vimsim render``'s
+    options. ``opts["cpus"]`` llvmpipe threads unless ``LP_NUM_THREADS`` is set. Returns
+    ``id``, ``status``, ``seconds``, ``frames_per_s``."""
     t0, c0 = time.perf_counter(), time.process_time()
     rec = {"id": item["id"], "status": "ok", "frames_per_s": None}
     try:
         # Before Mesa loads (the first context of this process): one thread per declared CPU.
         os.environ.setdefault("LP_NUM_THREADS", str(int(opts.get("cpus", 1))))
-
+        view = ViewSpec.from_options(opts["view"])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
-        mitigation = Mitigation(
-            opts.get("mitigation", "grf"),
-            aperture_min_deg=opts.get("aperture_min_deg", APERTURE_MIN_DEG),
-            feather_deg=opts.get("feather_deg", FEATHER_DEG),
-            color=parse_color(opts.get("vignette_color", "0,0,0")),
-        )
-        g = None
-        if opts["grf"] == "on" and mitigation.grains:
-            g = GrfConfig(
-                grain_deg=grf["grain_deg"],
-                density=grf["density"],
-                inner_deg=grf["inner_deg"],
-                outer_deg=grf["outer_deg"],
-                seed=grf["seed"],
-                distance_m=grf["distance_m"],
-            )
-        config = RenderConfig(
-            eye_size=tuple(opts["eye_size"]),
-            hfov_deg=opts["hfov_deg"],
-            vfov_deg=opts["vfov_deg"],
-            grf=g,
-            mitigation=mitigation,
-        )
         s = render_viewing(
             video["path"],
             hp,
             outdir,
             grid=grid,
-            config=config,
-            opacity=opts["opacity"],
+            view=view,
             layout=video["layout"],
-            hold=opts["hold_last"],
             preset=opts["preset"],
             crf=opts["crf"],
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
@@ -289,9 +269,6 @@ def render_task(
             review=bool(opts.get("review")),
             eyes=opts.get("eyes"),
             audio=opts.get("audio", True),
-            # the study's EPOF rule and method, so the render's opacity is the EPOF CSV's
-            rule=_rule(opts["epof"]) if "epof" in opts else OpacityRule(),
-            method=opts["epof"]["method"] if "epof" in opts else "auto",
         )
         rec["frames_per_s"] = s.get("frames_per_s")
     except Exception as e:  # noqa: BLE001

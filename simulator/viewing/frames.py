@@ -19,7 +19,6 @@ import math
 import os
 import platform
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -28,11 +27,11 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.core.progress import Counter, Progress
 from simulator.media.video import iter_frames, probe
-from simulator.mitigation.grf import OpacityRule
-from simulator.render.eye import EyeRenderer, RenderConfig
+from simulator.render.eye import EyeRenderer
 from simulator.render.gl import create_context
 from simulator.sphere.geometry import head_rotation, split_eye
 from simulator.viewing.plan import grf_settings, plan_viewing
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_frames"]
 
@@ -213,21 +212,20 @@ def render_frames(
     at=None,
     every: float | None = None,
     grid=None,
-    config: RenderConfig = RenderConfig(),
-    opacity: float | Literal["auto"] = "auto",
+    view: ViewSpec | None = None,
     layout: str = "mono",
-    hold: bool = False,
-    rule: OpacityRule = OpacityRule(),
-    method: str = "auto",
     ctx=None,
     progress: Progress | None = None,
+    **view_fields,
 ) -> dict:
     """Render the eye views at chosen video times into ``outdir`` as PNGs + ``frames.json``.
 
     Parameters
     ----------
-    video, headpath, grid, config, opacity, layout, hold, rule, method : as
-        :func:`simulator.viewing.job.render_viewing` (``vimsim render``)
+    video, headpath, grid, layout : as :func:`simulator.viewing.job.render_viewing`
+        (``vimsim render``)
+    view : :class:`simulator.viewing.spec.ViewSpec` (what the eye sees), or its fields as
+        keywords (``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``)
     at : times in seconds (list, or ``"1,2.5"``); or ``every``: a step in seconds
     ctx : moderngl.Context, or None to create one
 
@@ -243,6 +241,8 @@ def render_frames(
     number and its time, pose in degrees, EPOF deg/s, opacity), renderer settings and
     versions. Nothing time-varying, so that two runs give the same file.
     """
+    view = ViewSpec.given(view, **view_fields)
+    config, opacity, rule, hold = view.config, view.opacity, view.rule, view.hold
     if config.mitigation.local and config.grains is not None:
         raise InputError(
             "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
@@ -252,12 +252,8 @@ def render_frames(
         video,
         headpath,
         grid=grid,
-        config=config,
-        opacity=opacity,
+        view=view,
         layout=layout,
-        hold=hold,
-        rule=rule,
-        method=method,
     )
     info = plan.info
     times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 from pathlib import Path
-from typing import Literal
 
 import numpy as np
 
@@ -17,14 +15,13 @@ from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.media.audio import audio_source
 from simulator.media.gridfile import require_field
 from simulator.media.lazyfield import take_rows
-from simulator.mitigation.grf import OpacityRule
 from simulator.mitigation.kinds import cell_opacity, visible_flow
-from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.render.video import render_video
 from simulator.traces.path import HeadPath
 from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.viewing.review import ReviewWriter
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["OUTDIR_FILES", "REVIEW_FILES", "VISIBLE_COLUMNS", "render_viewing"]
 
@@ -57,10 +54,8 @@ def render_viewing(
     outdir,
     *,
     grid=None,
-    config: RenderConfig = RenderConfig(),
-    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
+    view: ViewSpec | None = None,
     layout: str = "mono",
-    hold: bool = False,
     preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
@@ -68,13 +63,12 @@ def render_viewing(
     ctx=None,
     start_s: float | None = None,
     end_s: float | None = None,
-    rule: OpacityRule = OpacityRule(),
-    method: str = "auto",
     review: bool = False,
     eyes: str | None = None,
     right=None,
     audio: bool = True,
     threads: int | None = None,
+    **view_fields,
 ) -> dict:
     """Render one viewing into ``outdir``: what ``vimsim render`` (and the demo) runs.
 
@@ -89,16 +83,17 @@ def render_viewing(
     outdir : output folder (created)
     grid : :class:`simulator.media.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
-    config : eye size, the frustum, GRF (``config.grf=None``: no grains) and the
-        mitigation (``config.mitigation``: grf, vignette, grf+vignette, local-grf, none;
-        local-grf needs a grid with a sphere-mode field)
-    opacity : ``"auto"`` (from the EPOF, needs ``grid``), a constant in [0, 1], or the path
-        of an EPOF CSV (its ``opacity`` column; it must have a row for every rendered
-        frame, numbered as the video's frames); ignored when nothing is drawn and by
-        local-grf (each cell's own flow drives it)
-    rule : the opacity rule of ``"auto"`` (:class:`simulator.mitigation.grf.OpacityRule`; default
-        the paper's unsmoothed rule, ``vimsim render`` uses :func:`simulator.mitigation.grf.comfort_rule`)
-    method : EPOF method (``auto``, ``paper``, ``sphere``; :func:`compute_epof`)
+    view : :class:`simulator.viewing.spec.ViewSpec`, what the eye sees (or its fields as
+        keywords: ``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``):
+        ``config`` the eye size, the frustum, GRF (``config.grf=None``: no grains) and the
+        mitigation (grf, vignette, grf+vignette, local-grf, none; local-grf needs a grid
+        with a sphere-mode field); ``opacity`` ``"auto"`` (from the EPOF, needs ``grid``),
+        a constant in [0, 1], or the path of an EPOF CSV (its ``opacity`` column; a row for
+        every rendered frame, numbered as the video's frames), ignored when nothing is
+        drawn and by local-grf; ``rule`` the opacity rule of ``"auto"`` (default the
+        paper's unsmoothed rule; :meth:`ViewSpec.from_options` and ``vimsim render`` the
+        eased comfort rule); ``method`` the EPOF method; ``hold`` hold the head path's
+        first/last pose where it does not cover the video
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
         byte copy) and ``both`` for a stereo one
@@ -111,7 +106,6 @@ def render_viewing(
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
     layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
-    hold : hold the head path's first/last pose where it does not cover the video
     preset, crf : x264 speed preset and quality
     threads : the render's CPU budget (:func:`simulator.render.render_video`; None: no
         bound; a study passes its task's declared CPUs, 1: one core, no pipeline threads)
@@ -134,6 +128,8 @@ def render_viewing(
     thresholds, EPOF and opacity percentiles, timings (seconds), frames/s, GL renderer.
     """
     t0 = time.perf_counter()
+    view = ViewSpec.given(view, **view_fields)
+    config, rule, opacity = view.config, view.rule, view.opacity
     w, h = config.eye_size
     hfov, vfov = config.hfov_deg, config.vfov_deg
     grf = config.grains
@@ -151,14 +147,10 @@ def render_viewing(
         video,
         headpath,
         grid=grid,
-        config=config,
-        opacity=opacity,
+        view=view,
         layout=layout,
-        hold=hold,
         start_s=start_s,
         end_s=end_s,
-        rule=rule,
-        method=method,
         right=right,
     )
     info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
@@ -19,12 +18,12 @@ from simulator.core.errors import InputError
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.media.video import MediaInfo, probe
-from simulator.mitigation.grf import OpacityRule, grain_count
-from simulator.render.eye import RenderConfig
+from simulator.mitigation.grf import grain_count
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 from simulator.traces.readers import load_headpath
 from simulator.viewing.inputs import check_right_eye, csv_opacity, frame_range
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
 
@@ -91,27 +90,27 @@ def plan_viewing(
     headpath,
     *,
     grid=None,
-    config: RenderConfig = RenderConfig(),
-    opacity: float | str | os.PathLike | Literal["auto"] = "auto",
+    view: ViewSpec | None = None,
     layout: str = "mono",
-    hold: bool = False,
     start_s: float | None = None,
     end_s: float | None = None,
-    rule: OpacityRule = OpacityRule(),
-    method: str = "auto",
     right=None,
+    **view_fields,
 ) -> ViewingPlan:
     """Check a viewing's inputs and work out what every frame shows (no GL, no output).
 
     What :func:`render_viewing` renders and ``vimsim frames`` renders at chosen moments:
-    the head pose at each frame's time ``i / fps`` and, with ``config.grf``, the opacity
-    (``"auto"``: from the EPOF of ``grid`` through ``rule``, over ``config.frustum``; an
-    EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
+    the head pose at each frame's time ``i / fps`` and, when something is drawn, the
+    opacity of ``view`` (a :class:`simulator.viewing.spec.ViewSpec`, or its fields as
+    keywords; ``"auto"``: from the EPOF of ``grid`` through ``view.rule``, over its
+    frustum; an EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
     it to a time range (:func:`simulator.viewing.inputs.frame_range`). ``right``: the right eye's
     equirect file (``video`` is then the left eye's; both mono, same size, frame rate and
     frame count). Raises InputError for a bad video, right-eye file, head path, grid,
     range or opacity.
     """
+    view = ViewSpec.given(view, **view_fields)
+    config, opacity, rule, hold = view.config, view.opacity, view.rule, view.hold
     grf = config.grains
     mit = config.mitigation
     drawn = grf is not None or mit.vignette
@@ -183,7 +182,7 @@ def plan_viewing(
             frustum=epof_frustum,
             hold=True if ranged else hold,
             rule=rule,
-            method=method,
+            method=view.method,
             frames=(max(0, f0 - warm), f1) if ranged else None,
         )
         epof_method = res.meta["method"]

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 import pytest
 
+from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.mitigation.grf import GrfConfig
 from simulator.mitigation.kinds import Mitigation, cell_opacity, parse_color, visible_flow
@@ -62,6 +63,35 @@ def test_aperture_must_lie_inside_the_view():
     RenderConfig(hfov_deg=107, vfov_deg=107, mitigation=Mitigation("vignette", 106.0))
     # grains only: the aperture is not used, so not checked
     RenderConfig(hfov_deg=60, vfov_deg=60, mitigation=Mitigation("grf", 90.0))
+
+
+def test_kinds_table_is_the_one_definition(monkeypatch):
+    """Every kind is one entry of KINDS, in the CLI's order; its flags, shader defines and
+    visible-flow rule come from the entry alone: a new kind added to the table is drawn
+    and measured with no other change."""
+    from simulator.core.choices import MITIGATION_HELP
+    from simulator.mitigation import kinds as K
+
+    assert tuple(K.KINDS) == MITIGATIONS == tuple(MITIGATION_HELP)
+    assert K.SHADER_DEFINES == ("LOCAL_GRF", "VIGNETTE")
+    assert Mitigation("local-grf").shader_defines(grains=True) == {"LOCAL_GRF": 1, "VIGNETTE": 0}
+    assert Mitigation("local-grf").shader_defines(grains=False) == {"LOCAL_GRF": 0, "VIGNETTE": 0}
+    assert Mitigation("grf+vignette").shader_defines(grains=True)["VIGNETTE"] == 1
+    new = K.Kind("local-grf+vignette", "both", lambda r: r.grains(r.cell_grain_alpha()) * r.vignette(),
+                 grains=True, vignette=True, local=True, defines=("VIGNETTE",),
+                 grain_defines=("LOCAL_GRF",))  # fmt: skip
+    monkeypatch.setitem(K.KINDS, new.name, new)
+    m = Mitigation(new.name)
+    assert m.grains and m.vignette and m.local
+    assert m.shader_defines(grains=True) == {"LOCAL_GRF": 1, "VIGNETTE": 1}
+    field = _smooth_field()
+    co = cell_opacity(field, (20.0, 60.0))
+    fr, views = Frustum.symmetric(FOV, FOV), np.zeros((1, 3))
+    kw = {"grf": GrfConfig(), "field_dps": field, "cell_deg": 4.0, "cell_op": co}
+    both = visible_flow(m, fr, views, [0.7], [50.0], **kw)
+    local = visible_flow(Mitigation("local-grf"), fr, views, [0.7], [50.0], **kw)
+    vig = visible_flow(Mitigation("vignette"), fr, views, [0.7], [50.0], **kw)
+    assert both.blocked[0] > max(local.blocked[0], vig.blocked[0]) > 0
 
 
 def test_parse_color():
@@ -238,7 +268,8 @@ def _smooth_field(cell: float = 4.0) -> np.ndarray:
     return (40 + 30 * np.sin(LON) * np.cos(LAT) + 10 * np.sin(LAT)).astype(np.float32)[None]
 
 
-@pytest.mark.parametrize("kind", ["grf", "vignette", "grf+vignette", "local-grf", "none"])
+@pytest.mark.gl
+@pytest.mark.parametrize("kind", MITIGATIONS)  # every kind of the table
 def test_visible_flow_matches_brute_force_on_rendered_frames(ctx, kind):
     """Library figures (ray samples + grain discs on the CPU) against every pixel of
     rendered white frames: visibility = pixel / 255, each pixel's flow from its field cell."""

@@ -183,3 +183,19 @@ def test_dry_run_reports_a_trace_that_does_not_cover_its_video(base, tmp_path, c
     cap = capsys.readouterr()
     assert "error: viewing clip-short: head path" in cap.err and "ends at 0.500 s" in cap.err
     assert "1 problems" in cap.out and not (tmp_path / "o").exists()
+
+
+def test_per_viewing_view_options_go_through_the_one_builder(base):
+    from simulator.viewing.spec import ViewSpec
+
+    v = MULTI.format(users="1-2", render="true") + 'headset = "quest-2"\ngrain_size = 3.0\n'
+    m = load_manifest(_manifest(base, v, "fov = 90\ncrf = 30"))
+    r = m.viewings[0].render_opts
+    assert r["crf"] == 30 and "fov" not in r["view"] and r["view"]["headset"] == "quest-2"
+    spec = ViewSpec.from_options(r["view"])
+    assert spec.frustum == ViewSpec.from_options({**r["view"], "fov": None}).frustum
+    assert spec.grains.grain_deg == 3.0
+    assert m.render["view"]["fov"] == 90  # the study's own [render] is unchanged
+    bad = MULTI.format(users="1", render="true") + "density = 7\n"
+    with pytest.raises(InputError, match=r"\[\[viewings\]\] #1 .*density"):
+        load_manifest(_manifest(base, bad))

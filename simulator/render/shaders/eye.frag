@@ -27,7 +27,7 @@
 //                  video; 0: level 0, bilinear (what that rule gives there anyway).
 //   GRAIN_PARALLAX grains at a finite distance (eye offset); 0: at infinity, the ray
 //                  from the eye is the view ray and the video's lon/lat are reused.
-//   LOCAL_GRF      local-grf (simulator/mitigation.py): the grain alpha follows the flow
+//   LOCAL_GRF      local-grf (simulator/mitigation/kinds.py): the grain alpha follows the flow
 //                  of the ray's field cell (u_cell_opacity, nearest) instead of u_opacity.
 //   VIGNETTE       the head-fixed tunneling vignette: alpha linear in eccentricity,
 //                  clamp((ecc - radius) / feather + 1/2, 0, 1), in u_vignette_color.
