@@ -6,7 +6,6 @@ Parses the options; the work is :func:`simulator.viewing.job.render_viewing`.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from simulator.commands._opacity import add_opacity_arguments
 from simulator.commands._types import (
@@ -301,7 +300,6 @@ def run(args: argparse.Namespace) -> int:
     sound = f"audio {a['codec']} {a['mode']}" if a["copied"] else f"silent: {a['why']}"
     print(
         f"vimsim render: {s['frames_written']} frames, eye {w}x{h} -> {s['outdir']}/"
-        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s; {sound})",
-        file=sys.stderr,
-    )
+        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s; {sound})"
+    )  # the result line: stdout
     return 0

@@ -51,7 +51,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--cache-dir",
         default=None,
         metavar="DIR",
-        help="grid cache (default: $VIMSIM_CACHE, else $XDG_CACHE_HOME/vimsim or ~/.cache/vimsim)",
+        help="grid cache (default: $VIMSIM_CACHE_DIR, else $XDG_CACHE_HOME/vimsim or "
+        "~/.cache/vimsim; the old $VIMSIM_CACHE still works, deprecated)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
@@ -108,6 +109,7 @@ def run(args: argparse.Namespace) -> int:
     """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
     from tqdm import tqdm
 
+    from simulator.commands._progress import progress_stream
     from simulator.study import load_manifest, run_study
     from simulator.study.executors import parse_executor
 
@@ -116,13 +118,13 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args, manifest)
     bars: list = []  # made on the first report: nothing is drawn before the work starts
-    show = not args.no_progress and sys.stderr.isatty()
+    stream = None if args.no_progress else progress_stream()  # a terminal only
 
     def progress(done: int, failed: int, total: int) -> None:
-        if not show:
+        if stream is None:
             return
         if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="study", file=sys.stderr,
+            bars.append(tqdm(total=total, unit="task", desc="study", file=stream,
                              dynamic_ncols=True))  # fmt: skip
         bar = bars[0]
         bar.total = total

@@ -61,7 +61,7 @@ class VideoSpec:
     path: Path
     layout: str = "mono"
     eye: str = "left"
-    method: str = "paper"
+    method: str = "sphere"
     grid: str = "default"
     hfov_deg: float = 107.0
     vfov_deg: float = 107.0
@@ -157,7 +157,8 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
         except InputError as err:
             e.fail(str(err))
         h, v = e.fov((107.0, 107.0))
-        method = e.get("method", (str,), "paper", choices=("paper", "sphere"))
+        # sphere by default, as vimsim preprocess; "paper" is the paper's method
+        method = e.get("method", (str,), "sphere", choices=("paper", "sphere"))
         cell = e.number("cell", 4.0, lo=0.0, lo_open=True)
         if method == "sphere" and abs(180.0 / cell - round(180.0 / cell)) > 1e-9:
             e.fail(f"cell = {cell}: expected degrees dividing 180, e.g. 4")

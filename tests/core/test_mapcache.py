@@ -137,7 +137,7 @@ def _noise_video(path, n=3, size=(128, 64)):
 
 def test_preprocess_no_cache_flag(tmp_path, cdir):
     vid = _noise_video(tmp_path / "v.mp4")
-    args = ["preprocess", str(vid), "--window-size", "16", "--no-progress"]
+    args = ["preprocess", str(vid), "--window-size", "16", "--method", "paper", "--no-progress"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main([*args, "-o", str(tmp_path / "a.npz"), "--no-cache"]) == 0
