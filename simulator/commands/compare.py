@@ -72,6 +72,8 @@ def run(args: argparse.Namespace) -> int:
     rep = compare_dirs(
         args.frames_dir, args.golden_dir, psnr_db=psnr, max_diff=mad, report_dir=args.report
     )
+    for line in rep.changes:  # what changed, before the pixel figures
+        print(f"vimsim compare: {line}")
     for s in rep.failures:
         print(f"vimsim compare: FAIL {s.why(psnr, mad)}", file=sys.stderr)
     worst = min(s.psnr_db for s in rep.scores)
