@@ -163,6 +163,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib import patheffects
 
     folder.mkdir(parents=True, exist_ok=True)
     grid = _grid_map(grid_path)
@@ -212,10 +213,14 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         y = (a[::k, 2] - lo_yaw) % 360.0 + lo_yaw  # the map's yaw range (wraps at the seam)
         ax.plot(a[::k, 1], y, ".", color="cyan", ms=1, alpha=0.3)
     ax.set_ylim(lo_yaw, hi_yaw)
+    # Markers readable on any colour of the map: white with a black outline (and a black
+    # disc behind the number), from black through magma's bright yellow.
+    halo = [patheffects.withStroke(linewidth=3, foreground="black")]
     for mo in moments:
-        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="none", mec="white", ms=13, mew=1.2)
+        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="black", mec="white", ms=14, mew=1.5,
+                alpha=0.9, path_effects=halo)  # fmt: skip
         ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=8,
-                    ha="center", va="center", weight="bold")  # fmt: skip
+                    ha="center", va="center", weight="bold", path_effects=halo)  # fmt: skip
     ax.set_xlabel("time (s)")
     ax.set_ylabel("yaw (deg, + right)")
     ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots)")

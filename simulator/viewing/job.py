@@ -221,6 +221,8 @@ def render_viewing(
             vfov_deg=vfov,
             fps=info.fps,
             audio=aud,
+            thresholds_dps=thresholds,
+            opacity_used=not mit.local,
         )
     try:
         result = render_video(
