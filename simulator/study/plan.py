@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import time
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,7 +26,17 @@ from simulator.media.video import probe
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
 from simulator.traces.readers import TraceFile, load_headpath
 
-__all__ = ["Plan", "check_plan", "default_cache_dir", "plan_study", "viewing_key"]
+__all__ = [
+    "Plan",
+    "base_row",
+    "check_outputs",
+    "check_plan",
+    "default_cache_dir",
+    "dry_run",
+    "plan_study",
+    "study_folders",
+    "viewing_key",
+]
 
 
 def default_cache_dir() -> Path:
@@ -156,3 +167,74 @@ def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
         except InputError as e:
             plan.problems.append(f"viewing {w.id}: {' '.join(str(e).split())}")
     return found
+
+
+def check_outputs(m: Manifest, out: Path, cache: Path) -> None:
+    """Refuse an OUTDIR or cache that would overwrite an input (or is one)."""
+    inputs = {p.resolve() for p in m.input_files()}
+    for d, what in ((out, "output folder"), (cache, "cache folder")):
+        r = d.resolve()
+        if r in inputs or (d.exists() and not d.is_dir()):
+            raise InputError(f"{d}: {what} is a file (an input?); give a folder")
+    roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
+    for p in inputs:
+        if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
+            raise InputError(
+                f"{p}: is an input and would be overwritten by the study; choose another -o"
+            )
+        if any(p.is_relative_to(r) for r in roots):
+            raise InputError(
+                f"{p}: is an input inside the study's output folders; choose another -o"
+            )
+
+
+def study_folders(manifest: Manifest, outdir, cache_dir) -> tuple[Path, Path]:
+    # Absolute: workers (Ray's especially) need not share the driver's working directory.
+    out = Path(outdir).absolute()
+    cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
+    check_outputs(manifest, out, cache)
+    return out, cache
+
+
+def dry_run(manifest: Manifest, outdir, *, cache_dir=None, resume: bool = True) -> dict:
+    """What ``run_study`` would do, checked and planned; writes nothing.
+
+    Returns ``videos`` (grid, ``hit``/``miss``, whether it would be preprocessed),
+    ``viewings`` (id, video, trace, user, condition, ``compute`` or ``unchanged``,
+    render range), ``tasks`` (the count the run's progress bar would show),
+    ``problems`` (one line each, naming the viewing or video: the run would fail them)
+    and ``warnings`` (``{viewing: [lines]}``, the trace readers' warnings)."""
+    t0 = time.perf_counter()
+    out, cache = study_folders(manifest, outdir, cache_dir)
+    plan = plan_study(manifest, out, cache, resume)
+    warns = check_plan(manifest, plan)
+    todo = {w.id for w in plan.todo}
+    need = {w.video for w in plan.todo}
+    videos = {
+        v.id: {"grid": str(plan.grids[v.id]), "cache": "hit" if plan.hits[v.id] else "miss",
+               "preprocess": v.id in need and not plan.hits[v.id], "method": v.method}
+        for v in manifest.videos
+    }  # fmt: skip
+    viewings = []
+    for w in manifest.viewings:
+        r = w.render_opts or {}
+        viewings.append({
+            **base_row(w), "action": "compute" if w.id in todo else "unchanged",
+            "render": w.render, "start_s": r.get("start_s"), "end_s": r.get("end_s"),
+            "review": bool(r.get("review")),
+        })  # fmt: skip
+    return {"videos": videos, "viewings": viewings, "tasks": plan.n_tasks,
+            "problems": plan.problems, "warnings": warns, "cache": str(cache),
+            "seconds": time.perf_counter() - t0}  # fmt: skip
+
+
+def base_row(w: ViewingSpec) -> dict:
+    """The identifying cells of a viewing's row in ``viewings.csv``."""
+    return {
+        "viewing": w.id,
+        "participant": w.participant,
+        "condition": w.condition,
+        "video": w.video,
+        "trace": str(w.trace),
+        "user": "" if w.user is None else w.user,
+    }

@@ -27,7 +27,14 @@ from simulator.core.fileio import check_output_dir
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
-from simulator.study.plan import Plan, check_plan, default_cache_dir, plan_study
+from simulator.study.plan import (
+    Plan,
+    base_row,
+    default_cache_dir,
+    dry_run,
+    plan_study,
+    study_folders,
+)
 
 __all__ = ["VIEWING_COLUMNS", "default_cache_dir", "dry_run", "run_study"]
 
@@ -52,25 +59,6 @@ def _item(w: ViewingSpec) -> dict:
             "plot": w.plot}  # fmt: skip
 
 
-def _check_outputs(m: Manifest, out: Path, cache: Path) -> None:
-    """Refuse an OUTDIR or cache that would overwrite an input (or is one)."""
-    inputs = {p.resolve() for p in m.input_files()}
-    for d, what in ((out, "output folder"), (cache, "cache folder")):
-        r = d.resolve()
-        if r in inputs or (d.exists() and not d.is_dir()):
-            raise InputError(f"{d}: {what} is a file (an input?); give a folder")
-    roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
-    for p in inputs:
-        if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
-            raise InputError(
-                f"{p}: is an input and would be overwritten by the study; choose another -o"
-            )
-        if any(p.is_relative_to(r) for r in roots):
-            raise InputError(
-                f"{p}: is an input inside the study's output folders; choose another -o"
-            )
-
-
 #: Runs of a task whose worker process died before it is failed (a task's own errors
 #: are its result's status, never retried).
 TASK_ATTEMPTS = 2
@@ -82,46 +70,6 @@ def _chunks(items: list, workers: int) -> list[list]:
     n = max(1, min(len(items), workers * 3))
     size = math.ceil(len(items) / n)
     return [items[i : i + size] for i in range(0, len(items), size)]
-
-
-def _folders(manifest: Manifest, outdir, cache_dir) -> tuple[Path, Path]:
-    # Absolute: workers (Ray's especially) need not share the driver's working directory.
-    out = Path(outdir).absolute()
-    cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
-    _check_outputs(manifest, out, cache)
-    return out, cache
-
-
-def dry_run(manifest: Manifest, outdir, *, cache_dir=None, resume: bool = True) -> dict:
-    """What ``run_study`` would do, checked and planned; writes nothing.
-
-    Returns ``videos`` (grid, ``hit``/``miss``, whether it would be preprocessed),
-    ``viewings`` (id, video, trace, user, condition, ``compute`` or ``unchanged``,
-    render range), ``tasks`` (the count the run's progress bar would show),
-    ``problems`` (one line each, naming the viewing or video: the run would fail them)
-    and ``warnings`` (``{viewing: [lines]}``, the trace readers' warnings)."""
-    t0 = time.perf_counter()
-    out, cache = _folders(manifest, outdir, cache_dir)
-    plan = plan_study(manifest, out, cache, resume)
-    warns = check_plan(manifest, plan)
-    todo = {w.id for w in plan.todo}
-    need = {w.video for w in plan.todo}
-    videos = {
-        v.id: {"grid": str(plan.grids[v.id]), "cache": "hit" if plan.hits[v.id] else "miss",
-               "preprocess": v.id in need and not plan.hits[v.id], "method": v.method}
-        for v in manifest.videos
-    }  # fmt: skip
-    viewings = []
-    for w in manifest.viewings:
-        r = w.render_opts or {}
-        viewings.append({
-            **_base_row(w), "action": "compute" if w.id in todo else "unchanged",
-            "render": w.render, "start_s": r.get("start_s"), "end_s": r.get("end_s"),
-            "review": bool(r.get("review")),
-        })  # fmt: skip
-    return {"videos": videos, "viewings": viewings, "tasks": plan.n_tasks,
-            "problems": plan.problems, "warnings": warns, "cache": str(cache),
-            "seconds": time.perf_counter() - t0}  # fmt: skip
 
 
 def run_study(
@@ -144,7 +92,7 @@ def run_study(
     (output folder, executor, Ray address).
     """
     t_start, c_start = time.perf_counter(), time.process_time()
-    out, cache = _folders(manifest, outdir, cache_dir)
+    out, cache = study_folders(manifest, outdir, cache_dir)
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
         return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start))
@@ -177,7 +125,7 @@ def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
     for w in manifest.viewings:
         if w.id in plan.unchanged:
             prev = plan.unchanged[w.id]
-            rows[w.id] = {**_base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
+            rows[w.id] = {**base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
                           "status": "ok", "warnings": prev.get("warnings", ""),
                           "resumed": True}  # fmt: skip
     timings["plan"] = time.perf_counter() - t0
@@ -363,7 +311,7 @@ class _Scheduler:
         if w.id not in self.results or (w.render and w.id not in self.renders):
             return
         r = self.results[w.id]
-        row = {**_base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
+        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
         status = r["status"]
         if status == "ok" and w.render and self.renders[w.id]["status"] != "ok":
             status = f"render: {self.renders[w.id]['status']}"
@@ -375,14 +323,3 @@ class _Scheduler:
             tasks.write_json(state, {"key": self.plan.keys[w.id], "row": row})
         else:
             state.unlink(missing_ok=True)
-
-
-def _base_row(w: ViewingSpec) -> dict:
-    return {
-        "viewing": w.id,
-        "participant": w.participant,
-        "condition": w.condition,
-        "video": w.video,
-        "trace": str(w.trace),
-        "user": "" if w.user is None else w.user,
-    }
