@@ -142,7 +142,7 @@ def main(argv=None) -> int:
             fast = be in (backends[0], "sphere")
             n = cfg.n_frames if fast else min(cfg.n_frames, args.slow_frames)
             t0 = time.perf_counter()
-            if be == "sphere":  # issue 7: field on the sphere (DIS), windows derived from it
+            if be == "sphere":  # sphere mode: field on the sphere (DIS), windows derived from it
                 from simulator.preprocess import preprocess_sphere
 
                 preprocess_sphere(vid, out, grid=grid, progress=False, end_s=n / cfg.fps)

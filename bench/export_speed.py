@@ -1,4 +1,4 @@
-"""Cost of one ``Epof`` call of the exported C# runtime in Mono, with Python's beside it (issue 17).
+"""Cost of one ``Epof`` call of the exported C# runtime in Mono, with Python's beside it.
 
 Goal: one call at most 50 us in paper mode (264 windows) and 20 us from a sphere-mode field.
 Data: the real 360 video three.js ``pano.mp4`` (188 frames, preprocessed in sphere mode once

@@ -10,7 +10,7 @@ same head path and settings (GRF on at opacity 0.8, mono), wall clock, set-up in
 * frames: :func:`simulator.viewing.frames.render_frames` at ``--moments`` times spread over the
   video (seek-decoded, rendered, PNG).
 
-Prints both in seconds and the ratio frames / full; the goal (issue 20): at most 0.10.
+Prints both in seconds and the ratio frames / full; the goal: at most 0.10.
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Peak memory of the long-running commands against video length (streaming check).
 
 Usage: .venv/bin/python bench/memory.py [--frames 60] [--factor 8] [--only sphere]
-(issue 13 quotes ``--frames 300 --factor 10``: 300 and 3000 frames)
+(docs/reliability.md quotes ``--frames 300 --factor 10``: 300 and 3000 frames)
 
 Makes two 1024x512 H.264 clips of the same content (petra.jpg panning), one ``--factor``
 times longer than the other, and runs each command on both in a fresh process:

@@ -1,4 +1,4 @@
-"""Accuracy of ``vimsim preprocess`` against analytic truth (issue 3).
+"""Accuracy of ``vimsim preprocess`` against analytic truth.
 
 A real panorama (vrview ``petra.jpg``, 2048x1024) is rotated about a known axis at
 omega deg/s and encoded as H.264 (crf 18) at 30 fps. Under that rotation a scene point at

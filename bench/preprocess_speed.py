@@ -1,8 +1,8 @@
 """Throughput of ``vimsim preprocess`` on a 2048x1024 H.264 video, default grid, as a
-ratio to the DIS-only floor measured in the same run (issues 3 and 19).
+ratio to the DIS-only floor measured in the same run.
 
 The floor: OpenCV DIS alone on the 264 pre-extracted window pairs per frame, on a pool of
-``--threads`` threads (default 2), nothing else running in this process: as in issue 19
+``--threads`` threads (default 2), nothing else running in this process: as docs/paper_speed.md measured
 (the backend's batch call, which also fills an (N, h, w, 2) array), and strict (bare
 ``DISOpticalFlow.calc`` per pair, nothing else). Then fresh processes run
 ``preprocess_video``, each with its own empty map cache folder (``VIMSIM_CACHE_DIR``):
@@ -11,7 +11,7 @@ one on 3 frames (cold cache: the maps are built and stored), then one on the who
 the three). Through the ``on_frame`` hook each reports the time from its launch to the
 first grid row (start-up: imports, probe, hash, maps, the first two frames) and the
 steady rate; the warm process's whole wall time gives the end-to-end rate. Goals
-(issue 19): steady / floor >= 0.75, whole / floor >= 0.6, first row within 2 s of launch
+(docs/paper_speed.md): steady / floor >= 0.75, whole / floor >= 0.6, first row within 2 s of launch
 (warm cache) and 5 s (cold). Then a start-up breakdown and a per-stage CPU profile (one
 caller thread).
 

@@ -12,7 +12,7 @@ reference against v360. Both sides put equirect pixel k's centre at k + 0.5
 (SPEC.md): measured, a half-texel shift of ours costs ~8 dB against v360.
 Where the eye's pixels are larger than the panorama's texels the renderer prefilters
 (mipmaps) and v360 does not (it aliases): those rows are marked "minified".
-Goal (issue 5): PSNR >= 35 dB.
+Goal: PSNR >= 35 dB.
 """
 
 from __future__ import annotations

@@ -12,7 +12,7 @@ path (yaw sweep + pitch sine), wall clock, decode and encode included on both si
   ``veryfast`` crf 18 (the issue's anchor: about 1.7 frames/s for one 1440x1600 eye).
 
 Prints both in frames/s (a frame = one video frame: two eyes for ours, one for v360), the
-ratio, and the goal (issue 5): ours >= 3x v360's frames/s. The machine is shared: both
+ratio, and the goal: ours >= 3x v360's frames/s. The machine is shared: both
 are measured in the same run, and CPU seconds are printed beside wall seconds.
 """
 
@@ -37,7 +37,7 @@ from simulator.testing.reference import ffmpeg_exe
 
 REAL = REPO.parent / "shared" / "data" / "real" / "equirect"
 GOAL_RATIO = 3.0
-ANCHOR_V360_FPS = 1.7  # issue 5: one 1440x1600 eye, measured on the project machine
+ANCHOR_V360_FPS = 1.7  # one 1440x1600 eye, measured on the project machine
 
 
 def make_video(path: Path, n: int, fps: int = 30, *, stereo: bool = False) -> None:

@@ -1,4 +1,4 @@
-"""Accuracy of sphere mode (issue 7): against analytic truth, against paper mode, and
+"""Accuracy of sphere mode: against analytic truth, against paper mode, and
 across FOVs (a field made once, windows/EPOF asked for at another FOV).
 
 Same run, same clips, same head path:

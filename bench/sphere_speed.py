@@ -1,4 +1,4 @@
-"""Throughput of sphere mode vs paper mode on a 2048x1024 H.264 video (issue 7), same run.
+"""Throughput of sphere mode vs paper mode on a 2048x1024 H.264 video, same run.
 
 Goal: sphere mode >= 60 frames/s (faster than real time for 60 fps video) and >= 20x the
 paper-mode rate measured in the same run (264 windows of 256x256 px with DIS per frame).

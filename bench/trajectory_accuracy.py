@@ -1,4 +1,4 @@
-"""Trajectory scene (issue 18): truth vs estimate, equality with the rotate scene, and
+"""Trajectory scene: truth vs estimate, equality with the rotate scene, and
 render speed against the coaster scene, all in one run.
 
 1. Truth vs estimate: camera CSVs for a walk (1.4 m/s with head bob and sway, sampled

@@ -8,7 +8,7 @@ Per panorama (each eye of stereo ones) x orientation: PSNR (dB, RGB) and the med
 deg v360 looks at yaw 0 of the panorama rolled by whole columns (v360 drifts with yaw;
 the drift is measured and printed first). Rows whose view contains a pole are reported
 separately (neither side prefilters; aliasing there makes PSNR content-dependent).
-Goals (issue 2): median PSNR >= 40 dB, median displacement <= 0.1 px.
+Goals: median PSNR >= 40 dB, median displacement <= 0.1 px.
 """
 
 from __future__ import annotations

@@ -34,6 +34,7 @@ from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.core.progress import Progress
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.media.gridfile import load_grid
+from simulator.media.source import Source
 from simulator.mitigation.grf import GrfConfig
 from simulator.preprocess.paper import preprocess_video
 from simulator.render.eye import RenderConfig
@@ -44,6 +45,7 @@ from simulator.synth.scenes import SynthConfig, make_scene, window_truth_dps
 from simulator.traces.path import save_headpath_csv
 from simulator.traces.path import synth as synth_headpath
 from simulator.viewing.job import render_viewing
+from simulator.viewing.spec import ViewSpec
 
 __all__ = ["DemoConfig", "run_demo"]
 
@@ -171,6 +173,129 @@ def _plot_heatmaps(
     plt.close(fig)
 
 
+def _exact_epof(scene, time_s, res) -> np.ndarray:
+    """The viewport's exact mean flow (deg/s) per frame of ``res``: the scene's analytic
+    speed over 32 x 32 rays of the 107 deg view, solid-angle weighted (the truth)."""
+    dirs, sa = perspective_rays((32, 32), 107.0, 107.0)
+    d = dirs.reshape(-1, 3).astype(np.float64)
+    w = sa.ravel().astype(np.float64)
+    return np.array(
+        [
+            np.sum(
+                scene.speed_dps(
+                    float(time_s[k]),
+                    head_rotation(res.yaw_deg[k], res.pitch_deg[k], res.roll_deg[k]).apply(d),
+                    "left",
+                )
+                * w
+            )
+            / w.sum()
+            for k in range(len(res.frame))
+        ]
+    )
+
+
+def _render(cfg: DemoConfig, source, hpath, outdir, grid, progress) -> str | None:
+    """Render the per-eye videos with GRFs (what ``vimsim render`` runs); the error line
+    of a failure (e.g. no EGL), which the summary and README report, else None."""
+    view = ViewSpec(RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)))
+    try:
+        render_viewing(source, hpath, outdir, grid=grid, view=view, progress=progress)
+    except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands
+        error = f"{type(e).__name__}: {e}"
+        warnings.warn(f"render failed: {error}", stacklevel=3)
+        return error
+    return None
+
+
+def _accuracy(grid, truth_win, res, res_truth_grid, exact) -> dict:
+    """Relative errors of the window POFs and the EPOF against the analytic truth."""
+    est = grid.pof_dps[1:].astype(np.float64)
+    rel = np.abs(est - truth_win[1:]) / truth_win[1:]
+    e_rel = np.abs(res.epof_dps[1:] - res_truth_grid.epof_dps[1:]) / res_truth_grid.epof_dps[1:]
+    x_rel = np.abs(res.epof_dps[1:] - exact[1:]) / exact[1:]
+    return {
+        "window_pof_rel_error_median": float(np.median(rel)),
+        "window_pof_rel_error_p90": float(np.percentile(rel, 90)),
+        "epof_rel_error_vs_truth_grid_median": float(np.median(e_rel)),
+        "epof_rel_error_vs_exact_viewport_median": float(np.median(x_rel)),
+    }
+
+
+def _summary(cfg, scfg, grid_def, grid, res, accuracy, render_error, log, t_all, files) -> dict:
+    """The demo's ``summary.json``."""
+    summary = {
+        "what": "vimsim end-to-end demo: synthetic stereo coaster clip -> POF matrix -> EPOF/opacity -> per-eye GRF videos",
+        "seed": cfg.seed,
+        "clip": {
+            "scene": "coaster",
+            "layout": "top-bottom",
+            "eye_size": list(cfg.eye_size),
+            "fps": cfg.fps,
+            "frames": scfg.n_frames,
+            "seconds": cfg.seconds,
+        },
+        "grid": {
+            "preset": "default",
+            "windows": list(grid_def.shape),
+            "window_px": cfg.window,
+            "fov_deg": grid_def.hfov_deg,
+            "flow": grid.meta.get("flow"),
+        },
+        "epof_dps": {"median": float(np.median(res.epof_dps)), "max": float(np.max(res.epof_dps))},
+        "opacity_thresholds_dps": [float(v) for v in res.thresholds_dps],
+        "accuracy_vs_truth": accuracy,
+        "render": {
+            "ok": render_error is None,
+            "skipped": not cfg.render,
+            "error": render_error,
+            "eye_size": list(cfg.render_size),
+        },
+        "timings_s": {name: round(dt, 2) for name, dt in log}
+        | {"total": round(time.perf_counter() - t_all, 2)},
+        "files": files,
+    }
+    return summary
+
+
+def _readme(summary: dict, files: dict, output, cfg: DemoConfig, render_error) -> list[str]:
+    """The lines of the demo's ``README.txt``."""
+    lines = [
+        "vimsim demo",
+        "===========",
+        "",
+        "The whole pipeline on an embedded default: a synthetic stereo 360 coaster clip with",
+        "known motion, a scripted look-around viewing, the POF matrix of the clip, the EPOF",
+        "and GRF opacity of the viewing, and what each eye saw with the granulated rest frame.",
+        f"Regenerate: vimsim demo -o {output} --seed {cfg.seed}   (deterministic given --seed)",
+        "",
+        "Files",
+        "-----",
+    ]
+    lines += [f"{k}\n    {v}" for k, v in files.items()]
+    acc = summary["accuracy_vs_truth"]
+    lines += [
+        "",
+        "Accuracy against the analytic truth (this clip)",
+        "-----------------------------------------------",
+        f"window POF relative error: median {acc['window_pof_rel_error_median']:.3f}, 90th percentile {acc['window_pof_rel_error_p90']:.3f}",
+        f"EPOF relative error vs EPOF of the truth grid: median {acc['epof_rel_error_vs_truth_grid_median']:.3f}",
+        f"EPOF relative error vs exact viewport truth: median {acc['epof_rel_error_vs_exact_viewport_median']:.3f}",
+        "(the latter includes the paper's window averaging; see docs/accuracy.md)",
+        "",
+        "Render: "
+        + (
+            "skipped"
+            if not cfg.render
+            else "ok"
+            if render_error is None
+            else "FAILED: " + render_error
+        ),
+        f"Total time: {summary['timings_s']['total']:.1f} s",
+    ]
+    return lines
+
+
 def run_demo(
     output: str | os.PathLike = "outputs/demo",
     cfg: DemoConfig = DemoConfig(),
@@ -224,9 +349,8 @@ def run_demo(
     # 3. Preprocess the left eye.
     grid_def = grid_preset("default", size=(cfg.window, cfg.window))
     gpath = out / "grid.npz"
-    preprocess_video(
-        video, gpath, grid=grid_def, flow="dis", layout="top-bottom", eye="left", progress=progress
-    )
+    source = Source.open(video, layout="top-bottom", eye="left")
+    preprocess_video(source, gpath, grid=grid_def, flow="dis", progress=progress)
     grid = load_grid(gpath)
     t0 = _step(
         log,
@@ -242,43 +366,13 @@ def run_demo(
     scene = make_scene(scfg)
     truth_win = window_truth_dps(scene, grid_def, tr.time_s, "left", rays=16)
     res_truth_grid = compute_epof(replace(grid, pof_dps=truth_win.astype(np.float32)), hp)
-    dirs, sa = perspective_rays((32, 32), 107.0, 107.0)
-    d = dirs.reshape(-1, 3).astype(np.float64)
-    w = sa.ravel().astype(np.float64)
-    exact = np.array(
-        [
-            np.sum(
-                scene.speed_dps(
-                    float(tr.time_s[k]),
-                    head_rotation(res.yaw_deg[k], res.pitch_deg[k], res.roll_deg[k]).apply(d),
-                    "left",
-                )
-                * w
-            )
-            / w.sum()
-            for k in range(len(res.frame))
-        ]
-    )
+    exact = _exact_epof(scene, tr.time_s, res)
     t0 = _step(log, "epof: EPOF, opacity and truth", t0, note)
 
     # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs).
     render_error = None
     if cfg.render:
-        try:
-            render_viewing(
-                video,
-                hpath,
-                out / "render",
-                grid=grid,
-                config=RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)),
-                opacity="auto",
-                layout="top-bottom",
-                progress=progress,
-            )
-        except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands
-            render_error = f"{type(e).__name__}: {e}"
-        if render_error:
-            warnings.warn(f"render failed: {render_error}", stacklevel=2)
+        render_error = _render(cfg, source, hpath, out / "render", grid, progress)
         t0 = _step(log, f"render: two eyes at {cfg.render_size[0]}x{cfg.render_size[1]}", t0, note)
 
     # 6. Plots, README, summary.
@@ -288,84 +382,14 @@ def run_demo(
     )
     t0 = _step(log, "plots", t0, note)
 
-    est = grid.pof_dps[1:].astype(np.float64)
-    rel = np.abs(est - truth_win[1:]) / truth_win[1:]
-    e_rel = np.abs(res.epof_dps[1:] - res_truth_grid.epof_dps[1:]) / res_truth_grid.epof_dps[1:]
-    x_rel = np.abs(res.epof_dps[1:] - exact[1:]) / exact[1:]
     files = {
         k: v
         for k, v in _FILES.items()
         if (out / k).exists() or k == "README.txt" or k == "summary.json"
     }
-    summary = {
-        "what": "vimsim end-to-end demo: synthetic stereo coaster clip -> POF matrix -> EPOF/opacity -> per-eye GRF videos",
-        "seed": cfg.seed,
-        "clip": {
-            "scene": "coaster",
-            "layout": "top-bottom",
-            "eye_size": list(cfg.eye_size),
-            "fps": cfg.fps,
-            "frames": scfg.n_frames,
-            "seconds": cfg.seconds,
-        },
-        "grid": {
-            "preset": "default",
-            "windows": list(grid_def.shape),
-            "window_px": cfg.window,
-            "fov_deg": grid_def.hfov_deg,
-            "flow": grid.meta.get("flow"),
-        },
-        "epof_dps": {"median": float(np.median(res.epof_dps)), "max": float(np.max(res.epof_dps))},
-        "opacity_thresholds_dps": [float(v) for v in res.thresholds_dps],
-        "accuracy_vs_truth": {
-            "window_pof_rel_error_median": float(np.median(rel)),
-            "window_pof_rel_error_p90": float(np.percentile(rel, 90)),
-            "epof_rel_error_vs_truth_grid_median": float(np.median(e_rel)),
-            "epof_rel_error_vs_exact_viewport_median": float(np.median(x_rel)),
-        },
-        "render": {
-            "ok": render_error is None,
-            "skipped": not cfg.render,
-            "error": render_error,
-            "eye_size": list(cfg.render_size),
-        },
-        "timings_s": {name: round(dt, 2) for name, dt in log}
-        | {"total": round(time.perf_counter() - t_all, 2)},
-        "files": files,
-    }
-    lines = [
-        "vimsim demo",
-        "===========",
-        "",
-        "The whole pipeline on an embedded default: a synthetic stereo 360 coaster clip with",
-        "known motion, a scripted look-around viewing, the POF matrix of the clip, the EPOF",
-        "and GRF opacity of the viewing, and what each eye saw with the granulated rest frame.",
-        f"Regenerate: vimsim demo -o {output} --seed {cfg.seed}   (deterministic given --seed)",
-        "",
-        "Files",
-        "-----",
-    ]
-    lines += [f"{k}\n    {v}" for k, v in files.items()]
-    acc = summary["accuracy_vs_truth"]
-    lines += [
-        "",
-        "Accuracy against the analytic truth (this clip)",
-        "-----------------------------------------------",
-        f"window POF relative error: median {acc['window_pof_rel_error_median']:.3f}, 90th percentile {acc['window_pof_rel_error_p90']:.3f}",
-        f"EPOF relative error vs EPOF of the truth grid: median {acc['epof_rel_error_vs_truth_grid_median']:.3f}",
-        f"EPOF relative error vs exact viewport truth: median {acc['epof_rel_error_vs_exact_viewport_median']:.3f}",
-        "(the latter includes the paper's window averaging; see docs/accuracy.md)",
-        "",
-        "Render: "
-        + (
-            "skipped"
-            if not cfg.render
-            else "ok"
-            if render_error is None
-            else "FAILED: " + render_error
-        ),
-        f"Total time: {summary['timings_s']['total']:.1f} s",
-    ]
+    accuracy = _accuracy(grid, truth_win, res, res_truth_grid, exact)
+    summary = _summary(cfg, scfg, grid_def, grid, res, accuracy, render_error, log, t_all, files)
+    lines = _readme(summary, files, output, cfg, render_error)
     with atomic_output(out / "README.txt") as tmp:
         Path(tmp).write_text("\n".join(lines) + "\n")
     folder.complete()  # the manifest, then the completion marker

@@ -1,4 +1,4 @@
-"""Reliability corpus: bad inputs and faults across every subcommand (issue 13).
+"""Reliability corpus: bad inputs and faults across every subcommand (docs/reliability.md).
 
 Each case is a row: the command line (``{d}`` = the case's folder, which holds a fresh
 copy of the base corpus), the expected exit status and a fragment of the expected
@@ -737,7 +737,7 @@ def test_headpath_errors_quote_only_the_failing_field(
     tmp_path, capsys, name, text, extra, shown, hidden
 ):
     """A head path's format errors name the file, the line/column and the one field that
-    failed, never the rest of the line or the header (issue 13, security)."""
+    failed, never the rest of the line or the header (security)."""
     p = tmp_path / ("in.json" if text.startswith("[") else "in.csv")
     p.write_text(text)
     assert main(["headpath", "convert", str(p), "-o", str(tmp_path / "o.csv"), *extra]) == 2

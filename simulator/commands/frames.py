@@ -38,6 +38,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--every", type=float, metavar="S", help="every S seconds from 0 to the end of the video"
     )
     add_view_options(p)
+    p.add_argument(
+        "--right",
+        metavar="FILE",
+        default=None,
+        help="the right eye's equirect video or image: VIDEO (left eye) and FILE are a stereo "
+        "source of two per-eye files (same size, frame rate and frame count)",
+    )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     add_reader_options(p)
     p.set_defaults(func=run)
@@ -47,22 +54,23 @@ def run(args: argparse.Namespace) -> int:
     """Run :func:`simulator.viewing.frames.render_frames`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.commands.render import view_from_args
+    from simulator.media.source import Source
     from simulator.viewing.frames import render_frames
 
     hp, grid, view, note, layout = view_from_args(args, "frames")
+    source = Source.open(args.video_file, layout=layout, right=args.right)
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,
     ):
         index = render_frames(
-            args.video_file,
+            source,
             hp,
             args.output,
             at=args.at,
             every=args.every,
             grid=grid,
             view=view,
-            layout=layout,
             progress=bar,
         )
     if note:

@@ -139,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
     """Preprocess; 0 when the grid file was written, 2 on bad input, 130 when interrupted."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.core.errors import InputError
+    from simulator.media.source import Source
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
     from simulator.sphere.windows import grid_preset
 
@@ -160,13 +161,11 @@ def run(args: argparse.Namespace) -> int:
             progress_bar("preprocess (sphere)", enabled=not args.no_progress) as bar,
         ):
             out = preprocess_sphere(
-                args.video,
+                Source.open(args.video, layout=args.layout, eye=args.eye),
                 args.output,
                 grid=grid,
                 config=SphereConfig(cell_deg=args.cell),
                 flow=args.flow,
-                layout=args.layout,
-                eye=args.eye,
                 start_s=args.start,
                 end_s=args.end,
                 progress=bar,
@@ -179,12 +178,10 @@ def run(args: argparse.Namespace) -> int:
             progress_bar("preprocess", enabled=not args.no_progress) as bar,
         ):
             out = preprocess_video(
-                args.video,
+                Source.open(args.video, layout=args.layout, eye=args.eye),
                 args.output,
                 grid=grid,
                 flow=args.flow,
-                layout=args.layout,
-                eye=args.eye,
                 start_s=args.start,
                 end_s=args.end,
                 resume=args.resume,

@@ -268,20 +268,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Parse the options and run :func:`simulator.viewing.job.render_viewing`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
+    from simulator.media.source import Source
     from simulator.viewing.job import render_viewing
 
     hp, grid, view, note, layout = view_from_args(args)
+    source = Source.open(args.video_file, layout=layout, right=args.right)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
     ):
         s = render_viewing(
-            args.video_file,
+            source,
             hp,
             args.output,
             grid=grid,
             view=view,
-            layout=layout,
             preset=args.preset,
             crf=args.crf,
             progress=bar,
@@ -290,7 +291,6 @@ def run(args: argparse.Namespace) -> int:
             end_s=args.end,
             review=args.review,
             eyes=args.eyes,
-            right=args.right,
             audio=not args.no_audio,
         )
     w, h = s["eye_size"]

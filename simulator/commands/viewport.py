@@ -91,21 +91,21 @@ def run(args: argparse.Namespace) -> int:
 
     from simulator.core.fileio import atomic_output
     from simulator.core.resources import check_fits
-    from simulator.media import video
+    from simulator.media.source import Source
     from simulator.sphere import geometry
 
     hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
     # rays (float64 x 3, twice), lon/lat, maps and the image: about 120 bytes per pixel
     check_fits(args.size[0] * args.size[1] * 120, f"--size {args.size[0]}x{args.size[1]}")
-    info = video.probe(args.src)
-    w, h = info.eye_size(args.layout)  # checks 2:1 per eye (SAR-aware) and the layout
+    source = Source.open(args.src, layout=args.layout, eye=args.eye)  # checks 2:1 per eye
+    info, (w, h) = source.info, source.eye_size
     if info.is_video and args.frame >= info.n_frames:
         raise InputError(
             f"{args.src}: has {info.n_frames} frames; --frame {args.frame} is beyond the last"
         )
     if not info.is_video and args.frame != 0:
         raise InputError(f"{args.src}: a still image has only frame 0; got --frame {args.frame}")
-    eye = video.read_frame(args.src, args.frame, layout=args.layout, eye=args.eye)
+    eye = source.read(args.frame)
     if eye.shape[:2] != (h, w):
         raise InputError(
             f"{args.src}: decoded eye is {eye.shape[1]}x{eye.shape[0]}; expected {w}x{h}"

@@ -10,7 +10,7 @@ The viewport may have roll (the windows have none); yaw wraps around at +-180 de
 viewports pitched beyond the grid (up to +-90 deg) use whatever windows they overlap
 (if none at all, the nearest window's POF). ``top_k`` keeps only the k largest overlaps
 (the paper's figure shows 4). Units: POF and EPOF in deg/s of visual angle; angles in
-degrees (yaw + right, pitch + up, roll + right ear down; geometry.py conventions).
+degrees (yaw + right, pitch + up, roll + right ear down; simulator.sphere.geometry conventions).
 
 How it is fast (one query ~10 us, batches > 10^6 queries/s)
 -----------------------------------------------------------

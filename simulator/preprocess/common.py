@@ -55,35 +55,34 @@ def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[in
 
 
 def common_meta(
-    video,
-    info,
+    source,
     *,
     n_rows: int,
     start_frame: int,
     flow: dict,
-    layout: str,
-    eye: str,
     content_hash: str,
     units: dict,
 ) -> dict:
     """The grid-file ``meta`` both methods write (paper and sphere mode): frames, flow,
     layout, eye, the frame range, units and the video's identity (``GridFile.check_video``
-    compares it with a video)."""
+    compares it with a video) of ``source`` (a :class:`simulator.media.source.Source`)."""
+    info = source.info
     fps = info.fps
     return {
         "fps": fps,
         "n_frames": n_rows,
         "flow": flow,
-        "layout": layout,
-        "eye": eye,
+        "layout": source.layout,
+        "eye": source.eye,
+        "projection": source.projection,
         "start_frame": start_frame,
         "end_frame": start_frame + n_rows,
         "start_s": start_frame / fps,
-        "eye_size": list(info.eye_size(layout)),
+        "eye_size": list(source.eye_size),
         "units": units,
         "frame0": "repeats frame 1",
         "video": {
-            "path": str(Path(video).resolve()),
+            "path": str(Path(source.path).resolve()),
             "width": info.width,
             "height": info.height,
             "sar": info.sar,

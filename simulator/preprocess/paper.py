@@ -61,7 +61,8 @@ from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.media.gridfile import content_hash, save_grid
-from simulator.media.video import iter_frames, prefetch, probe
+from simulator.media.source import as_source
+from simulator.media.video import prefetch
 from simulator.preprocess.common import (
     PreprocessInterrupted,
     check_output_dir,
@@ -80,7 +81,7 @@ _CKPT_VERSION = 1
 
 #: Window sampling. Bilinear, not bicubic: 0.6x the extraction CPU and closer to the
 #: analytic rotation truth (bench/preprocess_accuracy.py, DIS ultrafast, median error
-#: yaw 15 deg/s 3.53 -> 3.17 %, oblique 15 deg/s 3.64 -> 3.16 %; docs/preprocess_speed.md).
+#: yaw 15 deg/s 3.53 -> 3.17 %, oblique 15 deg/s 3.64 -> 3.16 %; docs/paper_speed.md).
 _INTERP = "linear"
 
 
@@ -236,8 +237,6 @@ def preprocess_video(
     *,
     grid: WindowGrid,
     flow: str | FlowBackend = "dis",
-    layout: str = "mono",
-    eye: str = "left",
     start_s: float = 0.0,
     end_s: float | None = None,
     resume: bool = False,
@@ -251,11 +250,11 @@ def preprocess_video(
 
     Parameters
     ----------
-    video : path of any FFmpeg-readable video (equirect, 2:1 per eye)
+    video : a :class:`simulator.media.source.Source` (stereo layout and the eye to use,
+        projection) or the path of any FFmpeg-readable video (mono equirect, 2:1)
     output : the grid file to write (``.npz``)
     grid : the window grid (FOVs, steps, window size)
     flow : a backend or its ``--flow`` text (``dis``, ``farneback``, ``torch:MODEL.pt``)
-    layout, eye : stereo layout of the video and the eye to use
     start_s, end_s : seconds; frames ``round(start_s * fps) <= i < round(end_s * fps)``
     resume : continue from ``checkpoint_path(output)`` if it exists
     checkpoint_every_s : wall-clock seconds between periodic checkpoints (0: every frame)
@@ -270,15 +269,15 @@ def preprocess_video(
     Path of the written grid file. Raises InputError on bad input (nothing written) and
     :class:`PreprocessInterrupted` on Ctrl-C (after saving a checkpoint).
     """
-    src = str(video)
-    info = probe(video)
+    source = as_source(video)
+    src, info, video = source.path, source.info, source.path
     if not info.is_video:
         raise InputError(
             f"{src}: is a still image; preprocess needs a video with at least 2 frames"
         )
     if info.n_frames < 1:
         raise InputError(f"{src}: video stream has no frames")
-    eye_w, eye_h = info.eye_size(layout)
+    eye_w, eye_h = source.eye_size
     start_f, end_f = frame_range(info, float(start_s), end_s, src)
     out = check_output_dir(output)
     backend = flow if isinstance(flow, FlowBackend) else make_backend(flow, size=grid.size)
@@ -298,8 +297,8 @@ def preprocess_video(
         "flow": backend.describe(),
         "reduce_stride": stride,
         "window_interp": _INTERP,
-        "layout": layout,
-        "eye": eye,
+        "layout": source.layout,
+        "eye": source.eye,
         "start_frame": start_f,
         "end_frame": end_f,
     }
@@ -396,9 +395,7 @@ def preprocess_video(
             last_ckpt = now
 
     try:
-        frames = iter_frames(
-            video, fmt="gray", layout=layout, eye=eye, start=decode_from, end=end_f
-        )
+        frames = source.frames(fmt="gray", start=decode_from, end=end_f)
         # Decoding and window extraction of frame t+1 overlap the flow of frame t.
         windows = prefetch((extract(f) for f in frames), depth=2)
         for win in windows:
@@ -448,13 +445,10 @@ def preprocess_video(
     if n_rows < 2:
         raise InputError(f"{src}: only {n_rows} frame(s) could be decoded; flow needs at least 2")
     meta = common_meta(
-        video,
-        info,
+        source,
         n_rows=n_rows,
         start_frame=start_f,
         flow=backend.describe(),
-        layout=layout,
-        eye=eye,
         content_hash=identity["video"]["content_hash"],
         units={
             "pof_dps": "deg/s of visual angle (solid-angle-weighted mean)",

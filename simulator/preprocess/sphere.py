@@ -31,7 +31,8 @@ from simulator.core.errors import InputError
 from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
-from simulator.media.video import iter_frames, prefetch, probe
+from simulator.media.source import as_source
+from simulator.media.video import prefetch
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
@@ -345,11 +346,9 @@ def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, si
 
 
 def field_from_video(
-    path,
+    source,
     config: SphereConfig = SphereConfig(),
     *,
-    layout: str = "mono",
-    eye: str = "left",
     start: int = 0,
     end: int | None = None,
     flow: str | FlowFn = "dis",
@@ -358,16 +357,17 @@ def field_from_video(
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
-    Decodes the Y plane only; decoding and tile extraction run in a background thread
+    ``source``: a :class:`simulator.media.source.Source` (its eye) or a path (mono
+    equirect). Decodes the Y plane only; decoding and tile extraction run in a background thread
     while flow and splatting run in the caller's. Frames ``start <= k < end``.
     """
 
-    info = probe(path)
+    source = as_source(source)
+    info, path = source.info, source.path
     if not info.is_video:
         raise InputError(f"{path}: sphere mode needs a video; got a still image")
-    w, h = info.eye_size(layout)
-    est = FieldEstimator((w, h), info.fps, config, flow=flow)
-    frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
+    est = FieldEstimator(source.eye_size, info.fps, config, flow=flow)
+    frames = source.frames(fmt="gray", start=start, end=end)
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
@@ -396,8 +396,6 @@ def preprocess_sphere(
     grid: WindowGrid,
     config: SphereConfig = SphereConfig(),
     flow: str | FlowFn = "dis",
-    layout: str = "mono",
-    eye: str = "left",
     start_s: float = 0.0,
     end_s: float | None = None,
     field_dtype: str = "float16",
@@ -417,13 +415,12 @@ def preprocess_sphere(
     Returns the output Path. InputError on bad input (nothing written).
     """
 
-    src = str(video)
-    info = probe(video)
+    source = as_source(video)  # checked once: the layout must fit the frame
+    src, info, video = source.path, source.info, source.path
     if not info.is_video:
         raise InputError(
             f"{src}: is a still image; preprocess needs a video with at least 2 frames"
         )
-    info.eye_size(layout)  # the layout must fit the frame (InputError otherwise)
     if field_dtype not in ("float16", "float32"):
         raise InputError(f"field dtype must be float16 or float32; got {field_dtype!r}")
     fps = info.fps
@@ -441,7 +438,7 @@ def preprocess_sphere(
     try:
         try:
             field_from_video(
-                video, config, layout=layout, eye=eye, start=start_f, end=end_f,
+                source, config, start=start_f, end=end_f,
                 flow=backend, progress=tick, sink=spool,
             )  # fmt: skip
         finally:
@@ -457,13 +454,10 @@ def preprocess_sphere(
         meta = {
             "method": "sphere",
             **common_meta(
-                video,
-                info,
+                source,
                 n_rows=T,
                 start_frame=start_f,
                 flow=desc,
-                layout=layout,
-                eye=eye,
                 content_hash=content_hash(video),
                 units={
                     "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",

@@ -9,7 +9,7 @@ from __future__ import annotations
 import importlib.resources
 import re
 
-from simulator.core.errors import InputError
+from simulator.core.errors import InputError, VimsimError
 
 __all__ = ["EGL_PACKAGES", "ShaderError", "create_context", "load_shader_source"]
 
@@ -17,8 +17,9 @@ __all__ = ["EGL_PACKAGES", "ShaderError", "create_context", "load_shader_source"
 EGL_PACKAGES = "libegl1 libgl1-mesa-dri"
 
 
-class ShaderError(RuntimeError):
-    """A shader failed to compile or link; the message names the file and quotes the line."""
+class ShaderError(VimsimError, RuntimeError):
+    """A shader failed to compile or link; the message names the file and quotes the line
+    (an internal error, under the package's root :class:`simulator.core.errors.VimsimError`)."""
 
 
 def create_context():

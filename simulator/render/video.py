@@ -2,7 +2,18 @@
 
 Frames are decoded once (:func:`simulator.media.video.prefetch`), rendered per eye
 (:class:`simulator.render.eye.EyeRenderer`) and leave the GPU as yuv420p planes for the
-encoder. Output files are written to temporary names and renamed when complete.
+encoder as they are (:meth:`simulator.render.eye.EyeRenderer.render` ``pix_fmt``). Output
+files are written to temporary names and renamed when complete. A mono video with grains
+at infinity gives the same image to both eyes: it is rendered and encoded once and
+``right.mp4`` is a copy of ``left.mp4``.
+
+The CPU budget (``threads`` of :func:`render_video`): None, no bound (decoding and each
+eye's encoder overlap the drawing in threads of their own; FFmpeg and x264 pick their
+thread counts); ``n``, the decoder and each x264 encoder use ``n`` threads, and with
+``n == 1`` decoding, drawing and encoding take turns on the calling thread, so the render
+keeps one core busy, not more (a study's task declaring one CPU: tasks side by side then
+scale with the cores). llvmpipe's threads are the process's ``LP_NUM_THREADS``, read when
+Mesa loads.
 """
 
 from __future__ import annotations
@@ -18,12 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.core.choices import EYES
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
-from simulator.media.video import VideoWriter, iter_frames, prefetch, probe
+from simulator.media.source import as_source
+from simulator.media.video import VideoWriter, prefetch
 from simulator.render.eye import EyeRenderer, RenderConfig
-from simulator.sphere.geometry import head_rotation, split_eye
+from simulator.sphere.geometry import head_rotation
 
 __all__ = ["VideoRenderResult", "render_video"]
 
@@ -107,39 +120,15 @@ class _Worker:
             raise self.error
 
 
-def _decode(video_path: str, right_path: str | None, start: int, end: int, threads=None):
-    """Decoded frames ``start <= i < end`` (copies): of ``video_path``, or ``(left, right)``
-    pairs of two per-eye files; both files are closed on every exit."""
-    left = iter_frames(video_path, layout="mono", start=start, end=end, threads=threads)
-    if right_path is None:
-        try:
-            for f in left:
-                yield np.array(f)
-        finally:
-            left.close()
-        return
-    right = iter_frames(right_path, layout="mono", start=start, end=end, threads=threads)
-    try:
-        for fl in left:
-            fr = next(right, None)
-            if fr is None:
-                raise InputError(f"{right_path}: right eye ends before the left eye ({video_path})")
-            yield np.array(fl), np.array(fr)
-    finally:
-        left.close()
-        right.close()
-
-
 def render_video(
     ctx,
-    video_path: str,
+    source,
     out_paths: tuple[str | None, str | None],
     angles_deg: NDArray[np.float64],
     *,
     opacity: NDArray[np.float64] | None = None,
     cell_opacity: NDArray[np.float32] | None = None,
     config: RenderConfig = RenderConfig(),
-    layout: str = "mono",
     fps: float | None = None,
     n_frames: int | None = None,
     preset: str = "veryfast",
@@ -149,7 +138,6 @@ def render_video(
     start_frame: int = 0,
     on_frame=None,
     audio=None,
-    right_path: str | None = None,
     review_eye: str = "left",
 ) -> VideoRenderResult:
     """Render per-eye H.264 videos of a (mono or stereo) equirect video along a head path.
@@ -157,17 +145,13 @@ def render_video(
     Parameters
     ----------
     ctx : moderngl.Context from :func:`create_context`
-    video_path : equirect video (or image: one frame)
+    source : the video: a :class:`simulator.media.source.Source` (mono or stereo layout, or
+        two per-eye files, both decoded in step) or a path (mono equirect; an image: one frame)
     out_paths : (left.mp4, right.mp4); each appears only when complete (atomic rename);
         None for an eye not wanted (at least one path)
-    angles_deg : ndarray, shape (N, 3), float64
-        (yaw, pitch, roll) in degrees for video frame ``i`` (time ``i / fps``); frames
-        beyond N hold the last pose
-    opacity : ndarray, shape (N,), GRF / vignette opacity 0..1 per frame
-    cell_opacity : ndarray, shape (N, n_lat, n_lon), local-grf's per-cell grain opacity
-        per frame (:func:`simulator.mitigation.kinds.cell_opacity`); frames beyond N hold the last
-    layout : ``mono`` (both eyes see the frame), ``top-bottom`` (left eye top) or
-        ``side-by-side`` (left eye left)
+    angles_deg, opacity, cell_opacity : per rendered frame (rows beyond N hold the last):
+        (yaw, pitch, roll) degrees ``(N, 3)``; GRF / vignette opacity 0..1 ``(N,)``;
+        local-grf's per-cell grain opacity ``(N, n_lat, n_lon)``
     fps, n_frames : the video's rate and frame count (from :func:`simulator.media.video.probe`)
     start_frame : render video frames ``start_frame <= i < start_frame + n_frames`` only
         (a time range); row ``j`` of ``angles_deg`` and ``opacity`` is video frame
@@ -177,44 +161,21 @@ def render_video(
         (left eye's for stereo, RGB) and the left eye's image (yuv420p planes, as encoded);
         its errors are raised here (e.g. :class:`simulator.viewing.review.ReviewWriter`).
     preset, crf : x264 speed preset and quality
-    threads : the render's CPU budget. None: no bound (decoding and each eye's encoder
-        overlap the drawing in threads of their own; FFmpeg and x264 pick their thread
-        counts). ``n``: the decoder and each x264 encoder use ``n`` threads, and with
-        ``n == 1`` decoding, drawing and encoding take turns on the calling thread, so
-        the render keeps one core busy, not more (a study's task declaring one CPU:
-        tasks side by side then scale with the cores). llvmpipe's threads are the
-        process's ``LP_NUM_THREADS``, read when Mesa loads.
+    threads : the render's CPU budget (module docstring): None no bound, ``n`` threads
+        for the decoder and each encoder, 1: one core
     audio : None, or a :class:`simulator.media.audio.AudioSource` (the source's audio, the
         range's part) carried into every eye file
-    right_path : the right eye's equirect file: ``video_path`` is then the left eye's (two
-        per-eye files, both decoded in step; same size and frame count, checked by the caller)
     review_eye : the eye whose image ``on_frame`` gets when both are rendered
 
-    A mono video with grains at infinity gives the same image to both eyes: it is
-    rendered and encoded once and ``right.mp4`` is a copy of ``left.mp4``. Frames are
-    converted to yuv420p on the GL side (:meth:`EyeRenderer.render` ``pix_fmt``) and
-    handed to x264 as they are.
-
-    Returns
-    -------
-    VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``, ``render``
-    (draw, yuv420p conversion and readback of both eyes), ``encode_wait`` (blocked on the encoders),
-    ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
+    Returns a VideoRenderResult with timings (seconds): ``decode_wait``, ``upload``,
+    ``render`` (draw, yuv420p conversion, readback), ``encode_wait`` (blocked on the
+    encoders), ``encode_busy`` (encoder threads' busy time, both eyes), ``total``.
     """
-    info = probe(video_path)
-    fps = float(fps or info.fps)
-    start_frame = int(start_frame)
-    if not (0 <= start_frame < info.n_frames):
-        raise InputError(
-            f"{video_path}: start frame {start_frame} outside the video's {info.n_frames} frames"
-        )
-    total = int(n_frames or info.n_frames - start_frame)
-    ang = np.asarray(angles_deg, float).reshape(-1, 3)
-    if ang.shape[0] < 1:
-        raise InputError(f"{video_path}: no head orientations to render")
-    op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
-    rots = head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix()
-    stereo = layout != "mono" or right_path is not None
+    source = as_source(source)
+    fps = float(fps or source.info.fps)
+    start_frame, total = _frame_span(source, start_frame, n_frames)
+    rots, op = _poses(source, angles_deg, opacity)
+    stereo = source.stereo
     # Mono video with grains at infinity: both eyes see exactly the same image, so it is
     # rendered and encoded once and the file copied (halves the work; same output).
     same = not stereo and (config.grains is None or config.grains.distance_m is None)
@@ -229,98 +190,29 @@ def render_video(
     w, h = config.eye_size
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
     t_start = time.perf_counter()
-    n = 0
+    serial = threads is not None and int(threads) <= 1
     try:
         with contextlib.ExitStack() as stack:
-            writers = [
-                stack.enter_context(
-                    VideoWriter(
-                        p, fps, (w, h), crf=crf, preset=preset, audio=audio, threads=threads
-                    )
-                )
-                for p in paths[: len(eyes)]
-            ]
-            serial = threads is not None and int(threads) <= 1
-            workers = [
-                _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}", inline=serial)
-                for i, wr in enumerate(writers)
-            ]
-            if on_frame is not None:
-                workers.append(
-                    _Worker(lambda item: on_frame(*item), name="on-frame", inline=serial)
-                )
+            writers, workers = _workers(stack, paths[: len(eyes)], fps, (w, h), serial,
+                                        on_frame, crf=crf, preset=preset, audio=audio,
+                                        threads=threads)  # fmt: skip
+            loop = _FrameLoop(renderer, rots, op, cell_opacity, eyes, stereo, workers,
+                              on_frame is not None, review_eye, timings)  # fmt: skip
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
-                decoded = _decode(video_path, right_path, start_frame, start_frame + total, threads)
+                decoded = source.eye_frames(
+                    start=start_frame, end=start_frame + total, threads=threads
+                )
                 frames = stack.enter_context(
                     contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
-                bar = Counter(progress, total)
-                t0 = time.perf_counter()
-                for frame in frames:
-                    t1 = time.perf_counter()
-                    timings["decode_wait"] += t1 - t0
-                    i = min(n, len(rots) - 1)
-                    if right_path is not None:
-                        renderer.upload(frame[0], "left")
-                        renderer.upload(frame[1], "right")
-                    elif stereo:
-                        renderer.upload(split_eye(frame, layout, "left", source=video_path), "left")
-                        renderer.upload(
-                            split_eye(frame, layout, "right", source=video_path), "right"
-                        )
-                    else:
-                        renderer.upload(frame, "left")
-                    t2 = time.perf_counter()
-                    o = 0.0 if op is None else float(op[min(n, len(op) - 1)])
-                    co = None
-                    if cell_opacity is not None and config.mitigation.local:
-                        co = cell_opacity[min(n, len(cell_opacity) - 1)]
-                    outs = []
-                    for eye in eyes:
-                        img = renderer.render(
-                            rots[i],
-                            eye,
-                            source=eye if stereo else "left",
-                            opacity=o,
-                            eye_offset=renderer.eye_offset(rots[i], eye),
-                            pix_fmt="yuv420p",
-                            cell_opacity=co,
-                        )
-                        outs.append(img.copy())  # the buffer is reused
-                    t3 = time.perf_counter()
-                    for wk, img in zip(workers, outs):
-                        wk.put(img)
-                    if on_frame is not None:
-                        k = eyes.index(review_eye) if review_eye in eyes else 0
-                        if right_path is not None:
-                            src = frame[0 if eyes[k] == "left" else 1]
-                        elif stereo:
-                            src = split_eye(frame, layout, eyes[k], source=video_path)
-                        else:
-                            src = frame
-                        workers[-1].put((src, outs[k]))
-                    t0 = time.perf_counter()
-                    timings["upload"] += t2 - t1
-                    timings["render"] += t3 - t2
-                    timings["encode_wait"] += t0 - t3
-                    n += 1
-                    bar.update(1)
-                bar.close()
+                n = loop.run(frames, Counter(progress, total))
             finally:
-                errors = []
-                for wk in workers:
-                    try:
-                        wk.join()
-                    except BaseException as e:  # noqa: BLE001
-                        errors.append(e)
-                timings["encode_busy"] = sum(wk.busy_s for wk in workers[: len(writers)])
-                if on_frame is not None:
-                    timings["on_frame_busy"] = workers[-1].busy_s
+                errors = loop.join(len(writers))
             if errors:
                 raise errors[0]
             if n == 0:
-                raise InputError(f"{video_path}: no frames decoded")
+                raise InputError(f"{source.path}: no frames decoded")
         if same and len(paths) == 2:
             with atomic_output(paths[1]) as tmp:
                 shutil.copyfile(paths[0], tmp)
@@ -328,3 +220,108 @@ def render_video(
         renderer.release()
     timings["total"] = time.perf_counter() - t_start
     return VideoRenderResult(n, (w, h), fps, timings)
+
+
+def _workers(stack, paths, fps, size, serial: bool, on_frame, **encode):
+    """``(writers, workers)``: one H.264 writer per path (entered on ``stack``) fed by an
+    encoder worker each, and ``on_frame``'s worker last (if any)."""
+    writers = [stack.enter_context(VideoWriter(p, fps, size, **encode)) for p in paths]
+    workers = [
+        _Worker(functools.partial(_write_yuv420p, wr), name=f"encode-{i}", inline=serial)
+        for i, wr in enumerate(writers)
+    ]
+    if on_frame is not None:
+        workers.append(_Worker(lambda item: on_frame(*item), name="on-frame", inline=serial))
+    return writers, workers
+
+
+def _frame_span(source, start_frame: int, n_frames: int | None) -> tuple[int, int]:
+    """``(start_frame, frame count)`` of the render, checked against the video."""
+    info, start_frame = source.info, int(start_frame)
+    if not (0 <= start_frame < info.n_frames):
+        raise InputError(
+            f"{source.path}: start frame {start_frame} outside the video's {info.n_frames} frames"
+        )
+    return start_frame, int(n_frames or info.n_frames - start_frame)
+
+
+def _poses(source, angles_deg, opacity):
+    """``(head->world matrices (N, 3, 3), opacity (N,) clipped to 0..1 or None)``."""
+    ang = np.asarray(angles_deg, float).reshape(-1, 3)
+    if ang.shape[0] < 1:
+        raise InputError(f"{source.path}: no head orientations to render")
+    op = None if opacity is None else np.clip(np.asarray(opacity, float).reshape(-1), 0.0, 1.0)
+    return head_rotation(ang[:, 0], ang[:, 1], ang[:, 2]).as_matrix(), op
+
+
+class _FrameLoop:
+    """The per-frame work of :func:`render_video`: upload each decoded frame, render the
+    eyes as yuv420p, hand them to the encoder workers (and ``on_frame``'s worker, last),
+    timing each step; poses and opacities beyond their last row hold the last."""
+
+    def __init__(self, renderer, rots, op, cell_opacity, eyes, stereo, workers, review,
+                 review_eye, timings):  # fmt: skip
+        self.renderer, self.rots, self.op, self.cell_op = renderer, rots, op, cell_opacity
+        self.eyes, self.stereo, self.workers, self.timings = eyes, stereo, workers, timings
+        self.review = review
+        self.k = eyes.index(review_eye) if review_eye in eyes else 0  # the review's eye
+
+    def _draw(self, frame, n: int) -> list:
+        """Render frame ``n``'s eyes (copies: the renderer's buffer is reused)."""
+        r, i = self.renderer, min(n, len(self.rots) - 1)
+        o = 0.0 if self.op is None else float(self.op[min(n, len(self.op) - 1)])
+        co = None
+        if self.cell_op is not None and r.config.mitigation.local:
+            co = self.cell_op[min(n, len(self.cell_op) - 1)]
+        outs = []
+        for eye in self.eyes:
+            img = r.render(
+                self.rots[i],
+                eye,
+                source=eye if self.stereo else "left",
+                opacity=o,
+                eye_offset=r.eye_offset(self.rots[i], eye),
+                pix_fmt="yuv420p",
+                cell_opacity=co,
+            )
+            outs.append(img.copy())
+        return outs
+
+    def run(self, frames, bar) -> int:
+        """Draw every frame of ``frames``; the number drawn."""
+        timings, n = self.timings, 0
+        t0 = time.perf_counter()
+        for frame in frames:
+            t1 = time.perf_counter()
+            timings["decode_wait"] += t1 - t0
+            for e, f in zip(EYES, frame):  # (left, right) or (mono,)
+                self.renderer.upload(f, e)
+            t2 = time.perf_counter()
+            outs = self._draw(frame, n)
+            t3 = time.perf_counter()
+            for wk, img in zip(self.workers, outs):
+                wk.put(img)
+            if self.review:
+                src = frame[EYES.index(self.eyes[self.k]) if self.stereo else 0]
+                self.workers[-1].put((src, outs[self.k]))
+            t0 = time.perf_counter()
+            timings["upload"] += t2 - t1
+            timings["render"] += t3 - t2
+            timings["encode_wait"] += t0 - t3
+            n += 1
+            bar.update(1)
+        bar.close()
+        return n
+
+    def join(self, n_writers: int) -> list[BaseException]:
+        """Finish every worker; their errors (first first) and their busy times."""
+        errors = []
+        for wk in self.workers:
+            try:
+                wk.join()
+            except BaseException as e:  # noqa: BLE001
+                errors.append(e)
+        self.timings["encode_busy"] = sum(wk.busy_s for wk in self.workers[:n_writers])
+        if self.review:
+            self.timings["on_frame_busy"] = self.workers[-1].busy_s
+        return errors

@@ -67,6 +67,18 @@ def check_ray_address(address: str, *, timeout_s: float = 3.0) -> None:
 _IN_TASK = [False]
 
 
+#: Modules the fork server imports once for every worker (what the tasks run: the task
+#: module and the stages it calls). multiprocessing ignores a name that does not import,
+#: so tests/study/test_study.py imports each.
+WORKER_PRELOAD = (
+    "simulator.study.tasks",
+    "simulator.preprocess.paper",
+    "simulator.preprocess.sphere",
+    "simulator.epof.viewing",
+    "simulator.viewing.job",
+)
+
+
 def _on_sigint(signum, frame) -> None:
     """A pool worker's Ctrl-C: interrupt the task it runs (a paper-mode preprocess then
     saves its checkpoint); while idle, nothing (the driver shuts the pool down), so no
@@ -110,14 +122,7 @@ class LocalExecutor:
         if "forkserver" in multiprocessing.get_all_start_methods():
             ctx = multiprocessing.get_context("forkserver")
             # What every task needs, imported once in the server (no GL context is made there).
-            ctx.set_forkserver_preload(
-                [
-                    "simulator.study.tasks",
-                    "simulator.sphere",
-                    "simulator.preprocess",
-                    "simulator.render",
-                ]
-            )
+            ctx.set_forkserver_preload(list(WORKER_PRELOAD))
         else:
             ctx = multiprocessing.get_context("spawn")
         self._ctx = ctx

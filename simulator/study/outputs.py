@@ -31,7 +31,8 @@ from simulator.analyze.report import analyze_study, write_report
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
-from simulator.sphere.geometry import extract_view, split_eye
+from simulator.media.source import Source
+from simulator.sphere.geometry import extract_view
 
 __all__ = [
     "confound_notes",
@@ -98,7 +99,7 @@ def provocative_moments(pof_ty, yaw_deg, fps: float, *, n: int = N_MOMENTS,
     ]  # fmt: skip
 
 
-def _thumbnails(video, layout: str, eye: str, moments: list[dict], hfov: float, vfov: float,
+def _thumbnails(source, moments: list[dict], hfov: float, vfov: float,
                 folder: Path) -> None:  # fmt: skip
     """``moment_<rank>.png``: the viewport of each moment (one decoding pass)."""
     from PIL import Image
@@ -106,7 +107,7 @@ def _thumbnails(video, layout: str, eye: str, moments: list[dict], hfov: float, 
     want: dict[int, list[dict]] = {}
     for mo in moments:
         want.setdefault(mo["frame"], []).append(mo)
-    for i, frame in _frames_at(video, sorted(want), layout, eye):
+    for i, frame in _frames_at(source, sorted(want)):
         for mo in want[i]:
             view = extract_view(frame, mo["yaw_deg"], mo["pitch_deg"], 0.0,
                                 hfov_deg=hfov, vfov_deg=vfov, size=THUMB_SIZE)  # fmt: skip
@@ -116,11 +117,11 @@ def _thumbnails(video, layout: str, eye: str, moments: list[dict], hfov: float, 
             mo["thumbnail"] = name
 
 
-def _frames_at(video, frames: list[int], layout: str, eye: str):
+def _frames_at(source, frames: list[int]):
     """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``: a seek to
     the keyframe before each (not a decode from the start: a long video has its
     moments anywhere), then decoding up to the frame (index = presentation time x fps)."""
-    with av.open(str(video)) as c:
+    with av.open(str(source.path)) as c:
         s = c.streams.video[0]
         fps = float(s.average_rate or s.guessed_rate)
         t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
@@ -134,7 +135,7 @@ def _frames_at(video, frames: list[int], layout: str, eye: str):
                     break
             if got is not None:
                 rgb = got.to_ndarray(format="rgb24")
-                yield f, split_eye(rgb, layout, eye, source=str(video))
+                yield f, source.eye_view(rgb)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -198,7 +199,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     moments = provocative_moments(m, grid.yaw_deg, fps)
     for mo in moments:
         mo["pitch_deg"] = pitch0
-    _thumbnails(v.path, v.layout, v.eye, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    _thumbnails(Source.open(v.path, layout=v.layout, eye=v.eye), moments, grid.hfov_deg, grid.vfov_deg, folder)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
     T = m.shape[0]

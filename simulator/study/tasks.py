@@ -26,6 +26,7 @@ from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
+from simulator.media.source import Source
 from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
@@ -46,6 +47,11 @@ _GL: list = []
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
 WEIGHT_CACHE_BYTES = 192 << 20
+
+
+def _source(video: dict) -> Source:
+    """The manifest video's checked :class:`simulator.media.source.Source`."""
+    return Source.open(video["path"], layout=video["layout"], eye=video["eye"])
 
 
 def _error_line(e: BaseException) -> str:
@@ -104,23 +110,19 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
             warnings.simplefilter("ignore")
             if video["method"] == "sphere":
                 preprocess_sphere(
-                    video["path"],
+                    _source(video),
                     output,
                     grid=grid,
                     config=SphereConfig(cell_deg=video["cell_deg"]),
                     flow=video["flow"],
-                    layout=video["layout"],
-                    eye=video["eye"],
                     progress=False,
                 )
             else:
                 preprocess_video(
-                    video["path"],
+                    _source(video),
                     output,
                     grid=grid,
                     flow=video["flow"],
-                    layout=video["layout"],
-                    eye=video["eye"],
                     resume=True,
                     threads=threads,
                     progress=False,
@@ -253,12 +255,11 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
         s = render_viewing(
-            video["path"],
+            Source.open(video["path"], layout=video["layout"]),
             hp,
             outdir,
             grid=grid,
             view=view,
-            layout=video["layout"],
             preset=opts["preset"],
             crf=opts["crf"],
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares

@@ -23,13 +23,15 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
+from simulator.core.choices import EYES
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.core.progress import Counter, Progress
+from simulator.media.source import as_source
 from simulator.media.video import iter_frames, probe
 from simulator.render.eye import EyeRenderer
 from simulator.render.gl import create_context
-from simulator.sphere.geometry import head_rotation, split_eye
+from simulator.sphere.geometry import head_rotation
 from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.viewing.spec import ViewSpec
 
@@ -204,86 +206,13 @@ def _previous_files(out: Path) -> list[Path]:
     return [out / n for n in names if Path(n).name == n and n.endswith(".png")] + [index]
 
 
-def render_frames(
-    video,
-    headpath,
-    outdir,
-    *,
-    at=None,
-    every: float | None = None,
-    grid=None,
-    view: ViewSpec | None = None,
-    layout: str = "mono",
-    ctx=None,
-    progress: Progress | None = None,
-    **view_fields,
-) -> dict:
-    """Render the eye views at chosen video times into ``outdir`` as PNGs + ``frames.json``.
-
-    Parameters
-    ----------
-    video, headpath, grid, layout : as :func:`simulator.viewing.job.render_viewing`
-        (``vimsim render``)
-    view : :class:`simulator.viewing.spec.ViewSpec` (what the eye sees), or its fields as
-        keywords (``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``)
-    at : times in seconds (list, or ``"1,2.5"``); or ``every``: a step in seconds
-    ctx : moderngl.Context, or None to create one
-
-    Eyes: ``left`` and ``right`` for a stereo layout or grains at a finite distance
-    (parallax), else one view named ``both`` (both eyes see the same image). Inputs are
-    checked before ``outdir`` is touched; then the files of a previous run listed in its
-    ``frames.json`` are removed, each PNG appears only when complete, and
-    ``frames.json`` is written last.
-
-    Returns
-    -------
-    dict, the content of ``frames.json``: per frame (file, eye, requested time, frame
-    number and its time, pose in degrees, EPOF deg/s, opacity), renderer settings and
-    versions. Nothing time-varying, so that two runs give the same file.
-    """
-    view = ViewSpec.given(view, **view_fields)
-    config, opacity, rule, hold = view.config, view.opacity, view.rule, view.hold
-    if config.mitigation.local and config.grains is not None:
-        raise InputError(
-            "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
-            "grf, vignette, grf+vignette or none"
-        )
-    plan = plan_viewing(
-        video,
-        headpath,
-        grid=grid,
-        view=view,
-        layout=layout,
-    )
-    info = plan.info
-    times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
-    stereo = layout != "mono"
-    parallax = config.grf is not None and config.grf.distance_m is not None
-    eyes = ("left", "right") if stereo or parallax else ("both",)
-    out = Path(outdir)
-    grid_path = plan.grid.path if plan.grid is not None else None
-    inputs = {Path(p).resolve() for p in (video, grid_path) if p}
-    if not isinstance(headpath, (str, os.PathLike)):
-        headpath = plan.headpath.source or headpath
-    if isinstance(headpath, (str, os.PathLike)):
-        inputs.add(Path(headpath).resolve())
-    names = [frame_name(t, e) for t in times for e in eyes] + [FRAMES_JSON]
-    for n in names:
-        if (out / n).resolve() in inputs:
-            raise InputError(f"{out / n}: output would overwrite an input; choose another -o")
-    if ctx is None:
-        ctx = create_context()
-    out = check_output_dir(out)
-    for p in _previous_files(out):
-        try:
-            p.unlink(missing_ok=True)
-        except OSError as e:
-            raise InputError(
-                f"{p}: cannot remove the previous run's output ({e.strerror})"
-            ) from None
-
+def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) -> list[dict]:
+    """Render the eye views at ``times`` into ``out`` as PNGs (written by two threads while
+    the next view renders); the rows of ``frames.json``. A failure removes this run's PNGs."""
+    info, stereo = plan.info, source.stereo
     idx = [frame_index(t, info.fps) for t in times]
-    decoded = decode_frames(video, idx)
+    decoded = decode_frames(source.path, idx)
+    decoded_right = decode_frames(source.right, idx) if source.right is not None else None
     renderer = EyeRenderer(ctx, config)
     rows = []
     bar = Counter(progress, len(times))
@@ -291,12 +220,9 @@ def render_frames(
     writes: list[concurrent.futures.Future] = []
     try:
         for t, i in zip(times, idx):
-            frame = decoded[i]
-            if stereo:
-                for e in ("left", "right"):
-                    renderer.upload(split_eye(frame, layout, e, source=str(video)), e)
-            else:
-                renderer.upload(frame, "left")
+            for e in EYES if stereo else ("left",):
+                held = decoded_right if e == "right" and decoded_right is not None else decoded
+                renderer.upload(np.ascontiguousarray(source.eye_view(held[i], e)), e)
             yaw, pitch, roll = (float(v) for v in plan.angles_deg[i])
             R = head_rotation(yaw, pitch, roll).as_matrix()
             op = float(plan.opacity[i])
@@ -339,30 +265,121 @@ def render_frames(
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
         renderer.release()
+    return rows
+
+
+def _index(source, plan, view: ViewSpec, headpath, rows: list[dict], ctx) -> dict:
+    """The content of ``frames.json``: the inputs, the renderer's settings, versions, rows."""
+    config, info = view.config, plan.info
     w, h = config.eye_size
     index = {
-        "video": str(video),
+        "video": str(source.path),
         "video_size": [info.width, info.height],
         "fps": info.fps,
         "frames_video": info.n_frames,
         "headpath": str(headpath) if isinstance(headpath, (str, os.PathLike)) else None,
         "grid": None if plan.grid is None else (plan.grid.path or None),
-        "layout": layout,
-        "hold": hold,
+        "layout": source.layout,
+        "right": source.right,
+        "projection": source.projection,
+        "hold": view.hold,
         "renderer": {
             "eye_size": [w, h],
             "hfov_deg": config.hfov_deg,
             "vfov_deg": config.vfov_deg,
             "grf": grf_settings(config.grains),
             "mitigation": config.mitigation.kind,
-            "opacity": "off" if config.grf is None else opacity,
+            "opacity": "off" if config.grf is None else view.opacity,
             "opacity_thresholds_dps": list(plan.thresholds_dps),
-            "opacity_rule": rule.describe() if plan.grid is not None else None,
+            "opacity_rule": view.rule.describe() if plan.grid is not None else None,
             "epof_method": plan.epof_method,
         },
         "versions": _versions(ctx),
         "frames": rows,
     }
+    return index
+
+
+def render_frames(
+    source,
+    headpath,
+    outdir,
+    *,
+    at=None,
+    every: float | None = None,
+    grid=None,
+    view: ViewSpec | None = None,
+    ctx=None,
+    progress: Progress | None = None,
+    **view_fields,
+) -> dict:
+    """Render the eye views at chosen video times into ``outdir`` as PNGs + ``frames.json``.
+
+    Parameters
+    ----------
+    source, headpath, grid : as :func:`simulator.viewing.job.render_viewing`
+        (``vimsim render``)
+    view : :class:`simulator.viewing.spec.ViewSpec` (what the eye sees), or its fields as
+        keywords (``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``)
+    at : times in seconds (list, or ``"1,2.5"``); or ``every``: a step in seconds
+    ctx : moderngl.Context, or None to create one
+
+    Eyes: ``left`` and ``right`` for a stereo layout or grains at a finite distance
+    (parallax), else one view named ``both`` (both eyes see the same image). Inputs are
+    checked before ``outdir`` is touched; then the files of a previous run listed in its
+    ``frames.json`` are removed, each PNG appears only when complete, and
+    ``frames.json`` is written last.
+
+    Returns
+    -------
+    dict, the content of ``frames.json``: per frame (file, eye, requested time, frame
+    number and its time, pose in degrees, EPOF deg/s, opacity), renderer settings and
+    versions. Nothing time-varying, so that two runs give the same file.
+    """
+    view = ViewSpec.given(view, **view_fields)
+    config = view.config
+    if config.mitigation.local and config.grains is not None:
+        raise InputError(
+            "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
+            "grf, vignette, grf+vignette or none"
+        )
+    source = as_source(source)
+    video = source.path
+    plan = plan_viewing(
+        source,
+        headpath,
+        grid=grid,
+        view=view,
+    )
+    info = plan.info
+    times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
+    stereo = source.stereo
+    parallax = config.grf is not None and config.grf.distance_m is not None
+    eyes = ("left", "right") if stereo or parallax else ("both",)
+    out = Path(outdir)
+    grid_path = plan.grid.path if plan.grid is not None else None
+    inputs = {Path(p).resolve() for p in (*source.files, grid_path) if p}
+    if not isinstance(headpath, (str, os.PathLike)):
+        headpath = plan.headpath.source or headpath
+    if isinstance(headpath, (str, os.PathLike)):
+        inputs.add(Path(headpath).resolve())
+    names = [frame_name(t, e) for t in times for e in eyes] + [FRAMES_JSON]
+    for n in names:
+        if (out / n).resolve() in inputs:
+            raise InputError(f"{out / n}: output would overwrite an input; choose another -o")
+    if ctx is None:
+        ctx = create_context()
+    out = check_output_dir(out)
+    for p in _previous_files(out):
+        try:
+            p.unlink(missing_ok=True)
+        except OSError as e:
+            raise InputError(
+                f"{p}: cannot remove the previous run's output ({e.strerror})"
+            ) from None
+
+    rows = _draw_frames(ctx, source, plan, config, out, times, eyes, progress)
+    index = _index(source, plan, view, headpath, rows, ctx)
     with atomic_output(out / FRAMES_JSON) as tmp:
         Path(tmp).write_text(json_text(index) + "\n")
     return index

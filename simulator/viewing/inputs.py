@@ -1,4 +1,4 @@
-"""Checks of one viewing's inputs: the time range, an EPOF CSV's opacity, a right-eye file."""
+"""Checks of one viewing's inputs: the time range and an EPOF CSV's opacity."""
 
 from __future__ import annotations
 
@@ -6,9 +6,8 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.epof.viewing import EpofResult
-from simulator.media.video import MediaInfo, probe
 
-__all__ = ["check_right_eye", "csv_opacity", "frame_range"]
+__all__ = ["csv_opacity", "frame_range"]
 
 
 def frame_range(
@@ -66,31 +65,3 @@ def csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
     if np.any((op < 0) | (op > 1)):
         raise InputError(f"{path}: opacity outside [0, 1] in the EPOF CSV")
     return op
-
-
-def check_right_eye(info: MediaInfo, right: str, layout: str) -> None:
-    """InputError unless ``right`` is a video matching ``info`` (the left eye's file):
-    same stored size, frame rate and frame count, both one eye each (layout mono)."""
-    if layout != "mono":
-        raise InputError(
-            f"{right}: --right takes the right eye's own equirect file; --layout {layout} "
-            "is for one file holding both eyes (drop one of them)"
-        )
-    r = probe(right)
-    if not r.is_video:
-        raise InputError(f"{right}: a still image; --right needs the right eye's video")
-    r.eye_size("mono")  # 2:1, else InputError naming the file
-    if (r.width, r.height) != (info.width, info.height):
-        raise InputError(
-            f"{right}: right eye is {r.width}x{r.height}; the left eye ({info.path}) is "
-            f"{info.width}x{info.height}: the two eye files must have the same size"
-        )
-    if abs(r.fps - info.fps) > 1e-6 * info.fps:
-        raise InputError(
-            f"{right}: right eye is {r.fps:g} fps; the left eye ({info.path}) is {info.fps:g} fps"
-        )
-    if r.n_frames != info.n_frames:
-        raise InputError(
-            f"{right}: right eye has {r.n_frames} frames; the left eye ({info.path}) has "
-            f"{info.n_frames}: the two eye files must have the same frames"
-        )

@@ -1,9 +1,15 @@
-"""The one-viewing job: head path -> EPOF -> render -> files in OUTDIR (``vimsim render``, the demo, studies)."""
+"""The one-viewing job: head path -> EPOF -> render -> files in OUTDIR (``vimsim render``, the demo, studies).
+
+:func:`render_viewing` is three steps: :func:`plan_job` (every check and the plan of every
+frame, nothing written), :func:`draw` (the eye videos) and the record
+(:mod:`simulator.viewing.summary`: ``epof.csv``'s settings and ``summary.json``).
+"""
 
 from __future__ import annotations
 
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,47 +21,190 @@ from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.media.audio import audio_source
 from simulator.media.gridfile import require_field
 from simulator.media.lazyfield import take_rows
-from simulator.mitigation.kinds import cell_opacity, visible_flow
+from simulator.media.source import Source, as_source
+from simulator.mitigation.kinds import VisibleFlow, cell_opacity, visible_flow
 from simulator.render.gl import create_context
-from simulator.render.video import render_video
+from simulator.render.video import VideoRenderResult, render_video
 from simulator.traces.path import HeadPath
-from simulator.viewing.plan import grf_settings, plan_viewing
+from simulator.viewing.plan import ViewingPlan, plan_viewing
 from simulator.viewing.review import ReviewWriter
 from simulator.viewing.spec import ViewSpec
+from simulator.viewing.summary import REVIEW_FILES, epof_settings, viewing_summary
 
-__all__ = ["OUTDIR_FILES", "REVIEW_FILES", "VISIBLE_COLUMNS", "render_viewing"]
+__all__ = [
+    "OUTDIR_FILES",
+    "REVIEW_FILES",
+    "VISIBLE_COLUMNS",
+    "ViewingJob",
+    "draw",
+    "plan_job",
+    "render_viewing",
+]
 
 #: What :func:`render_viewing` writes into OUTDIR, in this order; ``summary.json`` last.
 OUTDIR_FILES = ("left.mp4", "right.mp4", "epof.csv", "summary.json")
-#: Written besides with ``review=True`` (before ``summary.json``).
-REVIEW_FILES = ("review.mp4", "sheet.png")
 
 #: Columns ``epof.csv`` of a render has after the EPOF columns: what reaches the eye
 #: (:func:`simulator.mitigation.kinds.visible_flow`).
 VISIBLE_COLUMNS = ("visible_flow_dps", "visible_ratio", "blocked_share")
 
 
-def _mean(a) -> float | None:
-    a = np.asarray(a, float)
-    a = a[np.isfinite(a)]
-    return float(a.mean()) if a.size else None
+@dataclass(frozen=True)
+class ViewingJob:
+    """One render's work, checked before OUTDIR is touched: the source, the view, the plan
+    of every frame, what reaches the eye, the audio, and the outputs.
+
+    eyes : ``left``, ``right`` or ``both``; review : write :data:`REVIEW_FILES` too
+    folder, inputs : the :class:`simulator.core.fileio.OutputFolder` and the input files
+        it must never write over
+    visible : :class:`simulator.mitigation.kinds.VisibleFlow` per frame; per_direction :
+        it used the sphere-mode field's flow of each direction (else the EPOF, uniform)
+    cell_opacity : local-grf's per-cell grain opacity ``(N, n_lat, n_lon)``, or None
+    audio : the source's audio to copy (or None); audio_requested : audio was asked for
+    headpath_label : the head path as ``summary.json`` names it
+    """
+
+    source: Source
+    view: ViewSpec
+    plan: ViewingPlan
+    eyes: str
+    review: bool
+    folder: OutputFolder
+    inputs: list
+    visible: VisibleFlow
+    per_direction: bool
+    cell_opacity: np.ndarray | None
+    audio: object
+    audio_requested: bool
+    headpath_label: str
 
 
-def _ratio(num, den) -> float | None:
-    """sum(visible) / sum(EPOF) over frames: the share of the viewing's flow let through."""
-    n, d = np.asarray(num, float), np.asarray(den, float)
-    ok = np.isfinite(n) & np.isfinite(d)
-    return float(n[ok].sum() / d[ok].sum()) if ok.any() and d[ok].sum() > 0 else None
+def plan_job(source, headpath, outdir, *, grid=None, view: ViewSpec, start_s=None,
+             end_s=None, review=False, eyes=None, audio=True) -> ViewingJob:  # fmt: skip
+    """Check everything of one render and work out what it draws (no GL, nothing written);
+    the parameters are :func:`render_viewing`'s. InputError for any bad input."""
+    w, h = view.config.eye_size
+    if w % 2 or h % 2:
+        raise InputError(
+            f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
+        )
+    source = as_source(source)
+    if eyes is None:
+        eyes = "both" if source.stereo else "left"
+    if eyes not in ("left", "right", "both"):
+        raise InputError(f"eyes must be left, right or both; got {eyes!r}")
+    plan = plan_viewing(source, headpath, grid=grid, view=view, start_s=start_s, end_s=end_s)
+    # Only our own earlier outputs are removed (a failed run must not leave them beside new
+    # ones); a file of one of our names that we did not write, or an input, is refused.
+    folder = OutputFolder(outdir, OUTDIR_FILES + (REVIEW_FILES if review else ()), "render")
+    grid, label = plan.grid, plan.opacity_label
+    inputs = [*source.files, *([] if isinstance(headpath, HeadPath) else [headpath])]
+    inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
+    if isinstance(label, str) and label != "auto":
+        inputs.append(label)  # an EPOF CSV
+    folder.check(inputs)  # before the GL context and any work
+    visible, per_direction, cell_op = _what_reaches_the_eye(view, plan)
+    aud = None
+    if audio:
+        f1 = int(plan.frames[-1]) + 1
+        ranged = plan.ranged
+        aud = audio_source(
+            source.path, plan.times_s[0] if ranged else None, f1 / plan.info.fps if ranged else None
+        )
+    return ViewingJob(source, view, plan, eyes, review, folder, inputs, visible, per_direction,
+                      cell_op, aud, audio, plan.headpath.source or str(headpath))  # fmt: skip
+
+
+def _what_reaches_the_eye(view: ViewSpec, plan: ViewingPlan):
+    """``(visible flow, per direction?, local-grf's cell opacity)``: the flow of each
+    direction (the sphere-mode field, rows of the plan's frames) weighted by what is drawn
+    over it (:func:`simulator.mitigation.kinds.visible_flow`)."""
+    grid, mit, grf = plan.grid, view.mitigation, view.grains
+    field_dps = cells = None
+    if grid is not None and (getattr(grid, "field_dps", None) is not None or mit.local):
+        field_dps, cells = require_field(grid)  # local-grf on a paper-mode grid: the hint
+        start = int(grid.meta.get("start_frame", 0) or 0)
+        field_dps = take_rows(field_dps, np.clip(plan.frames - start, 0, len(field_dps) - 1))
+    cell_op = None
+    if mit.local and grf is not None:
+        cell_op = cell_opacity(field_dps, plan.thresholds_dps)
+    vis = visible_flow(
+        mit,
+        view.frustum,
+        plan.angles_deg,
+        plan.opacity,
+        plan.epof_dps,
+        grf=grf,
+        field_dps=field_dps,
+        cell_deg=None if cells is None else cells.cell_deg,
+        cell_op=cell_op,
+    )
+    return vis, field_dps is not None, cell_op  # the field itself is not kept
+
+
+def draw(job: ViewingJob, ctx, out: Path, *, preset="veryfast", crf=18, threads=None,
+         progress: Progress | None = None) -> VideoRenderResult:  # fmt: skip
+    """Render and encode the job's eye videos into ``out`` (and the review video and sheet
+    with ``job.review``): :func:`simulator.render.video.render_video`."""
+    plan, eyes = job.plan, job.eyes
+    rev = None
+    if job.review:
+        yaw, pitch, roll = plan.angles_deg.T
+        rev = ReviewWriter(
+            out / "review.mp4",
+            out / "sheet.png",
+            times_s=plan.times_s,
+            yaw_deg=yaw,
+            pitch_deg=pitch,
+            roll_deg=roll,
+            epof_dps=plan.epof_dps,
+            opacity=plan.opacity,
+            hfov_deg=job.view.config.hfov_deg,
+            vfov_deg=job.view.config.vfov_deg,
+            fps=plan.info.fps,
+            audio=job.audio,
+            thresholds_dps=plan.thresholds_dps,
+            opacity_used=not job.view.mitigation.local,
+        )
+    try:
+        result = render_video(
+            ctx,
+            job.source,
+            (
+                str(out / "left.mp4") if eyes in ("left", "both") else None,
+                str(out / "right.mp4") if eyes in ("right", "both") else None,
+            ),
+            plan.angles_deg,
+            opacity=plan.opacity,
+            cell_opacity=job.cell_opacity,
+            config=job.view.config,
+            fps=plan.info.fps,
+            n_frames=len(plan.frames),
+            preset=preset,
+            crf=crf,
+            threads=threads,
+            progress=progress,
+            start_frame=int(plan.frames[0]),
+            on_frame=None if rev is None else rev.add_yuv,
+            audio=job.audio,
+            review_eye=plan.epof_eye,
+        )
+    except BaseException:
+        if rev is not None:
+            rev.close(ok=False)
+        raise
+    if rev is not None:
+        rev.close(ok=True)
+    return result
 
 
 def render_viewing(
-    video,
+    source,
     headpath,
     outdir,
     *,
     grid=None,
     view: ViewSpec | None = None,
-    layout: str = "mono",
     preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
@@ -65,7 +214,6 @@ def render_viewing(
     end_s: float | None = None,
     review: bool = False,
     eyes: str | None = None,
-    right=None,
     audio: bool = True,
     threads: int | None = None,
     **view_fields,
@@ -77,35 +225,27 @@ def render_viewing(
 
     Parameters
     ----------
-    video : path of the equirect video (mono or stereo, see ``layout``)
+    source : the video: a :class:`simulator.media.source.Source` (stereo layout, right-eye
+        file, projection; checked when opened) or a path (mono equirect)
     headpath : :class:`simulator.traces.path.HeadPath`, or the path of a head path file
         (read with :func:`simulator.traces.readers.load_headpath`, format detected)
     outdir : output folder (created)
     grid : :class:`simulator.media.gridfile.GridFile`, a grid file's path, or None. With a grid
         the EPOF is computed and ``opacity="auto"`` follows it.
     view : :class:`simulator.viewing.spec.ViewSpec`, what the eye sees (or its fields as
-        keywords: ``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``):
-        ``config`` the eye size, the frustum, GRF (``config.grf=None``: no grains) and the
-        mitigation (grf, vignette, grf+vignette, local-grf, none; local-grf needs a grid
-        with a sphere-mode field); ``opacity`` ``"auto"`` (from the EPOF, needs ``grid``),
-        a constant in [0, 1], or the path of an EPOF CSV (its ``opacity`` column; a row for
-        every rendered frame, numbered as the video's frames), ignored when nothing is
-        drawn and by local-grf; ``rule`` the opacity rule of ``"auto"`` (default the
-        paper's unsmoothed rule; :meth:`ViewSpec.from_options` and ``vimsim render`` the
-        eased comfort rule); ``method`` the EPOF method; ``hold`` hold the head path's
-        first/last pose where it does not cover the video
+        keywords: ``config=``, ``opacity=``, ``rule=``, ``method=``, ``hold=``); its
+        ``opacity`` ``"auto"`` needs ``grid``, an EPOF CSV's needs a row for every
+        rendered frame; local-grf needs a grid with a sphere-mode field. Default rule: the
+        paper's (:meth:`ViewSpec.from_options` and ``vimsim render``: the eased one)
     eyes : ``left``, ``right`` or ``both``: which eye files to write; None (default) =
         ``left`` for a mono video (both eyes would be the same, so ``right.mp4`` would be a
         byte copy) and ``both`` for a stereo one
-    right : the right eye's equirect file: ``video`` and ``right`` are then a stereo
-        source of two per-eye files (same size, frame rate and frame count; layout mono)
     audio : copy the source's audio (of ``video``; the range's part) into every output
         video (:mod:`simulator.media.audio`); False: silent outputs. A source without audio
         gives silent outputs either way (``summary.json`` says which)
     review : also write :data:`REVIEW_FILES` (:class:`simulator.viewing.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
-    layout : ``mono``, ``top-bottom`` (left eye top) or ``side-by-side`` (left eye left)
     preset, crf : x264 speed preset and quality
     threads : the render's CPU budget (:func:`simulator.render.render_video`; None: no
         bound; a study passes its task's declared CPUs, 1: one core, no pipeline threads)
@@ -116,249 +256,43 @@ def render_viewing(
         (seconds of video time; None = the video's start / end). Head path and grid stay
         in video time; a grid made of part of the video is accepted if it covers the range.
 
-    The inputs (video, head path, grid, options) and the GL context are checked before
-    OUTDIR is touched (GL size limits only once rendering starts). Then the previous run's
-    :data:`OUTDIR_FILES` (only those names) are removed, each output appears only when
-    complete (temporary name, then rename), and ``summary.json`` is written last: a run
-    is complete when it exists.
-
-    Returns
-    -------
-    dict, the summary (also ``OUTDIR/summary.json``): settings, grain count, opacity
-    thresholds, EPOF and opacity percentiles, timings (seconds), frames/s, GL renderer.
+    The inputs and the GL context are checked before OUTDIR is touched (GL size limits
+    once rendering starts): :func:`plan_job`. Then the previous run's
+    :data:`OUTDIR_FILES` (only those names) are removed, :func:`draw` renders, each
+    output appears only when complete (temporary name, then rename), and
+    ``summary.json`` (:func:`simulator.viewing.summary.viewing_summary`) is written last:
+    a run is complete when it exists. Returns the summary dict (settings, grain count,
+    opacity thresholds, EPOF, opacity and visible-flow figures, timings, GL renderer).
     """
     t0 = time.perf_counter()
     view = ViewSpec.given(view, **view_fields)
-    config, rule, opacity = view.config, view.rule, view.opacity
-    w, h = config.eye_size
-    hfov, vfov = config.hfov_deg, config.vfov_deg
-    grf = config.grains
-    mit = config.mitigation
-    drawn = grf is not None or mit.vignette
-    if w % 2 or h % 2:
-        raise InputError(
-            f"--eye-size must be even for H.264 (yuv420p); got {w}x{h}, e.g. {w + w % 2}x{h + h % 2}"
-        )
-    if eyes is None:
-        eyes = "left" if layout == "mono" and right is None else "both"
-    if eyes not in ("left", "right", "both"):
-        raise InputError(f"eyes must be left, right or both; got {eyes!r}")
-    plan = plan_viewing(
-        video,
-        headpath,
-        grid=grid,
-        view=view,
-        layout=layout,
-        start_s=start_s,
-        end_s=end_s,
-        right=right,
-    )
-    info, hp, grid, opacity = plan.info, plan.headpath, plan.grid, plan.opacity_label
-    frames, times = plan.frames, plan.times_s
-    f0, f1 = int(frames[0]), int(frames[-1]) + 1
-    nf = f1 - f0
-    yaw, pitch, roll = plan.angles_deg.T
-    epof_dps, op, thresholds = plan.epof_dps, plan.opacity, plan.thresholds_dps
-    epof_method = plan.epof_method
-    ranged = plan.ranged
-    # Only our own earlier outputs are removed (a failed run must not leave them beside new
-    # ones); a file of one of our names that we did not write, or an input, is refused.
-    folder = OutputFolder(outdir, OUTDIR_FILES + (REVIEW_FILES if review else ()), "render")
-    inputs = [video, *([] if isinstance(headpath, HeadPath) else [headpath])]
-    inputs += [grid.path] if grid is not None and getattr(grid, "path", None) else []
-    inputs += [plan.right] if plan.right is not None else []
-    if isinstance(opacity, str) and opacity != "auto":
-        inputs.append(opacity)  # an EPOF CSV
-    folder.check(inputs)  # before the GL context and any work
-
-    # What reaches the eye: the flow of each direction (the sphere-mode field, rows of the
-    # plan's frames) weighted by what is drawn over it.
-    field_dps = cells = None
-    if grid is not None and (getattr(grid, "field_dps", None) is not None or mit.local):
-        field_dps, cells = require_field(grid)  # local-grf on a paper-mode grid: the hint
-        start = int(grid.meta.get("start_frame", 0) or 0)
-        field_dps = take_rows(field_dps, np.clip(frames - start, 0, len(field_dps) - 1))
-    cell_op = None
-    if mit.local and grf is not None:
-        cell_op = cell_opacity(field_dps, thresholds)
-    angles = plan.angles_deg
-    vis = visible_flow(
-        mit,
-        config.frustum,
-        angles,
-        op,
-        epof_dps,
-        grf=grf,
-        field_dps=field_dps,
-        cell_deg=None if cells is None else cells.cell_deg,
-        cell_op=cell_op,
-    )
-    per_direction = field_dps is not None
-    del field_dps  # the render needs only cell_op (local-grf); long videos hold less
-
-    aud = None
-    if audio:
-        aud = audio_source(video, times[0] if ranged else None, f1 / info.fps if ranged else None)
-
+    job = plan_job(source, headpath, outdir, grid=grid, view=view, start_s=start_s,
+                   end_s=end_s, review=review, eyes=eyes, audio=audio)  # fmt: skip
     if ctx is None:
         ctx = create_context()
-    out = folder.prepare(inputs)
+    out = job.folder.prepare(job.inputs)
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
-    rev = None
-    if review:
-        rev = ReviewWriter(
-            out / "review.mp4",
-            out / "sheet.png",
-            times_s=times,
-            yaw_deg=yaw,
-            pitch_deg=pitch,
-            roll_deg=roll,
-            epof_dps=epof_dps,
-            opacity=op,
-            hfov_deg=hfov,
-            vfov_deg=vfov,
-            fps=info.fps,
-            audio=aud,
-            thresholds_dps=thresholds,
-            opacity_used=not mit.local,
-        )
-    try:
-        result = render_video(
-            ctx,
-            str(video),
-            (
-                str(out / "left.mp4") if eyes in ("left", "both") else None,
-                str(out / "right.mp4") if eyes in ("right", "both") else None,
-            ),
-            angles,
-            opacity=op,
-            cell_opacity=cell_op,
-            config=config,
-            layout=layout,
-            fps=info.fps,
-            n_frames=nf,
-            preset=preset,
-            crf=crf,
-            threads=threads,
-            progress=progress,
-            start_frame=f0,
-            on_frame=None if rev is None else rev.add_yuv,
-            audio=aud,
-            right_path=plan.right,
-            review_eye=plan.epof_eye,
-        )
-    except BaseException:
-        if rev is not None:
-            rev.close(ok=False)
-        raise
-    if rev is not None:
-        rev.close(ok=True)
-
-    if aud is None:
-        audio_info = {
-            "copied": False,
-            "why": "off (--no-audio)" if not audio else "no audio stream in the source",
-        }
-    else:
-        audio_info = {
-            "copied": True,
-            "codec": aud.codec,
-            "mode": "packets copied" if aud.copy else "re-encoded to AAC",
-            "range_s": [aud.start_s, aud.end_s],
-        }
-    fr_ = plan.epof_frustum
-    settings = {
-        "epof_method": epof_method,
-        "epof_eye": plan.epof_eye,
-        "frustum_deg": None
-        if fr_ is None
-        else {"left": fr_.left_deg, "right": fr_.right_deg, "down": fr_.down_deg, "up": fr_.up_deg},
-        "fov_deg": [hfov, vfov],
-        "mitigation": mit.kind,
-        "opacity": "off" if not drawn else str(opacity),
-        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
-        "opacity_thresholds_dps": list(thresholds),
-    }
+    result = draw(job, ctx, out, preset=preset, crf=crf, threads=threads, progress=progress)
     # epof.csv: one row per video frame, the settings as '#' lines above the header, the
     # visible flow after the EPOF columns.
+    plan, vis = job.plan, job.visible
+    settings = epof_settings(job)
+    res = EpofResult(plan.frames, plan.times_s, *plan.angles_deg.T, plan.epof_dps,
+                     plan.opacity, plan.thresholds_dps)  # fmt: skip
     write_epof_csv(
         out / "epof.csv",
-        EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
+        res,
         extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
         settings=settings,
     )
-
-    def pct(a):
-        a = np.asarray(a, float)
-        a = a[np.isfinite(a)]
-        return {f"p{q}": float(np.percentile(a, q)) for q in (10, 50, 90)} if a.size else None
-
     timings = dict(result.timings_s, setup=t_setup, total_with_setup=time.perf_counter() - t0)
-    summary = {
-        "video": str(video),
-        "headpath": hp.source or str(headpath),
-        "grid": None if grid is None else (grid.path or None),
-        "layout": layout,
-        "right": plan.right,
-        "eyes": eyes,
-        "audio": audio_info,
-        "fps": info.fps,
-        "frames_video": info.n_frames,
-        "range_s": [float(times[0]), float(times[-1])],
-        "frames_range": [int(f0), int(f1)],
-        "frames_written": result.n_frames,
-        "eye_size": [w, h],
-        "hfov_deg": hfov,
-        "vfov_deg": vfov,
-        "frustum_deg": {
-            "eye": "left (the right eye mirrors left and right)",
-            "left": config.frustum.left_deg,
-            "right": config.frustum.right_deg,
-            "down": config.frustum.down_deg,
-            "up": config.frustum.up_deg,
-        },
-        "grf": grf_settings(grf),
-        "mitigation": {
-            "kind": mit.kind,
-            "vignette": {
-                "aperture_min_deg": mit.aperture_min_deg,
-                "feather_deg": mit.feather_deg,
-                "color_rgb": [round(c * 255) for c in mit.color],
-            }
-            if mit.vignette
-            else None,
-            "grain_opacity": "per-cell flow (sphere-mode field)" if cell_op is not None else None,
-        },
-        "opacity": "off" if not drawn else opacity,
-        "opacity_rule": rule.describe() if grid is not None and opacity == "auto" else None,
-        "opacity_thresholds_dps": list(thresholds),
-        "epof_method": epof_method,
-        "epof_eye": plan.epof_eye,
-        "epof_frustum_deg": settings["frustum_deg"],
-        "epof_dps_percentiles": pct(epof_dps),
-        "opacity_percentiles": pct(op),
-        "visible_flow": {
-            "what": "viewport flow weighted by 1 - alpha of what is drawn over each direction",
-            "flow_per_direction": "sphere-mode field" if per_direction else "uniform (EPOF)",
-            "visible_flow_dps_mean": _mean(vis.visible_dps),
-            "visible_ratio_mean": _mean(vis.ratio),
-            "visible_ratio_flow_weighted": _ratio(vis.visible_dps, epof_dps),
-            "blocked_share_mean": _mean(vis.blocked),
-            "visible_flow_dps_percentiles": pct(vis.visible_dps),
-        },
-        "x264": {"preset": preset, "crf": crf},
-        "timings_s": timings,
-        "frames_per_s": result.frames_per_s,
-        "renderer": ctx.info.get("GL_RENDERER"),
-        "outdir": str(out),
-        "review": list(REVIEW_FILES) if review else None,
-    }
-    if note:
-        summary["note"] = note
+    run = {"x264": {"preset": preset, "crf": crf}, "timings_s": timings, "note": note,
+           "renderer": ctx.info.get("GL_RENDERER"), "outdir": str(out)}  # fmt: skip
+    summary = viewing_summary(job, result, settings=settings, run=run)
     # Last: the manifest saying which files are ours, then the completion marker.
-    folder.complete()
+    job.folder.complete()
     with atomic_output(out / "summary.json") as tmp:
         Path(tmp).write_text(json_text(summary) + "\n")
     return summary

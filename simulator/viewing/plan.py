@@ -17,12 +17,13 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
-from simulator.media.video import MediaInfo, probe
+from simulator.media.source import Source, as_source
+from simulator.media.video import MediaInfo
 from simulator.mitigation.grf import grain_count
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 from simulator.traces.readers import load_headpath
-from simulator.viewing.inputs import check_right_eye, csv_opacity, frame_range
+from simulator.viewing.inputs import csv_opacity, frame_range
 from simulator.viewing.spec import ViewSpec
 
 __all__ = ["ViewingPlan", "grf_settings", "plan_viewing"]
@@ -42,7 +43,7 @@ class ViewingPlan:
     thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
     epof_method : ``paper`` or ``sphere`` (None without a grid)
     opacity_label : what ``opacity`` was given as: ``auto``, a number, or the EPOF CSV's path
-    right : the right eye's equirect file (two per-eye files), or None
+    source : the checked :class:`simulator.media.source.Source` (layout, right-eye file)
     epof_eye : the eye whose view the EPOF measures: the grid's eye (its meta) for a
         stereo source, else ``left``
     epof_frustum : the frustum the EPOF was computed over (that eye's; the right eye's
@@ -60,9 +61,14 @@ class ViewingPlan:
     thresholds_dps: tuple[float, float]
     epof_method: str | None = None
     opacity_label: object = "auto"
-    right: str | None = None
+    source: Source | None = None
     epof_eye: str = "left"
     epof_frustum: Frustum | None = None
+
+    @property
+    def right(self) -> str | None:
+        """The right eye's own file (two per-eye files), or None."""
+        return None if self.source is None else self.source.right
 
     @property
     def ranged(self) -> bool:
@@ -85,16 +91,61 @@ def grf_settings(grf) -> dict | None:
     }
 
 
+def _check_needs_grid(view: ViewSpec, grid) -> None:
+    """InputError when what is drawn needs a grid (or a sphere-mode field) not given."""
+    mit, grf = view.mitigation, view.grains
+    if mit.local and grf is not None and grid is None:
+        raise InputError(
+            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
+            f"with `{MAKE_FIELD_HINT}`"
+        )
+    if mit.local and grf is not None:
+        require_field(grid)  # local-grf on a paper-mode grid: one line with the hint
+    if view.drawn and view.opacity == "auto" and grid is None:
+        raise InputError(
+            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
+        )
+
+
+def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged):
+    """``(epof_dps, opacity, thresholds_dps, method)`` of the plan's ``frames`` (NaN, None,
+    NaN, None without a grid): the EPOF over ``frustum`` and the opacity of ``view.rule``."""
+    nf = len(frames)
+    if grid is None:
+        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None
+    rule, f0, f1 = view.rule, int(frames[0]), int(frames[-1]) + 1
+    # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
+    # and easing have their state at the range's start (cost ~ the range).
+    warm = 0
+    if ranged:
+        warm = int(np.ceil(fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s)))
+    res = compute_epof(
+        grid,
+        hp,
+        frustum=frustum,
+        hold=True if ranged else view.hold,
+        rule=rule,
+        method=view.method,
+        frames=(max(0, f0 - warm), f1) if ranged else None,
+    )
+    # Grid rows by video frame number (a grid may start later or lack the last frame).
+    rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+    return (
+        res.epof_dps[rows].astype(float),
+        res.opacity[rows].astype(float),
+        tuple(float(v) for v in res.thresholds_dps),
+        res.meta["method"],
+    )
+
+
 def plan_viewing(
-    video,
+    source,
     headpath,
     *,
     grid=None,
     view: ViewSpec | None = None,
-    layout: str = "mono",
     start_s: float | None = None,
     end_s: float | None = None,
-    right=None,
     **view_fields,
 ) -> ViewingPlan:
     """Check a viewing's inputs and work out what every frame shows (no GL, no output).
@@ -103,17 +154,15 @@ def plan_viewing(
     the head pose at each frame's time ``i / fps`` and, when something is drawn, the
     opacity of ``view`` (a :class:`simulator.viewing.spec.ViewSpec`, or its fields as
     keywords; ``"auto"``: from the EPOF of ``grid`` through ``view.rule``, over its
-    frustum; an EPOF CSV's path: its opacity column; else the constant). ``start_s``/``end_s`` limit
-    it to a time range (:func:`simulator.viewing.inputs.frame_range`). ``right``: the right eye's
-    equirect file (``video`` is then the left eye's; both mono, same size, frame rate and
-    frame count). Raises InputError for a bad video, right-eye file, head path, grid,
-    range or opacity.
+    frustum; an EPOF CSV's path: its opacity column; else the constant).
+    ``start_s``/``end_s`` limit it to a time range
+    (:func:`simulator.viewing.inputs.frame_range`). ``source``: a
+    :class:`simulator.media.source.Source` (layout, right-eye file; checked when opened) or
+    a path (mono equirect). Raises InputError for a bad video, head path, grid, range or
+    opacity.
     """
     view = ViewSpec.given(view, **view_fields)
-    config, opacity, rule, hold = view.config, view.opacity, view.rule, view.hold
-    grf = config.grains
-    mit = config.mitigation
-    drawn = grf is not None or mit.vignette
+    config, opacity, hold, drawn = view.config, view.opacity, view.hold, view.drawn
     op_csv = None
     if isinstance(opacity, (str, os.PathLike)) and opacity != "auto":
         op_csv = read_epof_csv(opacity)  # InputError naming the file if malformed
@@ -123,15 +172,12 @@ def plan_viewing(
     elif not (0.0 <= float(opacity) <= 1.0):
         raise InputError(f"opacity must be 'auto' or a number in [0, 1], e.g. 0.5; got {opacity!r}")
 
-    info = probe(video)
-    info.eye_size(layout)  # 2:1 per eye (or squeezed stereo), else InputError
+    source = as_source(source)  # checked once: 2:1 per eye, the right-eye file
+    info, video = source.info, source.path
     if not info.is_video:
         raise InputError(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
-    if right is not None:
-        right = str(right)
-        check_right_eye(info, right, layout)
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
     f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
     ranged = (f0, f1) != (0, info.n_frames)
@@ -146,51 +192,17 @@ def plan_viewing(
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
         op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
-    if mit.local and grf is not None and grid is None:
-        raise InputError(
-            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
-            f"with `{MAKE_FIELD_HINT}`"
-        )
-    if mit.local and grf is not None:
-        require_field(grid)  # local-grf on a paper-mode grid: one line with the hint
-    if drawn and opacity == "auto" and grid is None:
-        raise InputError(
-            "--opacity auto follows the EPOF and needs --grid GRID.npz; or give --opacity 0..1"
-        )
+    _check_needs_grid(view, grid)
 
     # Per-frame head angles and opacity (EPOF rows when a grid is given).
     yaw, pitch, roll = hp.sample_angles_deg(times, hold=hold)
-    epof_dps = np.full(nf, np.nan)
-    thresholds = (float("nan"), float("nan"))
-    op_auto = None
-    epof_method = None
-    stereo = layout != "mono" or right is not None
+    stereo = source.stereo
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
-    if grid is not None:
-        # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
-        # and easing have their state at the range's start (cost ~ the range).
-        warm = 0
-        if ranged:
-            warm = int(
-                np.ceil(info.fps * (rule.ease_in_s + rule.ease_out_s + 5 * rule.smoothing_s))
-            )
-        res = compute_epof(
-            grid,
-            hp,
-            frustum=epof_frustum,
-            hold=True if ranged else hold,
-            rule=rule,
-            method=view.method,
-            frames=(max(0, f0 - warm), f1) if ranged else None,
-        )
-        epof_method = res.meta["method"]
-        # Grid rows by video frame number (a grid may start later or lack the last frame).
-        rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
-        epof_dps = res.epof_dps[rows].astype(float)
-        op_auto = res.opacity[rows].astype(float)
-        thresholds = tuple(float(v) for v in res.thresholds_dps)
+    epof_dps, op_auto, thresholds, epof_method = _epof_rows(
+        grid, hp, view, epof_frustum, frames, info.fps, ranged
+    )
     if not drawn:
         op = np.zeros(nf)
     elif op_csv is not None:
@@ -212,7 +224,7 @@ def plan_viewing(
         thresholds,
         epof_method,
         opacity,
-        right,
+        source,
         epof_eye,
         epof_frustum,
     )

@@ -88,7 +88,7 @@ def test_overlaps_match_brute_force_and_sum():
 
 
 # derandomize: CI runs the same 10 cases each time (a random search once found a 1.12%
-# case, paper-198 at 90 deg FOV, pitch 62, sparse field; see the closing note of issue 12-20)
+# case, paper-198 at 90 deg FOV, pitch 62, sparse field)
 @settings(
     max_examples=10, deadline=None, derandomize=True, suppress_health_check=[HealthCheck.too_slow]
 )

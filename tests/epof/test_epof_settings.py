@@ -1,4 +1,4 @@
-"""EPOF CSVs and summary.json record the method, frustum and opacity rule; a stereo grid's eye picks the EPOF's frustum (issue 15)."""
+"""EPOF CSVs and summary.json record the method, frustum and opacity rule; a stereo grid's eye picks the EPOF's frustum."""
 
 from __future__ import annotations
 
@@ -69,6 +69,7 @@ def test_epof_csv_records_settings_and_top_k_method(tmp_path, capsys):
 def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     """A grid of the right eye of a top-bottom video: the EPOF is over the right eye's
     frustum (the left's mirrored), exactly as viewport_epof gives it."""
+    from simulator.media.source import Source
     from simulator.media.video import VideoWriter
     from simulator.render import RenderConfig
     from simulator.viewing.job import plan_viewing
@@ -86,8 +87,8 @@ def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     got = {}
     for eye in ("left", "right"):
         f = _sphere_grid(tmp_path / f"{eye}.npz", w=128, h=128, layout="top-bottom", eye=eye)
-        plan = plan_viewing(vid, hp, grid=load_grid(tmp_path / f"{eye}.npz"), config=cfg,
-                            layout="top-bottom")  # fmt: skip
+        plan = plan_viewing(Source.open(vid, layout="top-bottom"), hp,
+                            grid=load_grid(tmp_path / f"{eye}.npz"), config=cfg)  # fmt: skip
         want = fr if eye == "left" else mirrored
         assert plan.epof_eye == eye and plan.epof_frustum == want
         exact = viewport_epof(f, CELL, yaw, pitch, roll, frustum=want)

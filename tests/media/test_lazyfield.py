@@ -75,7 +75,7 @@ def test_lazy_field_rows_and_chunks_equal_the_array(grid_path):
     assert np.array_equal(lf[::4], f[::4])
     rows = np.array([9, 9, 10, 3, 22, 0])
     assert np.array_equal(lf[rows], f[rows])
-    sel = take_rows(lf, np.clip(np.arange(-2, 30), 0, T - 1))  # lazy, as viewing.py uses it
+    sel = take_rows(lf, np.clip(np.arange(-2, 30), 0, T - 1))  # lazy, as viewing/job.py uses it
     assert np.array_equal(np.asarray(sel), f[np.clip(np.arange(-2, 30), 0, T - 1)])
     assert np.array_equal(np.asarray(sel.take([0, 31, 5])), f[[0, 22, 3]])
     seen = [(i0, c) for i0, c in lf.chunks()]

@@ -1,4 +1,4 @@
-"""Opacity easing (ease-in / ease-out), the comfort default, the opacity options of render (issue 15)."""
+"""Opacity easing (ease-in / ease-out), the comfort default, the opacity options of render."""
 
 from __future__ import annotations
 

@@ -376,7 +376,7 @@ def test_headset_bad_input_and_resolve_fov():
         resolve_fov(hfov_deg="wide")
 
 
-# ------------------------------------------- integration (once the issue 7 patches land)
+# --------------------------------------------------- integration: the commands, sphere mode
 
 
 def test_compute_epof_uses_the_field(tmp_path):

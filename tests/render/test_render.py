@@ -18,6 +18,7 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
+from simulator.media.source import Source
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import EyeRenderer, RenderConfig
 from simulator.sphere.geometry import perspective_rays
@@ -97,7 +98,7 @@ def v360():
     return reference
 
 
-#: Issue 5 goal. Measured (bench/render_agreement.py, 1024 px, 107 deg): petra 37.5 dB
+#: The renderer's goal. Measured (bench/render_agreement.py, 1024 px, 107 deg): petra 37.5 dB
 #: at (0,0,0), 41.5 at 180; equirectangular.png 42-46 dB.
 AGREE_PSNR_DB = 35.0
 
@@ -279,6 +280,10 @@ def test_shader_compile_error_names_file_and_line(ctx, monkeypatch):
     ):
         EyeRenderer(ctx, RenderConfig(eye_size=(32, 32), grf=None))
     ctx.error  # noqa: B018 - reading clears a stale error from the failed compile
+    from simulator.core.errors import InputError, VimsimError
+
+    # under the package's exception root; an internal error, not the user's (exit 1)
+    assert issubclass(R.ShaderError, VimsimError) and not issubclass(R.ShaderError, InputError)
 
 
 def test_defines_after_version_keep_line_numbers():
@@ -552,11 +557,10 @@ def test_interrupted_render_leaves_no_mp4(ctx, tmp_path, monkeypatch):
     with pytest.raises(KeyboardInterrupt):
         R.render_video(
             ctx,
-            str(vid),
+            Source.open(vid, layout="top-bottom"),
             outs,
             np.zeros((5, 3)),
             config=R.RenderConfig(eye_size=(32, 32), grf=None),
-            layout="top-bottom",
             progress=False,
         )
     assert sorted(p.name for p in tmp_path.iterdir()) == ["m.mp4"]
@@ -588,7 +592,7 @@ def test_one_cpu_render_is_serial_and_the_same(ctx, tmp_path, layout):
         d = tmp_path / f"t{threads}"
         d.mkdir()
         outs = (str(d / "left.mp4"), str(d / "right.mp4"))
-        res = R.render_video(ctx, str(vid), outs, ang, opacity=np.full(6, 0.5), layout=layout,
+        res = R.render_video(ctx, Source.open(vid, layout=layout), outs, ang, opacity=np.full(6, 0.5),
                              config=R.RenderConfig(eye_size=(48, 32), grf=GrfConfig(seed=3)),
                              threads=threads, on_frame=on_frame, progress=False)  # fmt: skip
         assert res.n_frames == 6

@@ -1,4 +1,4 @@
-"""headpath convert --columns: any lab's head log through a column map (issue 15)."""
+"""headpath convert --columns: any lab's head log through a column map."""
 
 from __future__ import annotations
 
@@ -72,7 +72,7 @@ def test_errors_name_the_column(tmp_path, capsys):
     assert convert("time=t,yaw=yaw,pitch=elev") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'elev'" in err and "among its 3 columns" in err
-    assert "t, yaw, pitch" not in err  # the header is not echoed (issue 13)
+    assert "t, yaw, pitch" not in err  # the header is not echoed (docs/reliability.md)
     assert convert("time=t,yaw=yaw,pitch=pitch") == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "line 3" in err and "'yaw'" in err and "non-numeric" in err

@@ -1,4 +1,4 @@
-"""render: the source's audio in the outputs (the range's part), --no-audio, and --right FILE (issue 15)."""
+"""render: the source's audio in the outputs (the range's part), --no-audio, and --right FILE."""
 
 from __future__ import annotations
 
@@ -193,6 +193,7 @@ def test_right_eye_with_stereo_layout_refused(ctx, tmp_path, capsys):
 
 def test_review_shows_the_grid_eye_of_two_eye_files(ctx, tmp_path):
     """With two per-eye files the review panel gets the eye asked for (the grid's eye)."""
+    from simulator.media.source import Source
     from simulator.render import RenderConfig
     from simulator.render.video import render_video
 
@@ -201,9 +202,9 @@ def test_review_shows_the_grid_eye_of_two_eye_files(ctx, tmp_path):
     _clip(right, gray=180, audio=None)
     for eye, want in (("left", 60), ("right", 180)):
         seen = []
-        render_video(ctx, str(left), (str(tmp_path / f"{eye}L.mp4"), str(tmp_path / f"{eye}R.mp4")),
+        render_video(ctx, Source.open(left, right=right), (str(tmp_path / f"{eye}L.mp4"), str(tmp_path / f"{eye}R.mp4")),
                      np.zeros((N, 3)), config=RenderConfig(eye_size=(32, 32), grf=None),
-                     preset="ultrafast", right_path=str(right), review_eye=eye,
+                     preset="ultrafast", review_eye=eye,
                      on_frame=lambda eq, img, seen=seen: seen.append((float(eq.mean()), float(img[:32].mean()))))  # fmt: skip
         assert len(seen) == N
         assert np.allclose([s[0] for s in seen], want, atol=3)  # the equirect of that eye

@@ -1,4 +1,4 @@
-"""render --start/--end: only the frames of the range, in video time (issue 15)."""
+"""render --start/--end: only the frames of the range, in video time."""
 
 from __future__ import annotations
 

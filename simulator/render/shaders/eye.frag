@@ -1,7 +1,7 @@
 #version 430 core
 // One eye's view of an equirectangular frame, with the granulated rest frame (GRF).
 //
-// Conventions (simulator/geometry.py): world and head frames +x right, +y up, +z forward;
+// Conventions (simulator/sphere/geometry.py): world and head frames +x right, +y up, +z forward;
 // lon = atan(x, z) (+ right), lat = asin(y) (+ up); equirect column x covers [x, x+1),
 // its centre x + 0.5 maps to lon = (x + 0.5) / W * 2 pi - pi; row 0 is the top (lat + pi/2).
 // The texture holds the frame as uploaded: texel row 0 = image row 0 (top), so

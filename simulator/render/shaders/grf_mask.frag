@@ -1,7 +1,7 @@
 #version 430 core
 // Granulated rest frame: coverage (blocked fraction, 0..1) of the world-fixed grains on
 // the sphere, as an equirect image (rendered once per GRF, then mipmapped and sampled by
-// eye.frag). Conventions as eye.frag / simulator/geometry.py: texel (col x, row y), row 0
+// eye.frag). Conventions as eye.frag / simulator/sphere/geometry.py: texel (col x, row y), row 0
 // = lat +pi/2 (texture row 0 is written from GL row 0, so the image needs no flip here:
 // y = gl_FragCoord.y - 0.5 indexes texture rows the way eye.frag's t does).
 //
