@@ -329,6 +329,51 @@ def _boxplot(an: Analysis, path: Path) -> None:
     plt.close(fig)
 
 
+def _report_lines(an: Analysis, table_md: str) -> list[str]:
+    """The lines of ``report.md``: data, participants, the K_OF formula, the tables,
+    exclusions, row problems and notes."""
+    a, b = an.conditions
+    lines = [
+        "# Study analysis",
+        "",
+        (
+            f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
+            "an EPOF CSV is given, else the `flow` column."
+        ),
+        (
+            f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
+            f"({sum(q.condition == a for q in an.included)} {a}, "
+            f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
+            f"{len(an.study.problems)} rows with problems."
+        ),
+        "",
+        (
+            f"K_OF formula ({an.k_of_formula}): {K_OF_TEXT[an.k_of_formula]}; the same for N, "
+            "O and D."
+        ),
+        "",
+        "## SSQ per unit of optical flow (Mann-Whitney U, two-sided)",
+        "",
+        table_md,
+        "## Shapiro-Wilk",
+        "",
+        "| Measure | Group | n | W | *p* | Note |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in an.normality:
+        w = "n/a" if math.isnan(r["W"]) else f"{r['W']:.3f}"
+        lines.append(
+            f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {p_text(r['p'])} | {r['note']} |"
+        )
+    lines += ["", "## Excluded", ""]
+    lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
+    lines += ["", "## Rows with problems (not used)", ""]
+    lines += [f"- {s}" for s in an.study.problems] or ["- none"]
+    lines += ["", "## Notes", ""]
+    lines += [f"- {s}" for s in an.messages()] or ["- none"]
+    return lines
+
+
 #: What :func:`write_report` writes, in this order; ``report.md`` (the completion marker) last.
 REPORT_FILES = ("scores.csv", "table.csv", "normality.csv", "table.md", "boxplots.png", "report.md")
 
@@ -391,45 +436,7 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     _boxplot(an, out / "boxplots.png")
     written.append(out / "boxplots.png")
 
-    a, b = an.conditions
-    lines = [
-        "# Study analysis",
-        "",
-        (
-            f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
-            "an EPOF CSV is given, else the `flow` column."
-        ),
-        (
-            f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
-            f"({sum(q.condition == a for q in an.included)} {a}, "
-            f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
-            f"{len(an.study.problems)} rows with problems."
-        ),
-        "",
-        (
-            f"K_OF formula ({an.k_of_formula}): {K_OF_TEXT[an.k_of_formula]}; the same for N, "
-            "O and D."
-        ),
-        "",
-        "## SSQ per unit of optical flow (Mann-Whitney U, two-sided)",
-        "",
-        table_md,
-        "## Shapiro-Wilk",
-        "",
-        "| Measure | Group | n | W | *p* | Note |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in an.normality:
-        w = "n/a" if math.isnan(r["W"]) else f"{r['W']:.3f}"
-        lines.append(
-            f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {p_text(r['p'])} | {r['note']} |"
-        )
-    lines += ["", "## Excluded", ""]
-    lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
-    lines += ["", "## Rows with problems (not used)", ""]
-    lines += [f"- {s}" for s in an.study.problems] or ["- none"]
-    lines += ["", "## Notes", ""]
-    lines += [f"- {s}" for s in an.messages()] or ["- none"]
+    lines = _report_lines(an, table_md)
     folder.complete()  # the manifest, then the completion marker
     with atomic_output(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
