@@ -87,3 +87,11 @@ def test_cli_convert_and_epof_take_the_column_map(tmp_path, capsys):
         ns = build_parser().parse_args([*cmd, *args])
         assert ns.columns == SIT_MAP and ns.time_format == SIT_FORMAT and ns.drop_zero_rows
         assert load_headpath_args(ns, str(p), "vimsim x").n == 39
+    from simulator.commands.render import view_from_args
+
+    # render and frames read the head path through the same column options
+    for cmd in ("render", "frames"):
+        ns = build_parser().parse_args([cmd, "v.mp4", str(p), "-o", "d", "--at", "1", *args]
+                                       if cmd == "frames" else [cmd, "v.mp4", str(p), "-o", "d",
+                                                                *args])  # fmt: skip
+        assert view_from_args(ns, cmd)[0].n == 39
