@@ -98,10 +98,9 @@ class Plan:
 
     @property
     def n_tasks(self) -> int:
-        """Preprocess tasks (grids missing for a video with work), one EPOF per viewing to
-        compute (chunked when run), one render per rendering one."""
-        need = {w.video for w in self.todo}
-        return sum(not self.hits[v] for v in need) + sum(1 + w.render for w in self.todo)
+        """What the run's progress bar counts: a preprocess per grid missing from the cache,
+        an EPOF per viewing to compute (chunked when run), a render per rendering one."""
+        return sum(not hit for hit in self.hits.values()) + sum(1 + w.render for w in self.todo)
 
 
 def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
