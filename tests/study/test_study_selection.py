@@ -148,7 +148,7 @@ def test_dry_run_then_run_warnings_attributed_and_resumed(base, tmp_path, capsys
     assert not out.exists() and not cache.exists()  # nothing written
     assert "7 viewings (7 to compute, 0 unchanged, 1 to render, 2 with warnings), 9 tasks" in cap.out
     assert "render 0.2..0.8 s +review" in cap.out
-    assert dry_s < 5
+    assert dry_s < 10  # the figure is bench/study_lab.py's; this only catches a runaway
     assert main(args) == 0
     cap = capsys.readouterr()
     assert "7 ok, 2 with warnings, 0 failed (of 7 viewings" in cap.out
