@@ -52,8 +52,9 @@ def _map_cache_dir(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def ctx():
-    """A headless EGL context (moderngl) per test module; skips only where creating one
-    fails (CI installs libegl1 + libgl1-mesa-dri), and no GL error is left at the end."""
+    """A headless EGL context (moderngl) per test module, released at the module's end;
+    skips only where creating one fails (CI installs libegl1 + libgl1-mesa-dri), and no
+    GL error is left at the end."""
     from simulator.core.errors import InputError
     from simulator.render import create_context
 
@@ -61,6 +62,23 @@ def ctx():
         c = create_context()
     except InputError as e:
         pytest.skip(f"headless EGL absent on this machine ({e})")
-    assert c.error == "GL_NO_ERROR"
-    yield c
-    assert c.error == "GL_NO_ERROR"
+    try:
+        assert c.error == "GL_NO_ERROR"
+        yield c
+        assert c.error == "GL_NO_ERROR"
+    finally:
+        c.release()
+
+
+#: Fixtures that decide a marker: a test using one gets it (with the explicit marks on
+#: tests that make a context or read the data some other way, e.g. through the CLI).
+FIXTURE_MARKERS = {"ctx": "gl", "real_dir": "real_data", "shared_dir": "real_data"}
+
+
+def pytest_collection_modifyitems(config, items):
+    """``gl`` on every test given the GL context fixture, ``real_data`` on every test
+    given the real-data folder, so that ``-m "not gl"`` / ``-m "not real_data"`` select
+    what runs without them."""
+    for item in items:
+        for fixture in set(getattr(item, "fixturenames", ())) & FIXTURE_MARKERS.keys():
+            item.add_marker(FIXTURE_MARKERS[fixture])

@@ -33,6 +33,8 @@ def demo_dir(tmp_path_factory):
     return out
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_demo_writes_every_file(demo_dir):
     s = json.loads((demo_dir / "summary.json").read_text())
     for name in s["files"]:
@@ -65,6 +67,8 @@ def test_demo_writes_every_file(demo_dir):
         assert s["render"]["error"] and "FAILED" in readme
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_demo_flow_is_close_to_truth(demo_dir):
     s = json.loads((demo_dir / "summary.json").read_text())
     acc = s["accuracy_vs_truth"]
@@ -74,6 +78,8 @@ def test_demo_flow_is_close_to_truth(demo_dir):
     assert 0 < s["epof_dps"]["median"] < 500
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_demo_is_deterministic_given_seed(demo_dir, tmp_path):
     out = tmp_path / "again"
     run_demo(out, replace(TINY, render=False), progress=False)  # render is covered above
@@ -110,6 +116,8 @@ def test_demo_and_render_do_not_import_the_cli():
         assert bad == [], f"{mod.__name__} imports {bad}"
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_demo_render_matches_the_command(demo_dir):
     """The demo's render/ is what ``vimsim render --grid grid.npz --layout top-bottom`` writes."""
     s = json.loads((demo_dir / "summary.json").read_text())

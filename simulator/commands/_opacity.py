@@ -68,28 +68,11 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
 
 
 def rule_from_args(args: argparse.Namespace):
-    """The :class:`simulator.mitigation.grf.OpacityRule` the options ask for (InputError if
+    """The :class:`simulator.mitigation.grf.OpacityRule` the options ask for, by the one
+    builder :func:`simulator.mitigation.grf.rule_from_options` (InputError if
     ``--opacity-rule paper`` is combined with smoothing or easing)."""
-    from simulator.core.errors import InputError
-    from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
+    from simulator.mitigation.grf import rule_from_options
 
-    given = [
-        f"--{n.replace('_', '-')}"
-        for n in ("smooth", "ease_in", "ease_out")
-        if getattr(args, n) is not None
-    ]
-    if args.opacity_rule == "paper":
-        if given:
-            raise InputError(
-                f"--opacity-rule paper is the unsmoothed rule; drop {', '.join(given)} "
-                "or use --opacity-rule comfort"
-            )
-        return OpacityRule(args.low_pct, args.high_pct, args.opacity_source)
-    return OpacityRule(
-        args.low_pct,
-        args.high_pct,
-        args.opacity_source,
-        args.smooth or 0.0,
-        COMFORT_EASE_IN_S if args.ease_in is None else args.ease_in,
-        COMFORT_EASE_OUT_S if args.ease_out is None else args.ease_out,
+    return rule_from_options(
+        lambda name: getattr(args, name, None), lambda name: "--" + name.replace("_", "-")
     )

@@ -37,6 +37,7 @@ from simulator.media.gridfile import GridFile
 __all__ = [
     "COMFORT_EASE_IN_S",
     "COMFORT_EASE_OUT_S",
+    "RULE_OPTIONS",
     "GrainBuckets",
     "GrainField",
     "GrfConfig",
@@ -44,6 +45,7 @@ __all__ = [
     "comfort_rule",
     "cutout_alpha",
     "grain_count",
+    "rule_from_options",
 ]
 
 #: Ease-in / ease-out times (seconds for a full 0 -> 1 / 1 -> 0 change) of the comfort
@@ -379,3 +381,66 @@ def comfort_rule(**overrides) -> OpacityRule:
     ``overrides`` replace fields. ``OpacityRule()`` is the paper's unsmoothed rule."""
     kw = {"ease_in_s": COMFORT_EASE_IN_S, "ease_out_s": COMFORT_EASE_OUT_S, **overrides}
     return OpacityRule(**kw)
+
+
+#: The option names :func:`rule_from_options` reads (``vimsim epof``'s and ``render``'s
+#: ``--low-pct`` ... ``--opacity-rule``; a manifest's ``[epof]`` keys).
+RULE_OPTIONS = (
+    "low_pct",
+    "high_pct",
+    "opacity_source",
+    "opacity_rule",
+    "smooth",
+    "ease_in",
+    "ease_out",
+)
+
+
+def rule_from_options(get, label) -> OpacityRule:
+    """The one opacity-rule builder from options: the eased comfort rule by default
+    (:func:`comfort_rule`'s easing unless ``ease_in``/``ease_out`` are given),
+    ``opacity_rule = "paper"`` the paper's unsmoothed rule.
+
+    get : ``get(name)`` -> the option's value or None (not given), for the names of
+        :data:`RULE_OPTIONS`; label : ``label(name)`` -> the option as the caller spells it
+        (``--ease-in``, ``[epof] ease_in``), for the one-line InputError of a bad value.
+    """
+
+    def value(name, default, lo=0.0, hi=None):
+        v = get(name)
+        if v is None:
+            return default
+        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        if not ok or v < lo or (hi is not None and v > hi):
+            rng = f"[{lo:g}, {hi:g}]" if hi is not None else f">= {lo:g}"
+            raise InputError(f"{label(name)}: expected a number {rng}; got {v!r}")
+        return float(v)
+
+    low, high = value("low_pct", 10.0, hi=100.0), value("high_pct", 90.0, hi=100.0)
+    if not low < high:
+        raise InputError(
+            f"{label('low_pct')}: {low:g} must be below {label('high_pct')} ({high:g})"
+        )
+    source, kind = get("opacity_source") or "grid", get("opacity_rule") or "comfort"
+    for name, v, choices in (("opacity_source", source, OPACITY_SOURCES),
+                             ("opacity_rule", kind, ("comfort", "paper"))):  # fmt: skip
+        if v not in choices:
+            raise InputError(f"{label(name)}: expected one of {', '.join(choices)}; got {v!r}")
+    smooth, ease_in, ease_out = (value(n, None) for n in ("smooth", "ease_in", "ease_out"))
+    if kind == "paper":
+        given = [label(n) for n, v in (("smooth", smooth), ("ease_in", ease_in),
+                                       ("ease_out", ease_out)) if v is not None]  # fmt: skip
+        if given:
+            raise InputError(
+                f"{label('opacity_rule')} paper is the unsmoothed rule; drop "
+                f"{', '.join(given)} or use comfort"
+            )
+        return OpacityRule(low, high, source)
+    return OpacityRule(
+        low,
+        high,
+        source,
+        smooth or 0.0,
+        COMFORT_EASE_IN_S if ease_in is None else ease_in,
+        COMFORT_EASE_OUT_S if ease_out is None else ease_out,
+    )

@@ -27,7 +27,7 @@ from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.media.source import Source
-from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
+from simulator.mitigation.grf import OpacityRule, rule_from_options
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.render.gl import create_context
@@ -151,23 +151,16 @@ def viewing_stats(epof_dps, opacity) -> dict:
 
 
 def _rule(opts: dict) -> OpacityRule:
-    """The opacity rule of the ``[epof]`` table, with ``vimsim epof``'s defaults (the eased
-    comfort rule; ``opacity_rule = "paper"``: the paper's unsmoothed rule)."""
-    if opts.get("opacity_rule", "comfort") == "paper":
-        if opts["smooth_s"] or opts.get("ease_in_s") or opts.get("ease_out_s"):
-            raise InputError(
-                "[epof] opacity_rule = 'paper' is unsmoothed: drop smooth/ease_in/ease_out"
-            )
-        return OpacityRule(opts["low_pct"], opts["high_pct"], opts["opacity_source"])
-    ease_in, ease_out = opts.get("ease_in_s"), opts.get("ease_out_s")
-    return OpacityRule(
-        opts["low_pct"],
-        opts["high_pct"],
-        opts["opacity_source"],
-        opts["smooth_s"],
-        COMFORT_EASE_IN_S if ease_in is None else ease_in,
-        COMFORT_EASE_OUT_S if ease_out is None else ease_out,
-    )
+    """The opacity rule of the ``[epof]`` table, by ``vimsim epof``'s one builder
+    (:func:`simulator.mitigation.grf.rule_from_options`: the eased comfort rule by default;
+    ``opacity_rule = "paper"``: the paper's unsmoothed rule)."""
+    names = {"smooth": "smooth_s", "ease_in": "ease_in_s", "ease_out": "ease_out_s"}
+
+    def get(k):
+        v = opts.get(names.get(k, k))
+        return None if k == "smooth" and not v else v  # the table's default 0: not given
+
+    return rule_from_options(get, lambda k: f"[epof] {k}")
 
 
 def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> list[dict]:

@@ -29,6 +29,7 @@ from simulator.core.fileio import atomic_output, check_output_dir, json_text
 from simulator.core.progress import Counter, Progress
 from simulator.media.source import as_source
 from simulator.media.video import iter_frames, probe
+from simulator.mitigation.kinds import KINDS
 from simulator.render.eye import EyeRenderer
 from simulator.render.gl import create_context
 from simulator.sphere.geometry import head_rotation
@@ -340,8 +341,8 @@ def render_frames(
     config = view.config
     if config.mitigation.local and config.grains is not None:
         raise InputError(
-            "frames: --mitigation local-grf is rendered by `vimsim render` only; frames takes "
-            "grf, vignette, grf+vignette or none"
+            f"frames: --mitigation {config.mitigation.kind} (per-cell opacity) is rendered by "
+            f"`vimsim render` only; frames takes {', '.join(k for k, e in KINDS.items() if not e.local)}"
         )
     source = as_source(source)
     video = source.path

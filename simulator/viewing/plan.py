@@ -96,7 +96,7 @@ def _check_needs_grid(view: ViewSpec, grid) -> None:
     mit, grf = view.mitigation, view.grains
     if mit.local and grf is not None and grid is None:
         raise InputError(
-            f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
+            f"--mitigation {mit.kind} needs --grid GRID.npz with a sphere-mode field; make one "
             f"with `{MAKE_FIELD_HINT}`"
         )
     if mit.local and grf is not None:

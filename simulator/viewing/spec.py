@@ -18,16 +18,10 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from simulator.core.choices import EPOF_METHODS, MITIGATIONS, OPACITY_SOURCES
+from simulator.core.choices import EPOF_METHODS, MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.core.resources import check_fits
-from simulator.mitigation.grf import (
-    COMFORT_EASE_IN_S,
-    COMFORT_EASE_OUT_S,
-    GrfConfig,
-    OpacityRule,
-    grain_count,
-)
+from simulator.mitigation.grf import GrfConfig, OpacityRule, grain_count, rule_from_options
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.render.eye import RenderConfig
 from simulator.sphere.cells import Frustum
@@ -366,27 +360,7 @@ class _Options:
         return grf
 
     def rule(self) -> OpacityRule:
-        """The opacity rule: the eased comfort rule by default, the paper's on request."""
-        low, high = self.number("low_pct", 0.0, 100.0), self.number("high_pct", 0.0, 100.0)
-        if not low < high:
-            self.fail("low_pct", f"{low:g} must be below {self.label('high_pct')} ({high:g})")
-        source = self.choice("opacity_source", OPACITY_SOURCES)
-        kind = self.choice("opacity_rule", ("comfort", "paper"))
-        smooth, ease_in, ease_out = (self.number(k, 0.0) for k in ("smooth", "ease_in", "ease_out"))
-        if kind == "paper":
-            given = [self.label(k) for k, v in
-                     (("smooth", smooth), ("ease_in", ease_in), ("ease_out", ease_out)) if v]  # fmt: skip
-            if given:
-                self.fail(
-                    "opacity_rule",
-                    f"paper is the unsmoothed rule; drop {', '.join(given)} or use comfort",
-                )
-            return OpacityRule(low, high, source)
-        return OpacityRule(
-            low,
-            high,
-            source,
-            smooth or 0.0,
-            COMFORT_EASE_IN_S if ease_in is None else ease_in,
-            COMFORT_EASE_OUT_S if ease_out is None else ease_out,
+        """The opacity rule (:func:`simulator.mitigation.grf.rule_from_options`)."""
+        return rule_from_options(
+            lambda k: self.o.get(k) if self.mapping else getattr(self.o, k, None), self.label
         )

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import warnings
 
-import av
 import numpy as np
 import pytest
+from media_helpers import noise_frames, write_clip
 
 from simulator.cli import main
 from simulator.core import mapcache
@@ -121,22 +121,8 @@ def test_extractor_from_cache_equals_built(cdir):
         hit(frame, out=np.zeros((2, 2), np.uint8))
 
 
-def _noise_video(path, n=3, size=(128, 64)):
-    rng = np.random.default_rng(0)
-    with av.open(str(path), "w") as c:
-        s = c.add_stream("libx264", rate=10)
-        s.width, s.height, s.pix_fmt = size[0], size[1], "yuv420p"
-        for _ in range(n):
-            img = rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8)
-            for p in s.encode(av.VideoFrame.from_ndarray(img, format="rgb24")):
-                c.mux(p)
-        for p in s.encode():
-            c.mux(p)
-    return path
-
-
 def test_preprocess_no_cache_flag(tmp_path, cdir):
-    vid = _noise_video(tmp_path / "v.mp4")
+    vid = write_clip(tmp_path / "v.mp4", noise_frames(3))
     args = ["preprocess", str(vid), "--window-size", "16", "--method", "paper", "--no-progress"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

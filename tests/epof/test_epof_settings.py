@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 import pytest
+from media_helpers import gray_frames, write_clip
 
 from simulator.epof import EPOF_COLUMNS, read_epof_csv, viewport_epof
 from simulator.media.gridfile import load_grid, save_grid
@@ -70,14 +71,10 @@ def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     """A grid of the right eye of a top-bottom video: the EPOF is over the right eye's
     frustum (the left's mirrored), exactly as viewport_epof gives it."""
     from simulator.media.source import Source
-    from simulator.media.video import VideoWriter
     from simulator.render import RenderConfig
     from simulator.viewing.job import plan_viewing
 
-    vid = tmp_path / "tb.mp4"
-    with VideoWriter(vid, 30.0, (128, 128), preset="ultrafast") as wr:
-        for _ in range(4):
-            wr.write(np.full((128, 128, 3), 90, np.uint8))
+    vid = write_clip(tmp_path / "tb.mp4", gray_frames([90] * 4, (128, 128)), 30.0)
     hp = synth("sine", 1.0, rate_hz=60.0)
     fr = Frustum.from_headset("quest-2", "left")
     assert fr.left_deg != fr.right_deg
@@ -97,6 +94,7 @@ def test_stereo_grid_eye_picks_the_epof_frustum(tmp_path):
     assert np.max(np.abs(got["left"] - got["right"])) > 1e-3 * np.max(got["left"])
 
 
+@pytest.mark.gl
 def test_render_records_settings_in_summary_and_csv(tmp_path):
     from simulator.cli import main
 
@@ -108,12 +106,8 @@ def test_render_records_settings_in_summary_and_csv(tmp_path):
         create_context()
     except InputError as e:
         pytest.skip(f"headless EGL absent ({e})")
-    from simulator.media.video import VideoWriter
 
-    vid = tmp_path / "v.mp4"
-    with VideoWriter(vid, 30.0, (128, 64), preset="ultrafast") as wr:
-        for i in range(4):
-            wr.write(np.full((64, 128, 3), 40 * i, np.uint8))
+    vid = write_clip(tmp_path / "v.mp4", gray_frames(40 * i for i in range(4)), 30.0)
     _sphere_grid(tmp_path / "g.npz")
     save_headpath_csv(tmp_path / "p.csv", synth("sine", 1.0, rate_hz=60.0))
     out = tmp_path / "o"

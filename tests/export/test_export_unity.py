@@ -181,6 +181,7 @@ def _check_agreement(ref, e, op, frames, *, rel=1e-4):
 
 
 # -------------------------------------------------------------------- agreement
+@pytest.mark.slow
 def test_paper_mode_agrees_with_vimsim_epof(tmp_path, harness, capsys):
     """1000 random poses (roll, seam, |pitch| -> 90) at random times between frames, paper
     mode: float32 within 1e-4 relative; float16 within float16's rounding (2^-11, a weighted
@@ -206,6 +207,7 @@ def test_paper_mode_agrees_with_vimsim_epof(tmp_path, harness, capsys):
     assert worst < err16.max()  # float32 is the exact one
 
 
+@pytest.mark.slow
 def test_paper_198_and_another_viewport_fov(tmp_path, harness):
     """Another grid (paper-198, 90 x 80 deg windows) and viewport (--fov 100): the runtime
     builds its table from the header and still matches."""

@@ -108,6 +108,7 @@ def _save_constant_model(path, dx: float, dy: float, channels: int = 2):
     return path
 
 
+@pytest.mark.slow
 def test_torch_constant_model(tmp_path):
     p = _save_constant_model(tmp_path / "const.pt", 1.5, -0.5)
     b = TorchFlow(p, device="cpu", batch=3)

@@ -4,17 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from media_helpers import gray_frames, write_clip
 
 from simulator.core.errors import InputError
 from simulator.media.source import Source, as_source
-from simulator.media.video import VideoWriter
-
-
-def _clip(path, frames):
-    h, w = frames[0].shape[:2]
-    with VideoWriter(path, 10, (w, h), preset="ultrafast", crf=0) as wr:
-        for f in frames:
-            wr.write(f)
 
 
 def _tb(gray_top, gray_bottom, w=64):
@@ -36,7 +29,7 @@ def test_url_refused_in_one_line(url):
 
 def test_stereo_funnel_gives_each_eye(tmp_path):
     p = tmp_path / "tb.mp4"
-    _clip(p, [_tb(40, 200)] * 3)
+    write_clip(p, [_tb(40, 200)] * 3, crf=0)
     s = Source.open(p, layout="top-bottom", eye="right")
     assert s.stereo and s.eye_size == (64, 32) and s.files == [str(p)]
     assert abs(float(s.read(1).mean()) - 200) < 4  # its eye: right = bottom
@@ -50,8 +43,8 @@ def test_stereo_funnel_gives_each_eye(tmp_path):
 
 def test_right_eye_file_and_as_source(tmp_path):
     left, right = tmp_path / "l.mp4", tmp_path / "r.mp4"
-    _clip(left, [np.full((32, 64, 3), 60, np.uint8)] * 2)
-    _clip(right, [np.full((32, 64, 3), 180, np.uint8)] * 2)
+    write_clip(left, gray_frames([60] * 2, (64, 32)), crf=0)
+    write_clip(right, gray_frames([180] * 2, (64, 32)), crf=0)
     s = Source.open(left, right=right)
     assert s.stereo and s.files == [str(left), str(right)]
     (fl, fr), _ = list(s.eye_frames())
@@ -63,12 +56,12 @@ def test_right_eye_file_and_as_source(tmp_path):
 
 def test_bad_layout_projection_and_aspect(tmp_path):
     p = tmp_path / "m.mp4"
-    _clip(p, [np.zeros((32, 64, 3), np.uint8)] * 2)
+    write_clip(p, gray_frames([0] * 2, (64, 32)), crf=0)
     with pytest.raises(InputError, match="unknown stereo layout"):
         Source.open(p, layout="left-right")
     with pytest.raises(InputError, match="--projection 'mercator': unknown"):
         Source.open(p, projection="mercator")
     q = tmp_path / "sq.mp4"
-    _clip(q, [np.zeros((64, 64, 3), np.uint8)] * 2)
+    write_clip(q, gray_frames([0] * 2, (64, 64)), crf=0)
     with pytest.raises(InputError, match="top-bottom"):
         Source.open(q)  # 1:1 mono: the hint names the stereo layout

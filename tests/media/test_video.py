@@ -8,17 +8,15 @@ import time
 
 import numpy as np
 import pytest
+from media_helpers import noise_frames, write_clip
 
 from simulator.core.errors import InputError
 from simulator.media.video import VideoWriter, iter_frames, prefetch, probe, read_frame
 
 
-def _write(path, n: int, size=(128, 64), fps: float = 30.0, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    with VideoWriter(path, fps, size) as vw:
-        for _ in range(n):
-            vw.write(rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8))
-    return path
+def _write(path, n: int, fps: float = 30.0):
+    """``n`` noise frames at the writer's own defaults (veryfast, CRF 18)."""
+    return write_clip(path, noise_frames(n), fps, preset="veryfast")
 
 
 def test_writer_round_trip(tmp_path):

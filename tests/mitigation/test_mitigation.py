@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from media_helpers import write_clip
 
 from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
@@ -179,16 +180,17 @@ def test_none_draws_nothing_and_default_is_grf(ctx, petra_small):
 def _half_moving_clip(path: Path, n: int = 6, fps: float = 30.0) -> None:
     """A 512x256 noise panorama whose eastern half (lon 0..180) slides east 4 px a frame
     (wrapping inside that half); the western half stands still."""
-    from simulator.media.video import VideoWriter
 
     rng = np.random.default_rng(3)
     base = cv2.GaussianBlur(rng.integers(0, 256, (256, 512)).astype(np.uint8), (0, 0), 1.5)
     base = cv2.normalize(base, None, 0, 255, cv2.NORM_MINMAX)
-    with VideoWriter(path, fps, (512, 256), preset="ultrafast", crf=10) as w:
-        for k in range(n):
-            f = base.copy()
-            f[:, 256:] = np.roll(base[:, 256:], 4 * k, axis=1)
-            w.write(np.repeat(f[..., None], 3, axis=2))
+
+    def frame(k):
+        f = base.copy()
+        f[:, 256:] = np.roll(base[:, 256:], 4 * k, axis=1)
+        return np.repeat(f[..., None], 3, axis=2)
+
+    write_clip(path, (frame(k) for k in range(n)), fps, crf=10)
 
 
 @pytest.fixture(scope="module")
@@ -390,6 +392,7 @@ def test_cli_render_mitigation_bad_input(ctx, tmp_path, capsys, half_grid, extra
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_cli_local_grf_on_a_paper_grid_says_how_to_make_a_field(ctx, tmp_path, capsys):
     from simulator.cli import main
     from simulator.preprocess import preprocess_video

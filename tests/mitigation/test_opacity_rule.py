@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from media_helpers import gray_frames, write_clip
 
 from simulator.core.errors import InputError
 from simulator.mitigation.grf import OpacityRule, comfort_rule, ease
@@ -91,6 +92,7 @@ def test_epof_cli_comfort_default_paper_one_option_away(tmp_path, capsys):
     assert err.count("\n") == 1 and "--ease-in" in err and not c.exists()
 
 
+@pytest.mark.gl
 def test_render_takes_epof_csv_opacity(tmp_path, capsys):
     from simulator.render import create_context
 
@@ -99,12 +101,8 @@ def test_render_takes_epof_csv_opacity(tmp_path, capsys):
     except InputError as e:
         pytest.skip(f"headless EGL absent ({e})")
     from simulator.cli import main
-    from simulator.media.video import VideoWriter
 
-    vid = tmp_path / "v.mp4"
-    with VideoWriter(vid, 10, (128, 64), preset="ultrafast") as w:
-        for i in range(6):
-            w.write(np.full((64, 128, 3), 100 + 10 * i, np.uint8))
+    vid = write_clip(tmp_path / "v.mp4", gray_frames(100 + 10 * i for i in range(6)))
     p = tmp_path / "p.csv"
     p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,10,0,0\n")
     ecsv = tmp_path / "e.csv"

@@ -11,13 +11,13 @@ import sys
 import av
 import numpy as np
 import pytest
+from media_helpers import noise_frames, write_clip
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
 from simulator.cli import main
 from simulator.core.errors import InputError
 from simulator.media.gridfile import load_grid
-from simulator.media.video import VideoWriter
 from simulator.preprocess import (
     PreprocessInterrupted,
     WindowFlowReducer,
@@ -38,15 +38,11 @@ TINY = grid_preset("paper-198", size=(32, 32))
 # ------------------------------------------------------------------------- helpers
 def _rotation_video(path, img, axis, omega_dps, n):
     axis = np.asarray(axis, float) / np.linalg.norm(axis)
-    H, W = img.shape[:2]
-    with VideoWriter(path, FPS, (W, H)) as vw:
-        for i in range(n):
-            vw.write(
-                geometry.rotate_equirect(
-                    img, Rotation.from_rotvec(axis * np.radians(omega_dps * i / FPS))
-                )
-            )
-    return path
+    frames = (
+        geometry.rotate_equirect(img, Rotation.from_rotvec(axis * np.radians(omega_dps * i / FPS)))
+        for i in range(n)
+    )
+    return write_clip(path, frames, FPS, preset="veryfast")
 
 
 def _truth_dps(grid, axis, omega_dps):
@@ -356,11 +352,7 @@ def test_real_clips(tmp_path, real_dir, name, extra, capsys):
 
 # ----------------------------------------------------------------------- bad input
 def _video(path, n, size=(128, 64)):
-    rng = np.random.default_rng(0)
-    with VideoWriter(path, FPS, size) as vw:
-        for _ in range(n):
-            vw.write(rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8))
-    return path
+    return write_clip(path, noise_frames(n, size), FPS, preset="veryfast")
 
 
 def _zero_frame_video(path):
@@ -495,10 +487,8 @@ def test_top_bottom_stereo_eyes(tmp_path, real_dir, capsys):
     """vrview's top-bottom stereo panorama, shifted per frame: each eye gets its own grid."""
     img = Image.open(real_dir / "equirect" / "vrview" / "dolphins_stereo_tb.jpg").convert("RGB")
     img = np.asarray(img.resize((256, 256), Image.LANCZOS))
-    src = tmp_path / "tb.mp4"
-    with VideoWriter(src, FPS, (256, 256)) as vw:
-        for i in range(3):
-            vw.write(np.ascontiguousarray(np.roll(img, 2 * i, axis=1)))
+    frames = (np.ascontiguousarray(np.roll(img, 2 * i, axis=1)) for i in range(3))
+    src = write_clip(tmp_path / "tb.mp4", frames, FPS, preset="veryfast")
     grids = {}
     for eye in ("left", "right"):
         out = tmp_path / f"{eye}.npz"
@@ -553,6 +543,7 @@ def _min_size_model(path):
     return f"torch:{path}"
 
 
+@pytest.mark.slow
 def test_torch_model_checked_at_the_window_size(tmp_path, capsys, videos):
     """A model with a minimum input size (RAFT needs 128 px) is checked at the windows it
     will get: it works at 128 px windows, and at 32 px fails with its own reason, before

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from media_helpers import write_clip
 
 import simulator.preprocess.sphere
 from simulator.core.errors import InputError
@@ -245,13 +246,7 @@ def test_grid_with_field_round_trip(tmp_path):
 
 
 def test_preprocess_sphere_writes_a_grid_file(tmp_path):
-    from simulator.media.video import VideoWriter
-
-    frames, _ = _rotating_frames(3, 30.0, (0, 1, 0))
-    vid = tmp_path / "rot.mp4"
-    with VideoWriter(vid, 30.0, (512, 256)) as vw:
-        for fr in frames:
-            vw.write(np.repeat(fr[..., None], 3, axis=2))
+    vid = _rot_video(tmp_path / "rot.mp4")
     grid = grid_preset("paper-198", hfov_deg=90)
     out = preprocess_sphere(
         vid, tmp_path / "g.npz", grid=grid, config=SphereConfig(tile_size=96), progress=False
@@ -268,13 +263,10 @@ def test_preprocess_sphere_writes_a_grid_file(tmp_path):
 
 
 def _rot_video(path, n: int = 3):
-    from simulator.media.video import VideoWriter
-
+    """A gray panorama panning at 30 deg/s about the vertical axis (the writer's defaults)."""
     frames, _ = _rotating_frames(n, 30.0, (0, 1, 0))
-    with VideoWriter(path, 30.0, (512, 256)) as vw:
-        for fr in frames:
-            vw.write(np.repeat(fr[..., None], 3, axis=2))
-    return path
+    rgb = (np.repeat(fr[..., None], 3, axis=2) for fr in frames)
+    return write_clip(path, rgb, 30.0, preset="veryfast")
 
 
 def test_preprocess_sphere_checks_output_dir_before_any_work(tmp_path, monkeypatch):

@@ -16,6 +16,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from media_helpers import write_clip
 
 from simulator.core.errors import InputError
 from simulator.media.source import Source
@@ -345,7 +346,6 @@ def test_yuv420p_readback_matches_swscale(ctx, petra_small, grf):
 
 # ---------------------------------------------------------------------------- CLI
 def _tiny_video(path: Path, layout: str = "mono", n: int = 4, fps: int = 10) -> None:
-    from simulator.media.video import VideoWriter
 
     x = np.linspace(0, 255, 256, dtype=np.uint8)
     base = np.repeat(np.repeat(x[None, :, None], 128, axis=0), 3, axis=2)
@@ -355,9 +355,7 @@ def _tiny_video(path: Path, layout: str = "mono", n: int = 4, fps: int = 10) -> 
         )
     else:
         frame = base
-    with VideoWriter(path, fps, (frame.shape[1], frame.shape[0]), preset="ultrafast") as w:
-        for _ in range(n):
-            w.write(frame)
+    write_clip(path, [frame] * n, fps)
 
 
 def _path_csv(path: Path, end_s: float) -> None:

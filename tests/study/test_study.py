@@ -107,6 +107,8 @@ def ran(base, tmp_path_factory):
     return rc, out, cache
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_study_outputs(ran, base, capsys):
     rc, out, _ = ran
     assert rc == 3  # the short trace fails; everything else completes
@@ -152,6 +154,8 @@ def test_study_outputs(ran, base, capsys):
     np.testing.assert_array_equal(np.asarray(Image.open(v / r["thumbnail"])), ref)
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_study_epof_equals_vimsim_epof(ran, base, tmp_path):
     """Each viewing's EPOF CSV is byte-identical to `vimsim epof` on the cached grid
     (the single-viewing command), also for a user of the multi-user file."""
@@ -167,6 +171,8 @@ def test_study_epof_equals_vimsim_epof(ran, base, tmp_path):
         assert (out / "epof" / f"{vid}.csv").read_bytes() == ref.read_bytes()
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_resume_and_cache(ran, base, tmp_path):
     _, out, cache = ran
     before = (out / "viewings.csv").read_bytes()
@@ -196,6 +202,8 @@ def test_resume_and_cache(ran, base, tmp_path):
     assert json.loads((out2 / "study.json").read_text())["videos"]["clip"]["cache"] == "hit"
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_questionnaires_analysis(base, tmp_path):
     """[questionnaires]: the analyze report, each participant's flow = mean of their EPOF."""
     rows = list(csv.reader(ln for ln in EXAMPLE.read_text().splitlines() if not ln.startswith("#")))
@@ -302,6 +310,8 @@ def test_provocative_moments_separation():
     assert [g["pof_dps"] for g in got] == [10.0, 8.0, 7.0]
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_render_mitigation_from_the_manifest(base, tmp_path, capsys):
     """[render] mitigation = "vignette" (and its parameters) reaches the viewing's render."""
     m = _manifest(base, extra='mitigation = "vignette"\naperture_min = 50\nfeather = 5')
@@ -344,6 +354,8 @@ eye_size = "{eye}"
     return m
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 @pytest.mark.parametrize("kills", [1, 99], ids=["killed-once", "always-dies"])
 def test_worker_process_death(kills, base, tmp_path, monkeypatch, capsys):
     """A worker process that dies (killed, out of memory, a crash in a native library)
@@ -396,6 +408,8 @@ def test_worker_process_death(kills, base, tmp_path, monkeypatch, capsys):
         assert [v for v, r in rows.items() if r["status"] != "ok"] == ["clip-P02"]
 
 
+@pytest.mark.gl
+@pytest.mark.slow
 def test_interrupted_study_resumes(base, tmp_path):
     """Ctrl-C (SIGINT) while the study runs: one line, exit 130, no temporary file and
     no study.json left; the viewings finished before it keep their state records, and

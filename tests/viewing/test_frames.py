@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from media_helpers import write_clip
 
 FPS = 10
 N = 20
@@ -24,13 +25,10 @@ def _texture(shift: int = 0) -> np.ndarray:
 
 
 def _video(path: Path, shift: int = 0) -> Path:
-    from simulator.media.video import VideoWriter
 
-    base = _texture(shift)
-    with VideoWriter(path, FPS, (256, 128), preset="ultrafast", crf=0) as w:
-        for i in range(N):  # the scene scrolls 4 px per frame
-            w.write(np.ascontiguousarray(np.roll(base, 4 * i, axis=1)))
-    return path
+    base = _texture(shift)  # the scene scrolls 4 px per frame
+    frames = (np.ascontiguousarray(np.roll(base, 4 * i, axis=1)) for i in range(N))
+    return write_clip(path, frames, FPS, crf=0)
 
 
 @pytest.fixture(scope="module")

@@ -61,6 +61,7 @@ def test_outline_analytic_seam_and_pole():
     assert np.ptp(pole[:, 0]) > 0.95 * W and pole[:, 1].max() < H / 2  # around the north pole
 
 
+@pytest.mark.gl
 def test_render_review_writes_video_and_sheet(tmp_path):
     from simulator.render import create_context
 

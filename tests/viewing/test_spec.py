@@ -71,6 +71,18 @@ def test_conflicting_fov_options_name_both():
         ViewSpec.from_options(_cli_args("--headset", "quest-2", "--fov", "90"))
 
 
+def test_manifest_messages_name_the_table_and_key(tmp_path):
+    """The study checks its render view when it reads the manifest, naming table and key."""
+    from simulator.study.manifest import _view
+
+    m = tmp_path / "s.toml"
+    with pytest.raises(InputError, match=r"s\.toml: \[grf\] grain_size: .*95"):
+        _view(m, {"grf": {"grain_size": 95}})
+    with pytest.raises(InputError, match=r"\[epof\] smooth"):
+        _view(m, {"epof": {"opacity_rule": "paper", "smooth": 1.0}})
+    assert _view(m, {"render": {"headset": "quest-2"}})["headset"] == "quest-2"
+
+
 def test_given_replaces_fields():
     v = ViewSpec.given(opacity=0.8)
     assert v.opacity == 0.8 and ViewSpec.given(v, hold=True).hold and not v.hold
@@ -114,7 +126,7 @@ def test_study_render_equals_cli_render_with_a_headset(tmp_path, capsys):
     (tmp_path / "s.toml").write_text(
         '[[videos]]\nid = "clip"\npath = "clip.mp4"\nmethod = "sphere"\nwindow_size = 64\n\n'
         '[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\nid = "v"\nrender = true\n\n'
-        '[render]\neye_size = "64x64"\nheadset = "quest-2"\n'
+        '[render]\neye_size = "64x64"\nheadset = "quest-2"\n\n[epof]\nheadset = "quest-2"\n'
     )
     study = tmp_path / "study"
     rc = main(["study", str(tmp_path / "s.toml"), "-o", str(study), "--cache-dir",
@@ -133,6 +145,11 @@ def test_study_render_equals_cli_render_with_a_headset(tmp_path, capsys):
     sb, eb = _epof_columns(cli / "epof.csv")
     assert sa["frustum_deg"] == sb["frustum_deg"] and sa["opacity_rule"] == sb["opacity_rule"]
     assert np.array_equal(ea, eb) and np.ptp(eb[:, 1]) > 0  # same EPOF and (varying) opacity
+    # the study's EPOF of the viewing is vimsim epof's with the same headset, byte for byte
+    ref = tmp_path / "epof.csv"
+    assert main(["epof", grid, str(tmp_path / "P01.csv"), "-o", str(ref), "--headset",
+                 "quest-2"]) == 0  # fmt: skip
+    assert (study / "epof" / "v.csv").read_bytes() == ref.read_bytes()
     fa = np.stack(list(iter_frames(study / "render" / "v" / "left.mp4")))
     fb = np.stack(list(iter_frames(cli / "left.mp4")))
     assert fa.shape == fb.shape

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from media_helpers import gray_frames, write_clip
 
 from simulator.core.errors import InputError
 from simulator.viewing.plan import frame_range
@@ -17,13 +18,9 @@ def _data_lines(path):
     return [ln for ln in path.read_text().splitlines() if not ln.startswith("#")]
 
 
-def _ramp_video(path: Path, n: int = 10, fps: int = 10) -> None:
+def _ramp_video(path: Path, n: int = 10) -> None:
     """Frame i is a uniform gray of 20 + 20 i: its brightness names the frame."""
-    from simulator.media.video import VideoWriter
-
-    with VideoWriter(path, fps, (128, 64), preset="ultrafast", crf=0) as w:
-        for i in range(n):
-            w.write(np.full((64, 128, 3), 20 + 20 * i, np.uint8))
+    write_clip(path, gray_frames(20 + 20 * i for i in range(n)), crf=0)
 
 
 def _path_csv(path: Path, end_s: float) -> None:
@@ -86,6 +83,7 @@ def test_render_range_has_exactly_the_frames(ctx, tmp_path):
     assert s["frames_written"] == 4 and s["frames_range"] == [3, 7]
 
 
+@pytest.mark.slow
 def test_render_range_with_partial_grid(ctx, tmp_path):
     """A grid preprocessed for part of the video serves a range inside it; its EPOF rows
     equal the grid's own (epof CLI) rows for those frames."""
@@ -134,13 +132,9 @@ def test_render_layout_from_grid_meta(ctx, tmp_path, capsys):
     """No --layout: a stereo grid's layout (its meta) is used; both eye files by default."""
     from simulator.cli import main
     from simulator.media.gridfile import save_grid
-    from simulator.media.video import VideoWriter
     from simulator.sphere.windows import WindowGrid
 
-    vid = tmp_path / "tb.mp4"
-    with VideoWriter(vid, 10, (128, 128), preset="ultrafast") as w:
-        for _ in range(4):
-            w.write(np.full((128, 128, 3), 90, np.uint8))
+    vid = write_clip(tmp_path / "tb.mp4", gray_frames([90] * 4, (128, 128)))
     g = WindowGrid()
     z = np.ones((4, len(g.pitch_deg), len(g.yaw_deg)), np.float32)
     meta = {"fps": 10.0, "n_frames": 4, "flow": {"method": "none"}, "layout": "top-bottom",
