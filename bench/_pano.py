@@ -20,6 +20,7 @@ def pano_grid() -> Path:
     CACHE.mkdir(parents=True, exist_ok=True)
     gp = CACHE / "pano.npz"
     if not gp.exists():
-        cmd = [sys.executable, "-m", "simulator", "preprocess", str(VIDEO), "-o", str(gp)]
+        cmd = [sys.executable, "-m", "simulator", "preprocess", str(VIDEO), "-o", str(gp),
+               "--method", "paper"]  # fmt: skip
         subprocess.run(cmd, check=True)
     return gp

@@ -88,7 +88,7 @@ def main(argv=None) -> int:
             return {
                 "preprocess (paper, 128 px)": [
                     *VIMSIM, "preprocess", str(clip), "-o", str(grid),
-                    "--window-size", "128", "--no-progress",
+                    "--window-size", "128", "--method", "paper", "--no-progress",
                 ],
                 "preprocess --method sphere": [
                     *VIMSIM, "preprocess", str(clip), "-o", str(sgrid), "--method", "sphere",

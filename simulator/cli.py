@@ -42,7 +42,7 @@ COMMANDS: dict[str, str] = {
 FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo", "frames", "export", "study"})
 #: Suffixes ``--plot`` / ``headpath plot -o`` may have (matplotlib writes these).
 PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
-_OUTPUT_KEYS = ("output", "plot")
+_OUTPUT_KEYS = ("output", "plot", "log")
 
 
 def _inputs_named(args: argparse.Namespace) -> list[str]:
@@ -117,7 +117,30 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
     for module in COMMANDS.values():
         importlib.import_module(f"simulator.commands.{module}").register(sub)
+    _add_output_options(sub)
     return parser
+
+
+def _add_output_options(sub: argparse._SubParsersAction) -> None:
+    """``--quiet`` and ``--log FILE`` on every command (and subcommand)."""
+    for p in sub.choices.values():
+        g = p.add_argument_group("what the command says")
+        g.add_argument(
+            "--quiet",
+            action="store_true",
+            help="no progress bar, warnings or notes on the terminal: the result line and "
+            "errors only (--log still gets everything)",
+        )
+        g.add_argument(
+            "--log",
+            metavar="FILE",
+            default=None,
+            help="also append everything the command says (result, warnings, notes, errors; "
+            "no progress bars) to FILE",
+        )
+        for action in p._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                _add_output_options(action)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -131,11 +154,24 @@ def main(argv: list[str] | None = None) -> int:
     from simulator.core.fileio import input_scope
 
     name = f"vimsim {args.command}"
+    log = None
+    saved = sys.stdout, sys.stderr
     try:
         with handle_signals():
             inputs = _inputs_named(args)
             with input_scope(inputs):
                 _check_outputs(args, inputs)
+                log = _open_log(args, inputs, argv)
+                if log is not None or getattr(args, "quiet", False):
+                    from simulator.commands._progress import Tee
+
+                    quiet = getattr(args, "quiet", False)
+                    sys.stdout = Tee(saved[0], log)
+                    sys.stderr = Tee(saved[1], log, quiet=quiet)
+                from simulator.core.mapcache import deprecation_note
+
+                if deprecation_note():
+                    print(f"{name}: {deprecation_note()}", file=sys.stderr)
                 return int(args.func(args) or 0)
     except InputError as e:
         print(f"{name}: error: {_one_line(e)}", file=sys.stderr)
@@ -160,6 +196,41 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 1
+    finally:
+        for s in (sys.stdout, sys.stderr):
+            if s not in saved:
+                s.flush()
+        sys.stdout, sys.stderr = saved
+        if log is not None:
+            log.close()
+
+
+def _open_log(args: argparse.Namespace, inputs: list[str], argv) -> object | None:
+    """The ``--log`` file opened for appending (InputError before any work when it names
+    an input, the output, or a folder)."""
+    path = getattr(args, "log", None)
+    if path is None:
+        return None
+    from datetime import UTC, datetime
+
+    from simulator.core.fileio import check_not_input
+
+    if not str(path).strip() or os.path.isdir(path):
+        raise InputError(f"--log {path!r}: expected a file to append to, not a folder")
+    out = getattr(args, "output", None)
+    try:
+        check_not_input(path, [*inputs, *([out] if out else [])])
+    except InputError:
+        raise InputError(
+            f"--log {path}: is an input or the output of this command; refusing to append to it"
+        ) from None
+    try:
+        fh = open(path, "a", encoding="utf-8", buffering=1)  # noqa: SIM115 -- closed in main
+    except OSError as e:
+        raise InputError(f"--log {path}: cannot append ({e.strerror or e})") from None
+    cmd = " ".join(sys.argv[1:] if argv is None else map(str, argv))
+    fh.write(f"# {datetime.now(UTC):%Y-%m-%dT%H:%M:%SZ} vimsim {cmd}\n")
+    return fh
 
 
 def _one_line(e: object) -> str:

@@ -48,7 +48,7 @@ def base(tmp_path_factory) -> Path:
         + "".join(f"{t / 10},{t},{t / 2},0\n" for t in range(11))
     )
     assert main(["preprocess", str(d / "v.mp4"), "-o", str(d / "G.npz"), "--window-size",
-                 "32", "--no-progress"]) == 0  # fmt: skip
+                 "32", "--method", "paper", "--no-progress"]) == 0  # fmt: skip
     assert main(["preprocess", str(d / "v.mp4"), "-o", str(d / "S.npz"), "--window-size",
                  "32", "--method", "sphere", "--cell", "10", "--no-progress"]) == 0  # fmt: skip
     shutil.copy(EXAMPLE, d / "DATA.csv")
@@ -235,7 +235,7 @@ def _stale_tmp(d: Path) -> None:
 
 VIEW = ["viewport", "{d}/p.png", "--yaw", "10", "--pitch", "0", "--size", "32x32"]
 RENDER = ["render", "{d}/v.mp4", "{d}/P.csv", "--eye-size", "32x32", "--no-progress"]
-PRE = ["preprocess", "{d}/v.mp4", "--window-size", "32", "--no-progress"]
+PRE = ["preprocess", "{d}/v.mp4", "--window-size", "32", "--method", "paper", "--no-progress"]
 EPOF = ["epof", "{d}/G.npz", "{d}/P.csv"]
 HPC = ["headpath", "convert"]
 

@@ -13,11 +13,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.analyze.data import Participant, Study
-from simulator.analyze.scores import k_of
+from simulator.analyze.scores import K_OF_TEXT, k_of
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, csv_cell
 
-__all__ = ["Analysis", "analyze_study", "write_report"]
+__all__ = ["Analysis", "analyze_study", "p_text", "write_report"]
 
 # Measures of the paper's table, in its order: (column in scores.csv, label, SSQ field).
 _OF_MEASURES: tuple[tuple[str, str, str], ...] = (
@@ -63,6 +63,7 @@ class Analysis:
     comparisons: tuple[dict, ...]
     notes: tuple[str, ...]
     exclude_below: float | None = None
+    k_of_formula: str = "invariant"
 
     def __post_init__(self) -> None:
         if len(self.conditions) != 2 or self.conditions[0] == self.conditions[1]:
@@ -96,6 +97,8 @@ def analyze_study(
     *,
     exclude_below: float | None = None,
     conditions: Sequence[str] | None = None,
+    k_of_formula: str = "invariant",
+    notes: Sequence[str] = (),
 ) -> Analysis:
     """Exclude low-flow sessions, compute K_OF (N, O, D, K) and run the paper's tests.
 
@@ -109,6 +112,9 @@ def analyze_study(
     conditions : (str, str), optional
         The two condition labels in table order; rows with another label are excluded.
         Default: the two labels of the file, in order of first appearance.
+    k_of_formula : ``"invariant"`` (default: independent of group size) or ``"paper"``
+        (:func:`simulator.analyze.scores.k_of`).
+    notes : lines the caller adds to the report's notes (e.g. a study's confounds).
 
     Raises
     ------
@@ -157,14 +163,15 @@ def analyze_study(
         else:
             included.append(part)
 
-    notes: list[str] = []
+    notes = list(notes)
     groups = [q.condition for q in included]
     ms = np.array([q.mssq.total for q in included], dtype=np.float64)
     flow = np.array([q.flow for q in included], dtype=np.float64)
     of_scores: dict[str, NDArray[np.float64]] = {}
     for col, _label, attr in _OF_MEASURES:
         s = np.array([getattr(q.ssq, attr) for q in included], dtype=np.float64)
-        of_scores[col] = k_of(s, ms, flow, groups) if included else s
+        of_scores[col] = k_of(s, ms, flow, groups, k_of_formula) if included else s
+    notes += _group_size_notes(groups, conds, k_of_formula)
     for c in conds:
         sel = [g == c for g in groups]
         if any(sel) and float(ms[np.array(sel)].sum()) == 0.0:
@@ -234,7 +241,23 @@ def analyze_study(
         comparisons=tuple(comparisons),
         notes=tuple(notes),
         exclude_below=exclude_below,
+        k_of_formula=k_of_formula,
     )
+
+
+def _group_size_notes(groups: list[str], conds: tuple[str, str], formula: str) -> list[str]:
+    """A warning line when the condition groups differ in size (what it does to K_OF)."""
+    n_a, n_b = (sum(g == c for g in groups) for c in conds)
+    if n_a == n_b or not (n_a and n_b):
+        return []
+    what = (
+        "the paper's K_OF scales with 1 / group size, so its values are not comparable "
+        "across these groups (the default --k-of invariant is)"
+        if formula == "paper"
+        else "K_OF uses the group-size-invariant formula (--k-of paper gives the paper's, "
+        "which would scale with 1 / group size)"
+    )
+    return [f"WARNING: unequal groups, {n_a} {conds[0]} vs. {n_b} {conds[1]}: {what}"]
 
 
 def _fmt(v: object, digits: int = 10) -> str:
@@ -254,8 +277,11 @@ def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object
             w.writerow([csv_cell(v) if isinstance(v, str) else _fmt(v) for v in r])
 
 
-def _p_text(p: float) -> str:
-    return "n/a" if math.isnan(p) else f"{p:.3f}"
+def p_text(p: float) -> str:
+    """A p value as a report prints it: 3 decimals, ``< 0.001`` below that, ``n/a``."""
+    if math.isnan(p):
+        return "n/a"
+    return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
 def _table_markdown(an: Analysis) -> str:
@@ -268,7 +294,7 @@ def _table_markdown(an: Analysis) -> str:
         ma = "n/a" if math.isnan(row["mean_a"]) else f"{row['mean_a']:.2f}"
         mb = "n/a" if math.isnan(row["mean_b"]) else f"{row['mean_b']:.2f}"
         out.append(f"| **{row['measure']}** | | |")
-        out.append(f"| {a} vs. {b} | {ma} vs. {mb} | {_p_text(row['p'])} |")
+        out.append(f"| {a} vs. {b} | {ma} vs. {mb} | {p_text(row['p'])} |")
     return "\n".join(out) + "\n"
 
 
@@ -293,11 +319,59 @@ def _boxplot(an: Analysis, path: Path) -> None:
         for k, d in enumerate(data, start=1):
             ax.plot(k + rng.uniform(-0.08, 0.08, d.size), d, "o", ms=3, alpha=0.6, color="k")
         ax.set_title(label)
-    axes[0].set_ylabel("score x MS / (flow x group MS) x 1000")
+    axes[0].set_ylabel(
+        "score x MS / (flow x group MS) x 1000"
+        + (" x n_g / n_mean" if an.k_of_formula == "invariant" else "")
+    )
     fig.tight_layout()
     with atomic_output(path) as tmp:
         fig.savefig(tmp, dpi=100)
     plt.close(fig)
+
+
+def _report_lines(an: Analysis, table_md: str) -> list[str]:
+    """The lines of ``report.md``: data, participants, the K_OF formula, the tables,
+    exclusions, row problems and notes."""
+    a, b = an.conditions
+    lines = [
+        "# Study analysis",
+        "",
+        (
+            f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
+            "an EPOF CSV is given, else the `flow` column."
+        ),
+        (
+            f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
+            f"({sum(q.condition == a for q in an.included)} {a}, "
+            f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
+            f"{len(an.study.problems)} rows with problems."
+        ),
+        "",
+        (
+            f"K_OF formula ({an.k_of_formula}): {K_OF_TEXT[an.k_of_formula]}; the same for N, "
+            "O and D."
+        ),
+        "",
+        "## SSQ per unit of optical flow (Mann-Whitney U, two-sided)",
+        "",
+        table_md,
+        "## Shapiro-Wilk",
+        "",
+        "| Measure | Group | n | W | *p* | Note |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in an.normality:
+        w = "n/a" if math.isnan(r["W"]) else f"{r['W']:.3f}"
+        lines.append(
+            f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {p_text(r['p'])} | {r['note']} |"
+        )
+    lines += ["", "## Excluded", ""]
+    lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
+    lines += ["", "## Rows with problems (not used)", ""]
+    lines += [f"- {s}" for s in an.study.problems] or ["- none"]
+    lines += ["", "## Notes", ""]
+    lines += [f"- {s}" for s in an.messages()] or ["- none"]
+    return lines
 
 
 #: What :func:`write_report` writes, in this order; ``report.md`` (the completion marker) last.
@@ -362,40 +436,7 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     _boxplot(an, out / "boxplots.png")
     written.append(out / "boxplots.png")
 
-    a, b = an.conditions
-    lines = [
-        "# Study analysis",
-        "",
-        (
-            f"Data: `{an.study.path}`; session flow = {an.study.flow_stat} of `epof_dps` where "
-            "an EPOF CSV is given, else the `flow` column."
-        ),
-        (
-            f"Participants: {len(an.study.participants)} usable rows, {len(an.included)} included "
-            f"({sum(q.condition == a for q in an.included)} {a}, "
-            f"{sum(q.condition == b for q in an.included)} {b}), {len(an.excluded)} excluded, "
-            f"{len(an.study.problems)} rows with problems."
-        ),
-        "",
-        "## SSQ per unit of optical flow (Mann-Whitney U, two-sided)",
-        "",
-        table_md,
-        "## Shapiro-Wilk",
-        "",
-        "| Measure | Group | n | W | *p* | Note |",
-        "|---|---|---|---|---|---|",
-    ]
-    for r in an.normality:
-        w = "n/a" if math.isnan(r["W"]) else f"{r['W']:.3f}"
-        lines.append(
-            f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {_p_text(r['p'])} | {r['note']} |"
-        )
-    lines += ["", "## Excluded", ""]
-    lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
-    lines += ["", "## Rows with problems (not used)", ""]
-    lines += [f"- {s}" for s in an.study.problems] or ["- none"]
-    lines += ["", "## Notes", ""]
-    lines += [f"- {s}" for s in an.messages()] or ["- none"]
+    lines = _report_lines(an, table_md)
     folder.complete()  # the manifest, then the completion marker
     with atomic_output(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")

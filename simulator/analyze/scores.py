@@ -19,7 +19,13 @@ travelled / never experienced). Section score = (sum of the answers) x 9 / (9 - 
 
 K_OF (paper eq. in 4.4.1): K_OF,i = K_i x MS_i / (Flow_i x sum_{j in group of i} MS_j) x
 1000, and the same for N, O and D. The group sum runs over the participants of the same
-condition that remain after exclusion.
+condition that remain after exclusion. Its values scale with 1 / (group size): with 48
+against 4 participants the larger group's scores are 12x smaller for the same answers.
+The default (``formula="invariant"``) multiplies by n_g / n_mean (the group's size over
+the mean group size), i.e. divides by the group's *mean* MS times n_mean: it equals the
+paper's value exactly when the groups are equal, and duplicating every participant of a
+group changes no ratio between two participants' scores. ``formula="paper"`` is the
+paper's formula as printed.
 """
 
 from __future__ import annotations
@@ -33,7 +39,21 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 
+#: The K_OF formulas :func:`k_of` computes (the first is the default).
+K_OF_FORMULAS: tuple[str, ...] = ("invariant", "paper")
+
+#: What the report says of each formula.
+K_OF_TEXT: dict[str, str] = {
+    "invariant": "K_OF,i = K_i x MS_i / (Flow_i x sum_{j in group(i)} MS_j) x 1000 x n_g / "
+    "n_mean (the paper's formula scaled by the group's size over the mean group size: "
+    "independent of group size, equal to the paper's with equal groups)",
+    "paper": "K_OF,i = K_i x MS_i / (Flow_i x sum_{j in group(i)} MS_j) x 1000 (the paper's "
+    "formula as printed: its values scale with 1 / group size)",
+}
+
 __all__ = [
+    "K_OF_FORMULAS",
+    "K_OF_TEXT",
     "MSSQ_TYPES",
     "SSQ_ITEMS",
     "SSQ_MEMBERSHIP",
@@ -240,10 +260,13 @@ def k_of(
     ms: NDArray[np.float64],
     flow: NDArray[np.float64],
     groups: Sequence[str],
+    formula: str = "invariant",
 ) -> NDArray[np.float64]:
-    """The paper's flow- and susceptibility-normalised score.
+    """The flow- and susceptibility-normalised score (the module text gives both formulas).
 
-    K_OF,i = K_i x MS_i / (Flow_i x sum_{j in group(i)} MS_j) x 1000.
+    paper: K_OF,i = K_i x MS_i / (Flow_i x sum_{j in group(i)} MS_j) x 1000;
+    invariant (default): the same x n_g / n_mean (n_g: size of i's group, n_mean: the mean
+    size of the groups present), equal to the paper's when the groups are equal.
 
     Parameters
     ----------
@@ -255,6 +278,7 @@ def k_of(
         Session optical flow per participant, > 0 (any unit; the result scales with 1/unit).
     groups : sequence of str, length n
         Condition label per participant; the MS sum runs over each label.
+    formula : ``"invariant"`` (default) or ``"paper"``
 
     Returns
     -------
@@ -272,10 +296,16 @@ def k_of(
         )
     if np.any(~np.isfinite(f) | (f <= 0)):
         raise InputError("k_of: every flow value must be finite and > 0")
+    if formula not in K_OF_FORMULAS:
+        raise InputError(f"k_of: formula {formula!r}; expected one of {', '.join(K_OF_FORMULAS)}")
     out = np.full(s.shape, np.nan)
-    for label in dict.fromkeys(g.tolist()):
+    labels = list(dict.fromkeys(g.tolist()))
+    n_mean = s.size / max(1, len(labels))
+    for label in labels:
         sel = g == label
         total_ms = float(m[sel].sum())
         if total_ms > 0:
             out[sel] = s[sel] * m[sel] / (f[sel] * total_ms) * 1000.0
+            if formula == "invariant":
+                out[sel] *= int(sel.sum()) / n_mean  # exactly 1.0 with equal groups
     return out

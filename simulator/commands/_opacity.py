@@ -10,8 +10,9 @@ from simulator.core.choices import OPACITY_SOURCES
 __all__ = ["add_opacity_arguments", "rule_from_args"]
 
 
-def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
-    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule``."""
+def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES) -> None:
+    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule``;
+    ``sources``: the ``--opacity-source`` values the command can use (export: grid only)."""
     g = p.add_argument_group("GRF opacity rule (EPOF -> opacity)")
     g.add_argument(
         "--low-pct",
@@ -29,9 +30,10 @@ def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--opacity-source",
-        choices=OPACITY_SOURCES,
+        choices=sources,
         default="grid",
-        help="percentiles of every window of every frame (grid, the paper) or of this viewing's EPOF",
+        help="percentiles of every window of every frame (grid, the paper)"
+        + (" or of this viewing's EPOF (viewing)" if "viewing" in sources else ""),
     )
     g.add_argument(
         "--opacity-rule",

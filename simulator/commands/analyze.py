@@ -64,6 +64,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="the two condition labels in table order, e.g. NR,GR (default: order of "
         "first appearance; required when the file has more than two)",
     )
+    p.add_argument(
+        "--k-of",
+        choices=("invariant", "paper"),
+        default="invariant",
+        help="K_OF formula: invariant (default: the paper's x n_g / mean group size, "
+        "independent of group size, equal to the paper's with equal groups) or paper (as "
+        "printed in the paper: scales with 1 / group size); docs/analyze.md",
+    )
     p.set_defaults(func=run)
 
 
@@ -72,11 +80,13 @@ def run(args: argparse.Namespace) -> int:
     import math
 
     from simulator.analyze import analyze_study, read_study, write_report
+    from simulator.analyze.report import p_text
 
     study = read_study(args.data, flow_stat=args.flow_stat)
     for line in study.problems:
         print(f"vimsim analyze: warning: {line}", file=sys.stderr)
-    an = analyze_study(study, exclude_below=args.exclude_below, conditions=args.conditions)
+    an = analyze_study(study, exclude_below=args.exclude_below, conditions=args.conditions,
+                       k_of_formula=args.k_of)  # fmt: skip
     for pid, why in an.excluded:
         print(f"vimsim analyze: excluded {pid}: {why}", file=sys.stderr)
     for note in an.messages():
@@ -84,10 +94,8 @@ def run(args: argparse.Namespace) -> int:
     written = write_report(an, args.output)
     a, b = an.conditions
     for r in an.comparisons:
-        ma, mb, p = (
-            "n/a" if math.isnan(v) else f"{v:.{d}f}"
-            for v, d in ((r["mean_a"], 2), (r["mean_b"], 2), (r["p"], 3))
-        )
-        print(f"{r['measure']}: {a} vs. {b} means {ma} vs. {mb}, p = {p}")
-    print(f"wrote {len(written)} files to {args.output}")
+        ma, mb = ("n/a" if math.isnan(v) else f"{v:.2f}" for v in (r["mean_a"], r["mean_b"]))
+        p = p_text(r["p"])
+        print(f"{r['measure']}: {a} vs. {b} means {ma} vs. {mb}, p {p if p[0] == '<' else '= ' + p}")
+    print(f"wrote {len(written)} files to {args.output} (K_OF formula: {args.k_of})")
     return 0

@@ -67,21 +67,22 @@ def run(args: argparse.Namespace) -> int:
     mad = DEFAULT_MAX_DIFF if args.max_diff is None else args.max_diff
     if args.update and not Path(args.golden_dir).is_dir():
         names = update_goldens(args.frames_dir, args.golden_dir)
-        print(f"vimsim compare: {len(names)} goldens created in {args.golden_dir}", file=sys.stderr)
+        print(f"vimsim compare: {len(names)} goldens created in {args.golden_dir}")
         return 0
     rep = compare_dirs(
         args.frames_dir, args.golden_dir, psnr_db=psnr, max_diff=mad, report_dir=args.report
     )
+    for line in rep.changes:  # what changed, before the pixel figures
+        print(f"vimsim compare: {line}")
     for s in rep.failures:
         print(f"vimsim compare: FAIL {s.why(psnr, mad)}", file=sys.stderr)
     worst = min(s.psnr_db for s in rep.scores)
     print(
         f"vimsim compare: {len(rep.scores) - len(rep.failures)}/{len(rep.scores)} frames pass "
-        f"(lowest PSNR {worst:.2f} dB); report {rep.report_dir}/compare.json",
-        file=sys.stderr,
+        f"(lowest PSNR {worst:.2f} dB); report {rep.report_dir}/compare.json"
     )
     if args.update:
         names = update_goldens(args.frames_dir, args.golden_dir)
-        print(f"vimsim compare: {len(names)} goldens updated in {args.golden_dir}", file=sys.stderr)
+        print(f"vimsim compare: {len(names)} goldens updated in {args.golden_dir}")
         return 0
     return 0 if rep.passed else 1

@@ -61,7 +61,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default): the precision vimsim epof uses (float32 POFs, the field's stored dtype)",
     )
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
-    add_opacity_arguments(p)  # the same rule options (and defaults: comfort) as vimsim epof
+    # The same rule options (and defaults: comfort) as vimsim epof; the 'viewing' source
+    # needs a whole viewing, which an engine export does not have: not offered.
+    add_opacity_arguments(p, sources=("grid",))
     _add_overlay_arguments(p)
     p.set_defaults(func=run)
 

@@ -77,7 +77,6 @@ def run(args: argparse.Namespace) -> int:
         print(f"vimsim frames: note: {note}", file=sys.stderr)
     n = len({f["time_s"] for f in index["frames"]})
     print(
-        f"vimsim frames: {len(index['frames'])} PNGs ({n} moments) -> {args.output}/",
-        file=sys.stderr,
-    )
+        f"vimsim frames: {len(index['frames'])} PNGs ({n} moments) -> {args.output}/"
+    )  # the result line: stdout
     return 0

@@ -14,7 +14,7 @@ from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
 from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
 
-__all__ = ["add_reader_options", "load_headpath_args", "register", "run"]
+__all__ = ["add_column_options", "add_reader_options", "load_columns_args", "load_headpath_args", "register", "run"]
 
 
 _user = number("expected a user number >= 1", "1", integer=True, lo=1)
@@ -24,8 +24,56 @@ def _user_or_all(text: str) -> int | str:
     return "all" if text == "all" else _user(text)
 
 
+def add_column_options(p: argparse.ArgumentParser) -> None:
+    """--columns and the options of a lab log read through it (docs/headpath.md)."""
+    g = p.add_argument_group("a lab's own log (any delimited table or JSON log)")
+    g.add_argument(
+        "--columns",
+        metavar="MAP",
+        help="read any delimited or JSON log through a column map: time=COL,yaw=COL,pitch=COL"
+        "[,roll=COL]; a leading - flips a sign (pitch=-deg_pitch); nested JSON fields by "
+        "dotted names (yaw=rot.y), time=key for a JSON object keyed by timestamps; e.g. a "
+        "Unity log: time=t,yaw=rot_y,pitch=-rot_x,roll=-rot_z",
+    )
+    g.add_argument(
+        "--angles", choices=("deg", "rad"), default="deg", help="--columns: angle unit (deg)"
+    )
+    g.add_argument(
+        "--time-scale",
+        type=positive_float,
+        default=1.0,
+        metavar="F",
+        help="--columns: seconds per time unit (0.001 for milliseconds; default 1)",
+    )
+    g.add_argument(
+        "--time-from-first",
+        action="store_true",
+        help="--columns: count time from the first row (for clock timestamps)",
+    )
+    g.add_argument(
+        "--time-format",
+        default=None,
+        metavar="FMT",
+        help="--columns: the time column is a clock time in this strptime format, e.g. "
+        "%%Y%%m%%dZ-%%H%%M%%S_%%fZ (counted from the first row)",
+    )
+    g.add_argument(
+        "--skip-rows",
+        type=nonneg_int,
+        default=0,
+        metavar="N",
+        help="--columns: drop the first N data rows",
+    )
+    g.add_argument(
+        "--drop-zero-rows",
+        action="store_true",
+        help="--columns: drop rows whose angles are all exactly 0 (Unity's first sample)",
+    )
+
+
 def add_reader_options(p: argparse.ArgumentParser, *, allow_all: bool = False) -> None:
-    """--format, --video, --user (shared with ``vimsim epof``); ``allow_all``: ``--user all``."""
+    """--format, --video, --user and the --columns options (shared with ``vimsim epof``,
+    ``render``, ``frames``); ``allow_all``: ``--user all``."""
     p.add_argument(
         "--format",
         choices=("auto", *HEADPATH_FORMATS),
@@ -50,6 +98,7 @@ def add_reader_options(p: argparse.ArgumentParser, *, allow_all: bool = False) -
             else ""
         ),
     )
+    add_column_options(p)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -173,28 +222,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH.csv",
         help="output CSV (a folder with --user all)",
     )
-    c.add_argument(
-        "--columns",
-        metavar="MAP",
-        help="read any delimited log through a column map: time=COL,yaw=COL,pitch=COL[,roll=COL]; "
-        "a leading - flips a sign (pitch=-deg_pitch); e.g. a Unity log: "
-        "time=t,yaw=rot_y,pitch=-rot_x,roll=-rot_z",
-    )
-    c.add_argument(
-        "--angles", choices=("deg", "rad"), default="deg", help="--columns: angle unit (deg)"
-    )
-    c.add_argument(
-        "--time-scale",
-        type=positive_float,
-        default=1.0,
-        metavar="F",
-        help="--columns: seconds per time unit (0.001 for milliseconds; default 1)",
-    )
-    c.add_argument(
-        "--time-from-first",
-        action="store_true",
-        help="--columns: count time from the first row (for clock timestamps)",
-    )
     add_reader_options(c, allow_all=True)
     c.set_defaults(func=run, headpath_command="convert")
 
@@ -219,12 +246,33 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
     from simulator.traces.readers import load_headpath
 
     with warnings_to_stderr(prog):
+        if getattr(args, "columns", None):
+            return load_columns_args(args, path)
         return load_headpath(
             path,
             getattr(args, "format", "auto"),
             video=getattr(args, "video", None),
             user=getattr(args, "user", None),
         )
+
+
+def load_columns_args(args: argparse.Namespace, path):
+    """The head path ``path`` read through ``args.columns`` and the other column options."""
+    from simulator.core.errors import InputError
+    from simulator.traces.readers import load_columns
+
+    if getattr(args, "format", "auto") != "auto":
+        raise InputError("--columns and --format exclude each other: a column map is the format")
+    return load_columns(
+        path,
+        args.columns,
+        angles=args.angles,
+        time_scale=args.time_scale,
+        time_from_first=args.time_from_first,
+        time_format=args.time_format,
+        skip_rows=args.skip_rows,
+        drop_zero_rows=args.drop_zero_rows,
+    )
 
 
 def run(args: argparse.Namespace) -> int:
@@ -257,16 +305,8 @@ def run(args: argparse.Namespace) -> int:
             return 0
         if args.headpath_command == "convert" and args.user == "all":
             return _convert_all(args)
-        if args.headpath_command == "convert" and args.columns:
-            from simulator.traces.readers import load_columns
-
-            hp = load_columns(
-                args.input,
-                args.columns,
-                angles=args.angles,
-                time_scale=args.time_scale,
-                time_from_first=args.time_from_first,
-            )
+        if args.columns:
+            hp = load_columns_args(args, args.input)
         else:
             hp = load_headpath(args.input, args.format, video=args.video, user=args.user)
         if args.headpath_command == "convert":

@@ -92,11 +92,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--method",
         choices=PREPROCESS_METHODS,
-        default="paper",
-        help="paper: flow per window (the paper, default); sphere: flow once per frame on 6 cube "
-        "tiles, stored as an angular-speed field on lon/lat cells (field_dps) from which the "
-        "window matrix of --grid/--fov is derived; epof/render then integrate the field over any "
-        "viewport FOV. Real time; no checkpoints. See docs/sphere.md",
+        default="sphere",
+        help="sphere (default): flow once per frame on 6 cube tiles, stored as an "
+        "angular-speed field on lon/lat cells (field_dps) from which the window matrix of "
+        "--grid/--fov is derived; epof/render then integrate the field over any viewport FOV; "
+        "real time, no checkpoints (docs/sphere.md). paper: the paper's method, flow per "
+        "window (slower; resumable with --resume)",
     )
     p.add_argument(
         "--cell",

@@ -6,7 +6,6 @@ Parses the options; the work is :func:`simulator.viewing.job.render_viewing`.
 from __future__ import annotations
 
 import argparse
-import sys
 
 from simulator.commands._opacity import add_opacity_arguments
 from simulator.commands._types import (
@@ -164,14 +163,14 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     the :class:`simulator.viewing.spec.ViewSpec` (the one builder of what the eye sees,
     shared with studies), the inputs, and the stereo layout (the grid's when not given)."""
     from simulator.commands._progress import warnings_to_stderr
+    from simulator.commands.headpath import load_headpath_args
     from simulator.media.gridfile import load_grid
-    from simulator.traces.readers import load_headpath
     from simulator.viewing.spec import ViewSpec
 
     # frames writes PNGs: any size the GL limits allow; render encodes H.264
     view = ViewSpec.from_options(args, video=command == "render")
+    hp = load_headpath_args(args, args.headpath, f"vimsim {command}")  # --columns too
     with warnings_to_stderr(f"vimsim {command}"):
-        hp = load_headpath(args.headpath, args.format, video=args.video, user=args.user)
         grid = load_grid(args.grid) if args.grid else None
     meta_layout = grid.meta.get("layout") if grid is not None else None
     layout = args.layout or (meta_layout if meta_layout in LAYOUTS else None) or "mono"
@@ -301,7 +300,6 @@ def run(args: argparse.Namespace) -> int:
     sound = f"audio {a['codec']} {a['mode']}" if a["copied"] else f"silent: {a['why']}"
     print(
         f"vimsim render: {s['frames_written']} frames, eye {w}x{h} -> {s['outdir']}/"
-        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s; {sound})",
-        file=sys.stderr,
-    )
+        f"{', '.join(names)}, epof.csv, summary.json ({s['frames_per_s']:.2f} frames/s; {sound})"
+    )  # the result line: stdout
     return 0

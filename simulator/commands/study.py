@@ -51,27 +51,80 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--cache-dir",
         default=None,
         metavar="DIR",
-        help="grid cache (default: $VIMSIM_CACHE, else $XDG_CACHE_HOME/vimsim or ~/.cache/vimsim)",
+        help="grid cache (default: $VIMSIM_CACHE_DIR, else $XDG_CACHE_HOME/vimsim or "
+        "~/.cache/vimsim; the old $VIMSIM_CACHE still works, deprecated)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="check everything the run would (globs, users, that every trace covers its "
+        "video, render ranges, cache hits and misses) and print the plan and the count of "
+        "tasks; writes nothing (exit 2 when a viewing would fail)",
+    )
     p.set_defaults(func=run)
+
+
+def _print_warnings(pairs: list[tuple[str, str]]) -> None:
+    """Each distinct warning once on stderr, with the viewings it belongs to."""
+    by_text: dict[str, list[str]] = {}
+    for vid, text in pairs:
+        by_text.setdefault(text, []).append(vid)
+    for text, vids in by_text.items():
+        who = ", ".join(vids[:3]) + (f" and {len(vids) - 3} more" if len(vids) > 3 else "")
+        print(f"vimsim study: warning: {who}: {text}", file=sys.stderr)
+
+
+def _dry_run(args: argparse.Namespace, manifest) -> int:
+    from simulator.study.plan import dry_run
+
+    plan = dry_run(manifest, args.output, cache_dir=args.cache_dir, resume=args.resume)
+    for vid, v in plan["videos"].items():
+        what = "preprocess" if v["preprocess"] else "no preprocessing needed"
+        print(f"video {vid}: grid cache {v['cache']} ({v['method']} mode), {what}")
+    for w in plan["viewings"]:
+        rng = ""
+        if w["render"]:
+            a, b = w["start_s"], w["end_s"]
+            rng = " render" + (f" {a or 0:g}..{'end' if b is None else f'{b:g}'} s"
+                               if a is not None or b is not None else "")  # fmt: skip
+            rng += " +review" if w["review"] else ""
+        user = f" user {w['user']}" if w["user"] != "" else ""
+        print(f"viewing {w['viewing']}: {w['action']}, video {w['video']}, "
+              f"{w['trace']}{user}{rng}")  # fmt: skip
+    _print_warnings([(v, x) for v, xs in plan["warnings"].items() for x in xs])
+    for line in plan["problems"]:
+        print(f"vimsim study: error: {line}", file=sys.stderr)
+    n = len(plan["viewings"])
+    todo = sum(w["action"] == "compute" for w in plan["viewings"])
+    renders = sum(bool(w["render"]) for w in plan["viewings"])
+    n_warn = sum(bool(x) for x in plan["warnings"].values())
+    print(f"vimsim study: dry run: {n} viewings ({todo} to compute, {n - todo} unchanged, "
+          f"{renders} to render, {n_warn} with warnings), {plan['tasks']} tasks, "
+          f"{len(plan['problems'])} problems; nothing written")  # fmt: skip
+    return 2 if plan["problems"] else 0
 
 
 def run(args: argparse.Namespace) -> int:
     """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
-    from tqdm import tqdm
-
+    from simulator.commands._progress import progress_stream
     from simulator.study import load_manifest, run_study
     from simulator.study.executors import parse_executor
 
     parse_executor(args.executor)  # an unknown executor is a usage error before anything
     manifest = load_manifest(args.manifest)
+    if args.dry_run:
+        return _dry_run(args, manifest)
+    from tqdm import tqdm  # not for a dry run: importing it costs 0.2 s
     bars: list = []  # made on the first report: nothing is drawn before the work starts
+    stream = None if args.no_progress else progress_stream()  # a terminal only
 
     def progress(done: int, failed: int, total: int) -> None:
+        if stream is None:
+            return
         if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="study", disable=args.no_progress,
-                             file=sys.stderr, dynamic_ncols=True))  # fmt: skip
+            bars.append(tqdm(total=total, unit="task", desc="study", file=stream,
+                             dynamic_ncols=True))  # fmt: skip
         bar = bars[0]
         bar.total = total
         bar.n = done + failed
@@ -92,16 +145,20 @@ def run(args: argparse.Namespace) -> int:
         for bar in bars:
             bar.close()
     c = s["counts"]
+    _print_warnings([(w["viewing"], w["warning"]) for w in s["warnings"]])
     for f in s["failures"]:
         print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)
     an = s["outputs"].get("analysis")
     if an and an.get("error"):
         print(f"vimsim study: analysis not made: {an['error']}", file=sys.stderr)
+    for note in (an or {}).get("notes") or []:
+        print(f"vimsim study: analysis: {note}", file=sys.stderr)
     for vid, vo in s["outputs"]["videos"].items():
         if "error" in vo:
             print(f"vimsim study: video {vid}: {vo['error']}", file=sys.stderr)
     print(
-        f"vimsim study: {c['ok']} of {c['viewings']} viewings ok ({c['resumed']} unchanged), "
-        f"{c['failed']} failed, {s['timings_s']['total']:.1f} s -> {args.output}/study.json"
+        f"vimsim study: {c['ok']} ok, {c['with_warnings']} with warnings, {c['failed']} failed "
+        f"(of {c['viewings']} viewings; {c['resumed']} unchanged), "
+        f"{s['timings_s']['total']:.1f} s -> {args.output}/study.json"
     )
     return 3 if c["failed"] or (an and an.get("error")) else 0

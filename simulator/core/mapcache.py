@@ -1,7 +1,8 @@
 """A user cache folder for derived arrays (remap maps) that are slow to build and cheap to load.
 
-Where: ``$VIMSIM_CACHE_DIR`` if set, else ``$XDG_CACHE_HOME/vimsim``, else
-``~/.cache/vimsim``. An entry is one folder named by the SHA-256 of its key (a
+Where: ``$VIMSIM_CACHE_DIR`` if set (vimsim's one cache variable: the study's grids live
+there too, under ``grids/``), else the deprecated ``$VIMSIM_CACHE``, else
+``$XDG_CACHE_HOME/vimsim``, else ``~/.cache/vimsim``. An entry is one folder named by the SHA-256 of its key (a
 JSON-serialisable dict naming everything the arrays depend on, with a format version)
 holding ``key.json`` and one ``.npy`` per array (no pickles), loaded memory-mapped
 (read-only; no copy, pages come from the OS cache). The key is checked on load, so a
@@ -28,15 +29,27 @@ from pathlib import Path
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["cache_dir", "cached_arrays"]
+__all__ = ["DEPRECATED_ENV", "cache_dir", "cached_arrays", "deprecation_note"]
+
+#: The study cache's old variable, read when ``VIMSIM_CACHE_DIR`` is not set.
+DEPRECATED_ENV = "VIMSIM_CACHE"
+
+
+def deprecation_note() -> str | None:
+    """A line for the CLI when only the deprecated cache variable is set, else None."""
+    if os.environ.get(DEPRECATED_ENV) and not os.environ.get("VIMSIM_CACHE_DIR"):
+        return (f"note: {DEPRECATED_ENV} is deprecated; use VIMSIM_CACHE_DIR (the same "
+                "folder, for every cache of vimsim)")  # fmt: skip
+    return None
 
 _FORMAT = "vimsim-map-cache-1"
 
 
 def cache_dir() -> Path:
-    """The cache folder (not created): ``$VIMSIM_CACHE_DIR``, ``$XDG_CACHE_HOME/vimsim``
-    or ``~/.cache/vimsim``."""
-    own = os.environ.get("VIMSIM_CACHE_DIR")
+    """The cache folder (not created): ``$VIMSIM_CACHE_DIR``, the deprecated
+    ``$VIMSIM_CACHE`` (:data:`DEPRECATED_ENV`), ``$XDG_CACHE_HOME/vimsim`` or
+    ``~/.cache/vimsim``."""
+    own = os.environ.get("VIMSIM_CACHE_DIR") or os.environ.get(DEPRECATED_ENV)
     if own:
         return Path(own).expanduser()
     xdg = os.environ.get("XDG_CACHE_HOME")

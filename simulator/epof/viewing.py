@@ -282,6 +282,14 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
     return EpofResult(**arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {})
 
 
+def break_at_wraps(t, yaw_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(t, yaw)`` with a NaN between samples where yaw wraps (jumps by over 180 deg at
+    the +-180 seam), so a plotted line breaks there instead of crossing the panel."""
+    t, y = np.asarray(t, float), np.asarray(yaw_deg, float)
+    jumps = np.flatnonzero(np.abs(np.diff(y)) > 180.0) + 1
+    return np.insert(t, jumps, np.nan), np.insert(y, jumps, np.nan)
+
+
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
     """Plot a viewing into a PNG (atomic), three panels sharing the time axis: EPOF
     (deg/s) with the opacity thresholds labelled at the right edge, clear of the data;
@@ -311,7 +319,9 @@ def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -
     ax_op.plot(t, result.opacity, color="tab:red", lw=1.0)
     ax_op.set_ylim(-0.03, 1.03)
     ax_op.set_ylabel("GRF opacity")
-    ax_hd.plot(t, result.yaw_deg, color="tab:green", lw=1.0, label="yaw")
+    ax_hd.plot(*break_at_wraps(t, result.yaw_deg), color="tab:green", lw=1.0, label="yaw")
+    if np.nanmax(np.abs(result.yaw_deg)) > 150:  # a path that wraps: the whole seam range
+        ax_hd.set_ylim(-185, 185)
     ax_hd.plot(t, result.pitch_deg, color="tab:purple", lw=1.0, label="pitch")
     ax_hd.set_ylabel("head (deg)")
     ax_hd.legend(loc="upper left", fontsize=8, ncol=2, frameon=False)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import csv
 import glob
-import math
 import re
 import tomllib
 from dataclasses import dataclass, field
@@ -22,8 +21,8 @@ from simulator.core.choices import MITIGATIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.sphere.headsets import resolve_fov
-from simulator.traces.readers import FORMATS, detect_format
+from simulator.study.entry import Entry, user_numbers
+from simulator.traces.readers import FORMATS, n_users
 from simulator.viewing.spec import ViewSpec
 
 __all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
@@ -38,16 +37,19 @@ _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
     "window_size", "flow", "cell",
 )  # fmt: skip
-_VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition", "render")
-_QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions")
+_GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
+_RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
+                "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
+                "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
+#: Render options a viewing may set for itself (over [render] and [grf]); cpus is the study's.
+_VIEWING_RENDER_KEYS = (*(k for k in _RENDER_KEYS if k != "cpus"), *_GRF_KEYS)
+_VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition",
+                 "render", "plot", *_VIEWING_RENDER_KEYS)  # fmt: skip
+_QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
 )  # fmt: skip
-_RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
-                "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
-                "vignette_color")  # fmt: skip
-_GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
 
@@ -59,7 +61,7 @@ class VideoSpec:
     path: Path
     layout: str = "mono"
     eye: str = "left"
-    method: str = "paper"
+    method: str = "sphere"
     grid: str = "default"
     hfov_deg: float = 107.0
     vfov_deg: float = 107.0
@@ -94,6 +96,11 @@ class ViewingSpec:
     participant: str = ""
     condition: str = ""
     render: bool = False
+    #: The render options of this viewing ([render] with the viewing's own keys over it),
+    #: None when it is not rendered.
+    render_opts: dict | None = None
+    #: Also plot this viewing's EPOF (``epof/<id>.png``).
+    plot: bool = False
 
 
 @dataclass(frozen=True)
@@ -121,67 +128,6 @@ class Manifest:
         return files
 
 
-# ------------------------------------------------------------------------- checks
-class _Entry:
-    """Reads typed values from one table of the manifest; errors name manifest and entry."""
-
-    def __init__(self, manifest: Path, where: str, table: object, allowed: tuple[str, ...]):
-        self.m, self.where = manifest, where
-        if not isinstance(table, dict):
-            self.fail(f"expected a table, got {type(table).__name__}")
-        self.t = table
-        unknown = [k for k in table if k not in allowed]
-        if unknown:
-            self.fail(f"unknown key {unknown[0]!r}; expected one of {', '.join(allowed)}")
-
-    def fail(self, msg: str):
-        raise InputError(f"{self.m}: {self.where}: {msg}")
-
-    def get(self, key, types, default=None, *, required=False, choices=None):
-        if key not in self.t:
-            if required:
-                self.fail(f"key {key!r} missing")
-            return default
-        v = self.t[key]
-        if isinstance(v, bool) and bool not in types:
-            self.fail(f"{key} = {v!r}: expected {'/'.join(t.__name__ for t in types)}")
-        if not isinstance(v, types):
-            self.fail(f"{key} = {v!r}: expected {'/'.join(t.__name__ for t in types)}")
-        if isinstance(v, float) and not math.isfinite(v):
-            self.fail(f"{key} = {v!r}: expected a finite number")
-        if choices is not None and v not in choices:
-            self.fail(f"{key} = {v!r}: expected one of {', '.join(map(str, choices))}")
-        return v
-
-    def number(self, key, default=None, *, lo=None, hi=None, integer=False, lo_open=False):
-        v = self.get(key, (int,) if integer else (int, float), default)
-        if v is None:
-            return None
-        if (lo is not None and (v < lo or (lo_open and v == lo))) or (hi is not None and v > hi):
-            rng = f"{'(' if lo_open else '['}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
-            self.fail(f"{key} = {v!r}: expected a number in {rng}")
-        return v if integer else float(v)
-
-    def fov(self, default):
-        try:
-            return resolve_fov(
-                headset=self.get("headset", (str,)),
-                fov_deg=self.number("fov"),
-                hfov_deg=self.number("hfov"),
-                vfov_deg=self.number("vfov"),
-                default=default,
-            )
-        except InputError as e:
-            self.fail(str(e))
-
-    def path(self, key, base: Path, *, required=True) -> Path | None:
-        v = self.get(key, (str,), required=required)
-        if v is None:
-            return None
-        p = Path(v).expanduser()
-        return p if p.is_absolute() else base / p
-
-
 def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
     width = len(str(n_users)) if n_users > 1 else 1
     return {"stem": trace.stem, "user": "" if user is None else f"{user:0{width}d}"}
@@ -190,12 +136,7 @@ def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
 def _n_users(trace: Path, fmt: str) -> tuple[str, int]:
     """(format, number of users) of a trace file; counts lines only (no parsing)."""
     check_input_file(trace, "head path")
-    f = detect_format(trace) if fmt == "auto" else fmt
-    if f != "360vidstr":
-        return f, 1
-    with open(trace, encoding="utf-8", errors="replace") as fh:
-        n = sum(1 for ln in fh if ln.strip())
-    return f, max(1, (n - 1) // 2)
+    return n_users(trace, fmt)
 
 
 def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
@@ -204,7 +145,7 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
     out: list[VideoSpec] = []
     for i, t in enumerate(tables, start=1):
         label = t.get("id") if isinstance(t, dict) else None
-        e = _Entry(m, f"[[videos]] #{i}" + (f" ({label!r})" if label else ""), t, _VIDEO_KEYS)
+        e = Entry(m, f"[[videos]] #{i}" + (f" ({label!r})" if label else ""), t, _VIDEO_KEYS)
         vid = e.get("id", (str,), required=True)
         if not _ID_RE.match(vid):
             e.fail(f"id {vid!r}: use letters, digits, '.', '_' and '-' (it names files)")
@@ -216,7 +157,8 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
         except InputError as err:
             e.fail(str(err))
         h, v = e.fov((107.0, 107.0))
-        method = e.get("method", (str,), "paper", choices=("paper", "sphere"))
+        # sphere by default, as vimsim preprocess; "paper" is the paper's method
+        method = e.get("method", (str,), "sphere", choices=("paper", "sphere"))
         cell = e.number("cell", 4.0, lo=0.0, lo_open=True)
         if method == "sphere" and abs(180.0 / cell - round(180.0 / cell)) > 1e-9:
             e.fail(f"cell = {cell}: expected degrees dividing 180, e.g. 4")
@@ -238,7 +180,87 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
     return tuple(out)
 
 
-def _viewings(m: Path, base: Path, tables, videos) -> tuple[ViewingSpec, ...]:
+def _users_of(e: Entry, trace: Path, fmt: str, user) -> tuple[list[int | None], int]:
+    """The users of ``trace`` a viewing entry takes (None: the file's one trace), and the
+    number of users the file holds."""
+    try:
+        tfmt, n = _n_users(trace, fmt)
+    except InputError as err:
+        e.fail(str(err))
+    if user is None:
+        return [None], n
+    if user == "all":
+        return (list(range(1, n + 1)) if n > 1 or tfmt == "360vidstr" else [None]), n
+    users = user_numbers(e, "user", user)
+    bad = [u for u in users if u > n]
+    if bad:
+        e.fail(f"{trace}: no user {bad[0]} (user = {user!r}); the file holds {n}")
+    return list(users), n
+
+
+def _render_users(e: Entry, render, users: list[int | None]) -> set:
+    """Which of a viewing entry's users are rendered: ``render = true | false`` (all or
+    none) or a user spec naming some of them."""
+    if isinstance(render, bool):
+        return set(users) if render else set()
+    if users == [None]:
+        e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
+    chosen = user_numbers(e, "render", render)
+    missing = [u for u in chosen if u not in users]
+    if missing:
+        e.fail(f"render = {render!r}: user {missing[0]} is not among this entry's users")
+    return set(chosen)
+
+
+def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict) -> dict:
+    """The study's render options with the viewing's own keys over them, checked as
+    ``[render]`` is (its view by the one builder, :meth:`ViewSpec.from_options`)."""
+    own = {k: e.t[k] for k in _VIEWING_RENDER_KEYS if k in e.t}
+    if not own:
+        return render
+    table = dict(data.get("render") or {})
+    if own.keys() & _FOV_KEYS:
+        for k in _FOV_KEYS:
+            table.pop(k, None)
+    table.update({k: v for k, v in own.items() if k in _RENDER_KEYS})
+    opts = _render(m, table, f"{where}: render options")
+    opts["view"] = _view(m, data, own, where)
+    return opts
+
+
+def _expand_traces(e: Entry, pattern: str, base: Path) -> list[Path]:
+    pat = str(Path(pattern).expanduser())
+    pat = pat if Path(pat).is_absolute() else str(base / pat)
+    if not _GLOB_CHARS.search(pattern):
+        return [Path(pat)]
+    traces = [Path(p) for p in sorted(glob.glob(pat)) if Path(p).is_file()]
+    if not traces:
+        e.fail(f"trace glob {pattern!r} matches no file (relative to {base})")
+    return traces
+
+
+def _viewing_ids(e: Entry, trace: Path, u, n: int, vid: str, condition: str) -> tuple[str, str]:
+    """(viewing id, participant) of one user of a trace, from the entry's templates."""
+    f = _stem_fields(trace, u, n)
+    default_p = f["stem"] + (f"_user{f['user']}" if u is not None else "")
+    participant_t, id_t = e.get("participant", (str,)), e.get("id", (str,))
+    try:
+        participant = participant_t.format(**f) if participant_t else default_p
+        f.update(participant=participant, video=vid, condition=condition)
+        default_id = f"{vid}-{participant}" + (f"-{condition}" if condition else "")
+        vw_id = id_t.format(**f) if id_t else default_id
+    except (KeyError, IndexError, ValueError) as err:
+        e.fail(
+            f"bad template in id/participant ({err}); fields: stem, user, participant, video, condition"
+        )
+    if not _ID_RE.match(vw_id):
+        e.fail(f"viewing id {vw_id!r}: use letters, digits, '.', '_' and '-' (it names files)")
+    return vw_id, participant
+
+
+def _viewings(
+    m: Path, base: Path, tables, videos, data: dict, render: dict
+) -> tuple[ViewingSpec, ...]:
     if not isinstance(tables, list) or not tables:
         raise InputError(
             f"{m}: no [[viewings]] entries; expected at least one with video and trace"
@@ -249,74 +271,40 @@ def _viewings(m: Path, base: Path, tables, videos) -> tuple[ViewingSpec, ...]:
     for i, t in enumerate(tables, start=1):
         label = t.get("video") if isinstance(t, dict) else None
         where = f"[[viewings]] #{i}" + (f" (video {label!r})" if label else "")
-        e = _Entry(m, where, t, _VIEWING_KEYS)
+        e = Entry(m, where, t, _VIEWING_KEYS)
         vid = e.get("video", (str,), required=True)
         if vid not in ids:
             e.fail(f"video {vid!r} is not a [[videos]] id; known: {', '.join(sorted(ids))}")
         pattern = e.get("trace", (str,), required=True)
         fmt = e.get("format", (str,), "auto", choices=("auto", *FORMATS))
-        user = e.get("user", (int, str))
-        if isinstance(user, str) and user != "all":
-            e.fail(f'user = {user!r}: expected a number >= 1 or "all"')
-        if isinstance(user, int) and user < 1:
-            e.fail(f'user = {user}: expected a number >= 1 or "all"')
-        pat = str(Path(pattern).expanduser())
-        pat = pat if Path(pat).is_absolute() else str(base / pat)
-        if _GLOB_CHARS.search(pattern):
-            traces = [Path(p) for p in sorted(glob.glob(pat)) if Path(p).is_file()]
-            if not traces:
-                e.fail(f"trace glob {pattern!r} matches no file (relative to {base})")
-        else:
-            traces = [Path(pat)]
-        participant_t = e.get("participant", (str,))
-        id_t = e.get("id", (str,))
+        user = e.get("user", (int, str, list))
+        if user is not None and user != "all":
+            user_numbers(e, "user", user)  # a bad spec is named before any file is read
         condition = e.get("condition", (str,), "")
-        render = e.get("render", (bool,), False)
-        for trace in traces:
-            try:
-                tfmt, n_users = _n_users(trace, fmt)
-            except InputError as err:
-                e.fail(str(err))
-            if user == "all":
-                users: list[int | None] = (
-                    list(range(1, n_users + 1)) if n_users > 1 or tfmt == "360vidstr" else [None]
-                )
-            else:
-                if isinstance(user, int) and tfmt == "360vidstr" and user > n_users:
-                    e.fail(f"{trace}: no user {user}; the file holds {n_users}")
-                users = [user]
+        render_spec = e.get("render", (bool, int, str, list), False)
+        plot = e.get("plot", (bool,), False)
+        ropts = _viewing_render_opts(e, m, where, data, render)
+        for trace in _expand_traces(e, pattern, base):
+            users, n = _users_of(e, trace, fmt, user)
+            rendered = _render_users(e, render_spec, users)
             for u in users:
-                f = _stem_fields(trace, u, n_users)
-                default_p = f["stem"] + (f"_user{f['user']}" if u is not None else "")
-                try:
-                    participant = participant_t.format(**f) if participant_t else default_p
-                    f["participant"] = participant
-                    f["video"] = vid
-                    f["condition"] = condition
-                    default_id = f"{vid}-{participant}" + (f"-{condition}" if condition else "")
-                    vw_id = id_t.format(**f) if id_t else default_id
-                except (KeyError, IndexError, ValueError) as err:
-                    e.fail(
-                        f"bad template in id/participant ({err}); fields: stem, user, participant, video, condition"
-                    )
-                if not _ID_RE.match(vw_id):
-                    e.fail(
-                        f"viewing id {vw_id!r}: use letters, digits, '.', '_' and '-' (it names files)"
-                    )
+                vw_id, participant = _viewing_ids(e, trace, u, n, vid, condition)
                 if vw_id in seen:
                     e.fail(
                         f"duplicate viewing id {vw_id!r} (also from {seen[vw_id]}); give each "
                         "viewing its own participant, condition or id"
                     )
                 seen[vw_id] = where
-                out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, render))
+                r = u in rendered
+                out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, r,
+                                       ropts if r else None, plot))  # fmt: skip
     return tuple(out)
 
 
 def _questionnaires(m: Path, base: Path, t) -> dict | None:
     if t is None:
         return None
-    e = _Entry(m, "[questionnaires]", t, _QUEST_KEYS)
+    e = Entry(m, "[questionnaires]", t, _QUEST_KEYS)
     path = e.path("path", base)
     try:
         check_input_file(path, "questionnaire CSV")
@@ -335,11 +323,13 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
         "flow_stat": e.get("flow_stat", (str,), "mean", choices=("mean", "median", "sum")),
         "exclude_below": e.number("exclude_below", None, lo=0.0),
         "conditions": tuple(conds) if conds else None,
+        # The group-size-invariant K_OF by default; "paper" for the paper's formula.
+        "k_of": e.get("k_of", (str,), "invariant", choices=("invariant", "paper")),
     }
 
 
 def _epof(m: Path, t) -> dict:
-    e = _Entry(m, "[epof]", t or {}, _EPOF_KEYS)
+    e = Entry(m, "[epof]", t or {}, _EPOF_KEYS)
     h, v = e.fov((None, None))
     low = e.number("low_pct", 10.0, lo=0.0, hi=100.0)
     high = e.number("high_pct", 90.0, lo=0.0, hi=100.0)
@@ -364,8 +354,9 @@ def _epof(m: Path, t) -> dict:
     }
 
 
-def _render(m: Path, t) -> dict:
-    e = _Entry(m, "[render]", t or {}, _RENDER_KEYS)
+def _render(m: Path, t, where: str = "[render]") -> dict:
+    """The render options of ``[render]`` (or of a viewing: [render] with its keys over it)."""
+    e = Entry(m, where, t or {}, _RENDER_KEYS)
     size = e.get("eye_size", (str, list), "1440x1440")
     try:
         if isinstance(size, str):
@@ -397,11 +388,27 @@ def _render(m: Path, t) -> dict:
         "aperture_min_deg": e.number("aperture_min", APERTURE_MIN_DEG, lo=0.0),
         "feather_deg": e.number("feather", FEATHER_DEG, lo=0.0),
         "vignette_color": e.get("vignette_color", (str,), "0,0,0"),
+        **_render_range(e),
+    }
+
+
+def _render_range(e: Entry) -> dict:
+    """``start``/``end`` (seconds of video time), ``review``, ``eyes``, ``audio``."""
+    start = e.number("start", None, lo=0.0)
+    end = e.number("end", None, lo=0.0, lo_open=True)
+    if start is not None and end is not None and not start < end:
+        e.fail(f"start = {start:g} is not before end = {end:g}")
+    return {
+        "start_s": start,
+        "end_s": end,
+        "review": e.get("review", (bool,), False),
+        "eyes": e.get("eyes", (str,), None, choices=("left", "right", "both")),
+        "audio": e.get("audio", (bool,), True),
     }
 
 
 def _grf(m: Path, t) -> dict:
-    e = _Entry(m, "[grf]", t or {}, _GRF_KEYS)
+    e = Entry(m, "[grf]", t or {}, _GRF_KEYS)
     cut = e.get("cutout", (list,), [18.0, 40.0])
     if len(cut) != 2 or not all(
         isinstance(c, (int, float)) and not isinstance(c, bool) for c in cut
@@ -417,6 +424,8 @@ def _grf(m: Path, t) -> dict:
     }
 
 
+_FOV_KEYS = {"fov", "hfov", "vfov", "headset"}
+
 #: The keys of each table that say what the eye sees in a render
 #: (:meth:`simulator.viewing.spec.ViewSpec.from_options`, as ``vimsim render``'s options).
 _VIEW_KEYS = {
@@ -428,19 +437,26 @@ _VIEW_KEYS = {
 }  # fmt: skip
 
 
-def _view(m: Path, data: dict) -> dict:
+def _view(m: Path, data: dict, own: dict | None = None, own_where: str = "") -> dict:
     """The render's view options: the ``[render]`` and ``[grf]`` tables and the opacity
     rule of ``[epof]`` merged into one mapping of :data:`VIEW_OPTIONS` names (plain TOML
-    values, as shipped to a render task), checked by building the view once."""
+    values, as shipped to a render task), checked by building the view once. ``own``: a
+    viewing's own render and grain keys over the tables (named ``own_where`` in errors)."""
     options: dict = {"grid": True}  # every viewing of a study has its video's grid
     where: dict = {}
     for table, keys in _VIEW_KEYS.items():
         t = data.get(table) or {}
         for k in keys:
             if k in t:
-                options[k], where[k] = t[k], table
+                options[k], where[k] = t[k], f"[{table}]"
+    own = own or {}
+    if own.keys() & _FOV_KEYS:  # a viewing's FOV replaces the table's, whichever spelling
+        for k in _FOV_KEYS:
+            options.pop(k, None)
+    for k in own.keys() & set(_VIEW_KEYS["render"] + _VIEW_KEYS["grf"]):
+        options[k], where[k] = own[k], own_where
     try:
-        ViewSpec.from_options(options, label=lambda k: f"[{where.get(k, 'render')}] {k}")
+        ViewSpec.from_options(options, label=lambda k: f"{where.get(k, '[render]')} {k}")
     except InputError as e:
         raise InputError(f"{m}: {e}") from None
     return options
@@ -459,11 +475,11 @@ def load_manifest(path) -> Manifest:
     if unknown:
         raise InputError(f"{m}: unknown table {unknown[0]!r}; expected {', '.join(_TOP_KEYS)}")
     base = m.resolve().parent
-    st = _Entry(m, "[study]", data.get("study", {}), _STUDY_KEYS)
+    st = Entry(m, "[study]", data.get("study", {}), _STUDY_KEYS)
     videos = _videos(m, base, data.get("videos"))
-    viewings = _viewings(m, base, data.get("viewings"), videos)
-    render = _render(m, data.get("render"))
+    render = _render(m, data.get("render"))  # checked first: viewings build on it
     render["view"] = _view(m, data)
+    viewings = _viewings(m, base, data.get("viewings"), videos, data, render)
     return Manifest(
         path=m.resolve(),
         name=st.get("name", (str,), m.stem),

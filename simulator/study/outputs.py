@@ -35,6 +35,7 @@ from simulator.media.source import Source
 from simulator.sphere.geometry import extract_view
 
 __all__ = [
+    "confound_notes",
     "provocative_moments",
     "versions",
     "write_study_outputs",
@@ -163,6 +164,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib import patheffects
 
     folder.mkdir(parents=True, exist_ok=True)
     grid = _grid_map(grid_path)
@@ -212,10 +214,14 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         y = (a[::k, 2] - lo_yaw) % 360.0 + lo_yaw  # the map's yaw range (wraps at the seam)
         ax.plot(a[::k, 1], y, ".", color="cyan", ms=1, alpha=0.3)
     ax.set_ylim(lo_yaw, hi_yaw)
+    # Markers readable on any colour of the map: white with a black outline (and a black
+    # disc behind the number), from black through magma's bright yellow.
+    halo = [patheffects.withStroke(linewidth=3, foreground="black")]
     for mo in moments:
-        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="none", mec="white", ms=13, mew=1.2)
+        ax.plot(mo["time_s"], mo["yaw_deg"], "o", mfc="black", mec="white", ms=14, mew=1.5,
+                alpha=0.9, path_effects=halo)  # fmt: skip
         ax.annotate(str(mo["rank"]), (mo["time_s"], mo["yaw_deg"]), color="white", fontsize=8,
-                    ha="center", va="center", weight="bold")  # fmt: skip
+                    ha="center", va="center", weight="bold", path_effects=halo)  # fmt: skip
     ax.set_xlabel("time (s)")
     ax.set_ylabel("yaw (deg, + right)")
     ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots)")
@@ -281,15 +287,35 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:
         study = read_study(data, flow_stat=q["flow_stat"])
-        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"])
+        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"],
+                           k_of_formula=q.get("k_of", "invariant"),
+                           notes=confound_notes(table))  # fmt: skip
         info["files"] = [p.name for p in write_report(an, folder)]
         info["problems"] = list(study.problems)
         info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]
         info["comparisons"] = an.comparisons
+        info["notes"] = an.messages()
         info["error"] = None
     except InputError as e:
         info["error"] = str(e)
     return info
+
+
+def confound_notes(table: list[dict]) -> list[str]:
+    """A warning line when condition and video are confounded: no video was watched under
+    two conditions, so a difference between conditions may be one between videos."""
+    by_cond: dict[str, set[str]] = {}
+    for r in table:
+        if r["status"] == "ok" and r["condition"]:
+            by_cond.setdefault(r["condition"], set()).add(r["video"])
+    if len(by_cond) < 2:
+        return []
+    sets = list(by_cond.values())
+    if any(sets[i] & sets[j] for i in range(len(sets)) for j in range(i + 1, len(sets))):
+        return []
+    per = "; ".join(f"{c} on {', '.join(sorted(v))}" for c, v in by_cond.items())
+    line = f"WARNING: condition is confounded with video ({per}): a difference between "
+    return [line + "conditions may be one between videos"]
 
 
 def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list[dict]) -> dict:

@@ -16,59 +16,36 @@ study.
 
 from __future__ import annotations
 
-import hashlib
-import json
 import math
 import os
 import time
 from dataclasses import asdict
 from pathlib import Path
 
-from simulator import __version__
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_output_dir
-from simulator.media.gridfile import VERSION as GRID_VERSION
-from simulator.media.gridfile import content_hash
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
+from simulator.study.plan import (
+    Plan,
+    base_row,
+    default_cache_dir,
+    dry_run,
+    plan_study,
+    study_folders,
+)
 
-__all__ = ["VIEWING_COLUMNS", "default_cache_dir", "run_study"]
+__all__ = ["VIEWING_COLUMNS", "default_cache_dir", "dry_run", "run_study"]
 
 VIEWING_COLUMNS = (
     "viewing", "participant", "condition", "video", "trace", "user", "frames",
     "epof_mean_dps", "epof_median_dps", "epof_p90_dps", "epof_max_dps", "opacity_mean",
-    "share_opacity_ge_0_5", "status",
+    "share_opacity_ge_0_5", "status", "warnings",
 )  # fmt: skip
 _STAT_COLUMNS = VIEWING_COLUMNS[6:13]
-
-
-def default_cache_dir() -> Path:
-    """``$VIMSIM_CACHE``, else ``$XDG_CACHE_HOME/vimsim``, else ``~/.cache/vimsim``."""
-    if os.environ.get("VIMSIM_CACHE"):
-        return Path(os.environ["VIMSIM_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "vimsim"
-
-
-def _sha(obj) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
-
-
-def _file_sha(path: Path, memo: dict) -> str:
-    key = str(path)
-    if key not in memo:
-        h = hashlib.sha256()
-        with open(path, "rb") as fh:
-            for b in iter(lambda: fh.read(1 << 20), b""):
-                h.update(b)
-        memo[key] = h.hexdigest()
-    return memo[key]
-
-
-def _grid_key(v: VideoSpec) -> str:
-    return _sha({"video": content_hash(v.path), "options": v.options(), "grid": GRID_VERSION,
-                 "vimsim": __version__})  # fmt: skip
+#: Warnings of one viewing in its ``warnings`` cell are joined by this.
+WARNING_SEP = " | "
 
 
 def _video_dict(v: VideoSpec) -> dict:
@@ -78,26 +55,8 @@ def _video_dict(v: VideoSpec) -> dict:
 
 
 def _item(w: ViewingSpec) -> dict:
-    return {"id": w.id, "trace": str(w.trace), "format": w.format, "user": w.user}
-
-
-def _check_outputs(m: Manifest, out: Path, cache: Path) -> None:
-    """Refuse an OUTDIR or cache that would overwrite an input (or is one)."""
-    inputs = {p.resolve() for p in m.input_files()}
-    for d, what in ((out, "output folder"), (cache, "cache folder")):
-        r = d.resolve()
-        if r in inputs or (d.exists() and not d.is_dir()):
-            raise InputError(f"{d}: {what} is a file (an input?); give a folder")
-    roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
-    for p in inputs:
-        if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
-            raise InputError(
-                f"{p}: is an input and would be overwritten by the study; choose another -o"
-            )
-        if any(p.is_relative_to(r) for r in roots):
-            raise InputError(
-                f"{p}: is an input inside the study's output folders; choose another -o"
-            )
+    return {"id": w.id, "trace": str(w.trace), "format": w.format, "user": w.user,
+            "plot": w.plot}  # fmt: skip
 
 
 #: Runs of a task whose worker process died before it is failed (a task's own errors
@@ -127,27 +86,22 @@ def run_study(
 
     ``progress(done, failed, total)`` is called as tasks finish (units: a preprocess, a
     viewing's EPOF, a render). Failed viewings do not stop the study: their row's
-    ``status`` holds the error line. InputError only for problems found before any work
+    ``status`` holds the error line. Each viewing's warnings (its trace's reader
+    warnings) are in its row's ``warnings`` cell and in the summary's ``warnings``
+    (``{"viewing", "warning"}``). InputError only for problems found before any work
     (output folder, executor, Ray address).
     """
-
     t_start, c_start = time.perf_counter(), time.process_time()
-    # Absolute: workers (Ray's especially) need not share the driver's working directory.
-    out = Path(outdir).absolute()
-    cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
-    _check_outputs(manifest, out, cache)
+    out, cache = study_folders(manifest, outdir, cache_dir)
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
-        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), outputs)
+        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start))
     except BaseException:
         ex.close(cancel=True)
         raise
 
 
-def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
-    t_start, c_start = start
-    timings: dict[str, float] = {}
-    cpu_tasks = 0.0
+def _prepare(manifest: Manifest, out: Path, cache: Path, ex) -> None:
     cpus = manifest.render["cpus"]
     if ex.name == "ray" and any(w.render for w in manifest.viewings) and cpus > ex.max_task_cpus:
         raise InputError(
@@ -160,157 +114,58 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
         (out / sub).mkdir(exist_ok=True)
     (out / "study.json").unlink(missing_ok=True)  # the completion marker goes first
 
-    # ---- plan: grid keys, viewing keys, what is unchanged
+
+def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
+    t_start, c_start = start
+    timings: dict[str, float] = {}
+    _prepare(manifest, out, cache, ex)
     t0 = time.perf_counter()
-    memo: dict = {}
-    grids = {v.id: cache / "grids" / f"{_grid_key(v)[:32]}.npz" for v in manifest.videos}
-    opts = {"epof": manifest.epof, "render": manifest.render, "grf": manifest.grf}
+    plan = plan_study(manifest, out, cache, resume)
     rows: dict[str, dict] = {}
-    keys: dict[str, str] = {}
-    todo: list[ViewingSpec] = []
     for w in manifest.viewings:
-        keys[w.id] = _sha({
-            "grid": grids[w.video].name, "trace": _file_sha(w.trace, memo), "format": w.format,
-            "user": w.user, "epof": opts["epof"], "vimsim": __version__,
-            "render": [opts["render"], opts["grf"]] if w.render else None,
-        })  # fmt: skip
-        prev = _read_state(out / "state" / f"{w.id}.json") if resume else None
-        if (
-            prev is not None
-            and prev.get("key") == keys[w.id]
-            and prev.get("row", {}).get("status") == "ok"
-            and (out / "epof" / f"{w.id}.csv").is_file()
-            and (not w.render or (out / "render" / w.id / "summary.json").is_file())
-        ):
-            rows[w.id] = {**_base_row(w), **{c: prev["row"][c] for c in _STAT_COLUMNS},
-                          "status": "ok", "resumed": True}  # fmt: skip
-        else:
-            todo.append(w)
+        if w.id in plan.unchanged:
+            prev = plan.unchanged[w.id]
+            rows[w.id] = {**base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
+                          "status": "ok", "warnings": prev.get("warnings", ""),
+                          "resumed": True}  # fmt: skip
     timings["plan"] = time.perf_counter() - t0
 
-    # ---- schedule
-    total = sum(1 + w.render for w in todo)
-    need_grid = {w.video for w in todo}
-    video_info: dict[str, dict] = {}
-    for v in manifest.videos:
-        hit = grids[v.id].is_file()
-        video_info[v.id] = {"path": str(v.path), "grid": str(grids[v.id]),
-                            "cache": "hit" if hit else "miss", "preprocess_s": 0.0}  # fmt: skip
-        if not hit:
-            total += 1
-    done = failed = 0
-
-    def tick(ok: bool, n: int = 1) -> None:
-        nonlocal done, failed
-        done += n if ok else 0
-        failed += 0 if ok else n
-        if progress is not None:
-            progress(done, failed, total)
-
-    tick(True, 0)
-    pending: dict = {}
-    n_pre = sum(not grids[v.id].is_file() for v in manifest.videos)
-    threads = max(1, (os.cpu_count() or 1) // max(1, min(ex.workers, n_pre)))
-    threads = min(threads, ex.max_task_cpus)  # a task no node can take would never start
-    render_opts = dict(manifest.render)
-
-    def submit(what: tuple, call: tuple, cpus: int, attempt: int = 1) -> None:
-        """Submit ``call`` = (fn, *args); ``what`` = (kind, video id, payload)."""
-        h = ex.submit(*call, num_cpus=cpus, alone=attempt > 1)
-        pending[h] = (*what, call, cpus, attempt)
-
-    def launch(v: VideoSpec) -> None:
-        mine = [w for w in todo if w.video == v.id]
-        for chunk in _chunks([_item(w) for w in mine], ex.workers):
-            submit(("epof", v.id, chunk),
-                   (tasks.epof_task, str(grids[v.id]), chunk, manifest.epof, str(out / "epof")),
-                   1)  # fmt: skip
-        for w in mine:
-            if w.render:
-                submit(("render", v.id, w.id),
-                       (tasks.render_task, _video_dict(v), str(grids[v.id]), _item(w),
-                        render_opts, str(out / "render" / w.id)),
-                       render_opts["cpus"])  # fmt: skip
-
     t0 = time.perf_counter()
-    for v in manifest.videos:
-        if not grids[v.id].is_file():
-            submit(("preprocess", v.id, None),
-                   (tasks.preprocess_task, _video_dict(v), str(grids[v.id]), threads), threads)  # fmt: skip
-        elif v.id in need_grid:
-            launch(v)
-
-    results: dict[str, dict] = {}
-    renders: dict[str, dict] = {}
-    warnings_: list[str] = []
-    by_id = {w.id: w for w in manifest.viewings}
-    while pending:
-        for h in ex.wait(pending.keys()):
-            kind, vid, payload, call, cpus, attempt = pending.pop(h)
-            try:
-                res = ex.result(h)
-                cpu_tasks += sum(
-                    r.get("cpu_s", 0.0) for r in (res if isinstance(res, list) else [res])
-                )
-            except Exception as e:  # noqa: BLE001 -- a worker died: its tasks fail, the rest go on
-                if ex.lost(e) and attempt < TASK_ATTEMPTS:
-                    # Its process died (killed, out of memory, a crash) -- maybe another
-                    # task's, which takes the whole local pool down: once more, new workers.
-                    submit((kind, vid, payload), call, cpus, attempt + 1)
-                    continue
-                res = None
-                line = f"internal error: worker failed: {ex.describe(e)}"
-            if kind == "preprocess":
-                if res is not None:
-                    line = f"video {vid}: {res['error']}"
-                    video_info[vid]["preprocess_s"] = res["seconds"]
-                if res is not None and res["ok"]:
-                    tick(True)
-                    if vid in need_grid:
-                        launch(manifest.video(vid))
-                else:
-                    video_info[vid]["error"] = line
-                    tick(False)
-                    for w in todo:
-                        if w.video == vid:
-                            results[w.id] = {"id": w.id, "status": line}
-                            if w.render:
-                                renders[w.id] = {"status": line}
-                            tick(False, 1 + w.render)
-            elif kind == "epof":
-                recs = (
-                    res if res is not None else [{"id": it["id"], "status": line} for it in payload]
-                )
-                for r in recs:
-                    results[r["id"]] = r
-                    warnings_ += [f"{r['id']}: {x}" for x in r.get("warnings", [])]
-                    tick(r["status"] == "ok")
-                    _maybe_finish(out, by_id[r["id"]], keys, results, renders, rows)
-            else:
-                r = res if res is not None else {"status": line}
-                renders[payload] = r
-                tick(r["status"] == "ok")
-                _maybe_finish(out, by_id[payload], keys, results, renders, rows)
+    sched = _Scheduler(manifest, out, ex, plan, rows, progress)
+    sched.run()
     timings["tasks"] = time.perf_counter() - t0
     ex_info = ex.info()
     ex.close(wait=False)  # Ray's runtime stops while the outputs are written
 
-    # ---- outputs
     t0 = time.perf_counter()
     table = [rows[w.id] for w in manifest.viewings]
     outputs.write_viewings_csv(out / "viewings.csv", table, VIEWING_COLUMNS)
-    report = outputs.write_study_outputs(manifest, out, grids, table)
+    report = outputs.write_study_outputs(manifest, out, plan.grids, table)
     timings["outputs"] = time.perf_counter() - t0
     ex.join()
     timings["total"] = time.perf_counter() - t_start
     # CPU seconds: this process, and the tasks as measured in their workers (worker
     # start-up and imports not included).
     timings["cpu_driver"] = time.process_time() - c_start
-    timings["cpu_tasks"] = cpu_tasks
+    timings["cpu_tasks"] = sched.cpu_tasks
+    summary = _summary(manifest, out, cache, ex_info, sched.video_info, table, report)
+    summary["timings_s"] = timings
+    tasks.write_json(out / "study.json", summary)  # last: the study is complete
+    return summary
+
+
+def _summary(manifest, out, cache, ex_info, video_info, table, report) -> dict:
     failures = [
         {"viewing": r["viewing"], "status": r["status"]} for r in table if r["status"] != "ok"
     ]
-    summary = {
+    warns = [
+        {"viewing": r["viewing"], "warning": x}
+        for r in table
+        for x in (r.get("warnings") or "").split(WARNING_SEP)
+        if x
+    ]
+    ok = [r for r in table if r["status"] == "ok"]
+    return {
         "format": "vimsim-study",
         "version": 1,
         "name": manifest.name,
@@ -318,57 +173,153 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
         "outdir": str(out),
         "cache": str(cache),
         **ex_info,
-        "settings": {**opts, "questionnaires": manifest.questionnaires},
+        "settings": {
+            "epof": manifest.epof,
+            "render": manifest.render,
+            "grf": manifest.grf,
+            "questionnaires": manifest.questionnaires,
+        },
         "videos": video_info,
         "counts": {
             "viewings": len(table),
-            "ok": sum(r["status"] == "ok" for r in table),
+            "ok": len(ok),
+            "with_warnings": sum(bool(r.get("warnings")) for r in ok),
             "failed": len(failures),
             "resumed": sum(bool(r.get("resumed")) for r in table),
             "renders": sum(w.render for w in manifest.viewings),
         },
         "failures": failures,
-        "warnings": warnings_,
+        "warnings": warns,
         "outputs": report,
         "versions": outputs.versions(ex_info),
-        "timings_s": timings,
-    }
-    tasks.write_json(out / "study.json", summary)  # last: the study is complete
-    return summary
-
-
-def _base_row(w: ViewingSpec) -> dict:
-    return {
-        "viewing": w.id,
-        "participant": w.participant,
-        "condition": w.condition,
-        "video": w.video,
-        "trace": str(w.trace),
-        "user": "" if w.user is None else w.user,
     }
 
 
-def _read_state(p: Path) -> dict | None:
-    try:
-        d = json.loads(p.read_text())
-    except (OSError, ValueError):
-        return None
-    return d if isinstance(d, dict) else None
+class _Scheduler:
+    """Submits the plan's tasks to the executor as their inputs exist, collects results
+    into rows (and resume records), counts progress."""
 
+    def __init__(self, manifest: Manifest, out: Path, ex, plan: Plan, rows: dict, progress):
+        self.m, self.out, self.ex, self.plan, self.rows = manifest, out, ex, plan, rows
+        self.progress = progress
+        self.pending: dict = {}
+        self.results: dict[str, dict] = {}
+        self.renders: dict[str, dict] = {}
+        self.by_id = {w.id: w for w in manifest.viewings}
+        self.need_grid = {w.video for w in plan.todo}
+        self.total = sum(1 + w.render for w in plan.todo)
+        self.done = self.failed = 0
+        self.cpu_tasks = 0.0
+        self.video_info: dict[str, dict] = {}
+        for v in manifest.videos:
+            hit = plan.hits[v.id]
+            self.video_info[v.id] = {"path": str(v.path), "grid": str(plan.grids[v.id]),
+                                     "cache": "hit" if hit else "miss", "preprocess_s": 0.0}  # fmt: skip
+            self.total += 0 if hit else 1
 
-def _maybe_finish(out, w: ViewingSpec, keys, results, renders, rows) -> None:
-    """Once a viewing's EPOF (and render, if asked) are in: its row, and its state file."""
-    if w.id not in results or (w.render and w.id not in renders):
-        return
-    r = results[w.id]
-    row = {**_base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
-    status = r["status"]
-    if status == "ok" and w.render and renders[w.id]["status"] != "ok":
-        status = f"render: {renders[w.id]['status']}"
-    row["status"] = status
-    rows[w.id] = row
-    state = out / "state" / f"{w.id}.json"
-    if status == "ok":
-        tasks.write_json(state, {"key": keys[w.id], "row": row})
-    else:
-        state.unlink(missing_ok=True)
+    def tick(self, ok: bool, n: int = 1) -> None:
+        self.done += n if ok else 0
+        self.failed += 0 if ok else n
+        if self.progress is not None:
+            self.progress(self.done, self.failed, self.total)
+
+    def submit(self, what: tuple, call: tuple, cpus: int, attempt: int = 1) -> None:
+        """Submit ``call`` = (fn, *args); ``what`` = (kind, video id, payload)."""
+        h = self.ex.submit(*call, num_cpus=cpus, alone=attempt > 1)
+        self.pending[h] = (*what, call, cpus, attempt)
+
+    def launch(self, v: VideoSpec) -> None:
+        grid = str(self.plan.grids[v.id])
+        mine = [w for w in self.plan.todo if w.video == v.id]
+        for chunk in _chunks([_item(w) for w in mine], self.ex.workers):
+            self.submit(("epof", v.id, chunk),
+                        (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof")), 1)  # fmt: skip
+        for w in mine:
+            if w.render:
+                self.submit(("render", v.id, w.id),
+                            (tasks.render_task, _video_dict(v), grid, _item(w), w.render_opts,
+                             str(self.out / "render" / w.id)),
+                            self.m.render["cpus"])  # fmt: skip
+
+    def run(self) -> None:
+        n_pre = sum(not hit for hit in self.plan.hits.values())
+        threads = max(1, (os.cpu_count() or 1) // max(1, min(self.ex.workers, n_pre)))
+        threads = min(threads, self.ex.max_task_cpus)  # a task no node can take never starts
+        self.tick(True, 0)
+        for v in self.m.videos:
+            if not self.plan.hits[v.id]:
+                self.submit(("preprocess", v.id, None),
+                            (tasks.preprocess_task, _video_dict(v), str(self.plan.grids[v.id]),
+                             threads), threads)  # fmt: skip
+            elif v.id in self.need_grid:
+                self.launch(v)
+        while self.pending:
+            for h in self.ex.wait(self.pending.keys()):
+                self.collect(h)
+
+    def collect(self, h) -> None:
+        kind, vid, payload, call, cpus, attempt = self.pending.pop(h)
+        line = ""
+        try:
+            res = self.ex.result(h)
+            self.cpu_tasks += sum(
+                r.get("cpu_s", 0.0) for r in (res if isinstance(res, list) else [res])
+            )
+        except Exception as e:  # noqa: BLE001 -- a worker died: its tasks fail, the rest go on
+            if self.ex.lost(e) and attempt < TASK_ATTEMPTS:
+                # Its process died (killed, out of memory, a crash) -- maybe another
+                # task's, which takes the whole local pool down: once more, new workers.
+                self.submit((kind, vid, payload), call, cpus, attempt + 1)
+                return
+            res = None
+            line = f"internal error: worker failed: {self.ex.describe(e)}"
+        if kind == "preprocess":
+            self.preprocessed(vid, res, line)
+        elif kind == "epof":
+            recs = res if res is not None else [{"id": it["id"], "status": line} for it in payload]
+            for r in recs:
+                self.results[r["id"]] = r
+                self.tick(r["status"] == "ok")
+                self.finish(self.by_id[r["id"]])
+        else:
+            r = res if res is not None else {"status": line}
+            self.renders[payload] = r
+            self.tick(r["status"] == "ok")
+            self.finish(self.by_id[payload])
+
+    def preprocessed(self, vid: str, res: dict | None, line: str) -> None:
+        if res is not None:
+            line = f"video {vid}: {res['error']}"
+            self.video_info[vid]["preprocess_s"] = res["seconds"]
+        if res is not None and res["ok"]:
+            self.tick(True)
+            if vid in self.need_grid:
+                self.launch(self.m.video(vid))
+            return
+        self.video_info[vid]["error"] = line
+        self.tick(False)
+        for w in self.plan.todo:
+            if w.video == vid:
+                self.results[w.id] = {"id": w.id, "status": line}
+                if w.render:
+                    self.renders[w.id] = {"status": line}
+                self.tick(False, 1 + w.render)
+                self.finish(w)
+
+    def finish(self, w: ViewingSpec) -> None:
+        """Once a viewing's EPOF (and render, if asked) are in: its row and state file."""
+        if w.id not in self.results or (w.render and w.id not in self.renders):
+            return
+        r = self.results[w.id]
+        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
+        status = r["status"]
+        if status == "ok" and w.render and self.renders[w.id]["status"] != "ok":
+            status = f"render: {self.renders[w.id]['status']}"
+        row["status"] = status
+        row["warnings"] = WARNING_SEP.join(r.get("warnings") or [])
+        self.rows[w.id] = row
+        state = self.out / "state" / f"{w.id}.json"
+        if status == "ok":
+            tasks.write_json(state, {"key": self.plan.keys[w.id], "row": row})
+        else:
+            state.unlink(missing_ok=True)

@@ -24,7 +24,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
-from simulator.epof.viewing import compute_epof, write_epof_csv
+from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
@@ -34,7 +34,7 @@ from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.traces.path import HeadPath
-from simulator.traces.readers import load_all_users, load_headpath
+from simulator.traces.readers import TraceFile, load_headpath
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec
 
@@ -42,7 +42,7 @@ __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 
 # Per worker process: kept between tasks (a pool or Ray worker runs many tasks).
 _GRIDS: dict[tuple, GridFile] = {}
-_TRACES: dict[tuple, dict[int, HeadPath]] = {}
+_TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
@@ -82,20 +82,16 @@ def _grid(path: str) -> GridFile:
 
 
 def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
-    """The head path of one viewing; a multi-user file is parsed once per worker."""
+    """The head path of one viewing, with its own warnings (the file's and its user's
+    sampling): a multi-user file is parsed once per worker."""
     if user is None:
         return load_headpath(path, fmt)
     key = (*_file_key(path), fmt)
     if key not in _TRACES:
         if len(_TRACES) > 8:
             _TRACES.clear()
-        _TRACES[key] = load_all_users(path, fmt)
-    users = _TRACES[key]
-    if user not in users:
-        if len(users) == 1 and user == 1:
-            return users[1]
-        raise InputError(f"{path}: no user {user}; the file holds {len(users)}")
-    return users[user]
+        _TRACES[key] = TraceFile(path, fmt)
+    return _TRACES[key].user(user)
 
 
 def preprocess_task(video: dict, output: str, threads: int) -> dict:
@@ -199,21 +195,25 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                hp = _trace(it["trace"], it["format"], it["user"])
-                res = compute_epof(
-                    grid,
-                    hp,
-                    hfov_deg=None if frustum else opts["hfov_deg"],
-                    vfov_deg=None if frustum else opts["vfov_deg"],
-                    frustum=frustum,
-                    top_k=opts["top_k"],
-                    rule=rule,
-                    hold=opts["hold_last"],
-                    method=opts["method"],
-                )
+                try:
+                    hp = _trace(it["trace"], it["format"], it["user"])
+                    res = compute_epof(
+                        grid,
+                        hp,
+                        hfov_deg=None if frustum else opts["hfov_deg"],
+                        vfov_deg=None if frustum else opts["vfov_deg"],
+                        frustum=frustum,
+                        top_k=opts["top_k"],
+                        rule=rule,
+                        hold=opts["hold_last"],
+                        method=opts["method"],
+                    )
+                finally:  # a failed viewing keeps the warnings of its input too
+                    rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
             write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
+            if it.get("plot"):
+                plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
             rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
-            rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
         except Exception as e:  # noqa: BLE001
             rec["status"] = _error_line(e)
         rec["seconds"] = time.perf_counter() - t0
@@ -234,7 +234,8 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
     ``left.mp4``, ``right.mp4``, ``epof.csv``, ``summary.json`` last) with the view of
     ``opts["view"]`` (the manifest's view options, built by
     :meth:`simulator.viewing.spec.ViewSpec.from_options` as ``vimsim render`` builds its
-    own). ``opts["cpus"]`` llvmpipe threads unless ``LP_NUM_THREADS`` is set. Returns
+    own); ``start_s``/``end_s``, ``review``, ``eyes``, ``audio`` as ``vimsim render``'s
+    options. ``opts["cpus"]`` llvmpipe threads unless ``LP_NUM_THREADS`` is set. Returns
     ``id``, ``status``, ``seconds``, ``frames_per_s``."""
     t0, c0 = time.perf_counter(), time.process_time()
     rec = {"id": item["id"], "status": "ok", "frames_per_s": None}
@@ -257,6 +258,11 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,
             ctx=_context(),
+            start_s=opts.get("start_s"),
+            end_s=opts.get("end_s"),
+            review=bool(opts.get("review")),
+            eyes=opts.get("eyes"),
+            audio=opts.get("audio", True),
         )
         rec["frames_per_s"] = s.get("frames_per_s")
     except Exception as e:  # noqa: BLE001

@@ -69,12 +69,14 @@ class FrameScore:
 
 @dataclass(frozen=True)
 class CompareReport:
-    """All frames' scores, the thresholds and where the report went."""
+    """All frames' scores, the thresholds and where the report went; ``changes``: what
+    differs between the two ``frames.json`` (:func:`frames_json_changes`), first the cause."""
 
     scores: tuple[FrameScore, ...]
     psnr_db: float
     max_diff: float
     report_dir: str | None
+    changes: tuple[str, ...] = ()
 
     @property
     def failures(self) -> tuple[FrameScore, ...]:
@@ -83,6 +85,72 @@ class CompareReport:
     @property
     def passed(self) -> bool:
         return not self.failures
+
+
+#: Pose and opacity differences below these are equal (degrees; opacity 0..1).
+POSE_TOL_DEG = 1e-6
+OPACITY_TOL = 1e-6
+
+
+def _index(folder: Path) -> dict | None:
+    try:
+        d = json.loads((folder / FRAMES_JSON).read_text())
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) and isinstance(d.get("frames"), list) else None
+
+
+def _differs(a, b) -> list[str]:
+    """``key: a -> b`` for each differing key of two flat-ish dicts."""
+    keys = sorted(set(a) | set(b))
+    return [f"{k} {a.get(k)!r} -> {b.get(k)!r}" for k in keys if a.get(k) != b.get(k)]
+
+
+def frames_json_changes(golden: dict | None, new: dict | None, pixels_differ: bool) -> list[str]:
+    """What changed between the golden and the new ``frames.json``, the likely cause
+    first: ``the head path changed`` (a frame's pose), ``the opacity changed``, ``the
+    input files differ`` (video, head path, grid names), ``the render settings changed``,
+    then versions; ``the renderer changed`` when the frames differ though all of those
+    are the same. Empty when nothing differs
+    (or a ``frames.json`` is missing: then one line says so)."""
+    if golden is None or new is None:
+        return ["no frames.json in " + ("the goldens" if golden is None else "the new frames")
+                + ": cannot tell what changed"] if pixels_differ else []  # fmt: skip
+    out: list[str] = []
+    old_rows = {r.get("file"): r for r in golden["frames"] if isinstance(r, dict)}
+    pose, opac = [], []
+    for r in new["frames"]:
+        g = old_rows.get(r.get("file"))
+        if not isinstance(r, dict) or g is None:
+            continue
+        d = max(abs(float(r.get(k, 0)) - float(g.get(k, 0)))
+                for k in ("yaw_deg", "pitch_deg", "roll_deg"))  # fmt: skip
+        if d > POSE_TOL_DEG:
+            pose.append((r["file"], d))
+        if abs(float(r.get("opacity", 0)) - float(g.get("opacity", 0))) > OPACITY_TOL:
+            opac.append(r["file"])
+    if pose:
+        f, d = max(pose, key=lambda x: x[1])
+        out.append(f"the head path changed: {len(pose)} frame(s) have another pose (up to "
+                   f"{d:.3g} deg, {f})")  # fmt: skip
+    if opac:
+        out.append(f"the opacity changed in {len(opac)} frame(s) ({opac[0]}): EPOF, grid or rule")
+    inputs = _differs({k: golden.get(k) for k in ("video", "headpath", "grid")},
+                      {k: new.get(k) for k in ("video", "headpath", "grid")})  # fmt: skip
+    if inputs:
+        out.append("the input files differ: " + "; ".join(inputs))
+    settings = _differs(golden.get("renderer") or {}, new.get("renderer") or {})
+    settings += _differs({k: golden.get(k) for k in ("layout", "hold", "video_size", "fps")},
+                         {k: new.get(k) for k in ("layout", "hold", "video_size", "fps")})  # fmt: skip
+    if settings:
+        out.append("the render settings changed: " + "; ".join(settings))
+    versions = _differs(golden.get("versions") or {}, new.get("versions") or {})
+    if pixels_differ and not (pose or opac or settings or inputs):
+        out.insert(0, "the renderer changed: same poses, opacity and settings, other pixels"
+                   + (f" ({'; '.join(versions)})" if versions else ""))  # fmt: skip
+    elif versions:
+        out.append("versions: " + "; ".join(versions))
+    return out
 
 
 def _frame_files(folder: Path, what: str) -> dict[str, Path]:
@@ -208,8 +276,12 @@ def compare_dirs(
                 s.name, s.psnr_db, s.mean_abs_diff, s.ssim, False, str(dpath), str(spath)
             )
         final.append(s)
-    report = CompareReport(tuple(final), float(psnr_db), float(max_diff), str(rep))
+    changes = frames_json_changes(
+        _index(golden_dir), _index(new_dir), any(s.psnr_db != math.inf for s in final)
+    )
+    report = CompareReport(tuple(final), float(psnr_db), float(max_diff), str(rep), tuple(changes))
     doc = {
+        "changes": changes,
         "frames_dir": str(new_dir),
         "golden_dir": str(golden_dir),
         "psnr_db_min": psnr_db,

@@ -163,6 +163,8 @@ def draw(job: ViewingJob, ctx, out: Path, *, preset="veryfast", crf=18, threads=
             vfov_deg=job.view.config.vfov_deg,
             fps=plan.info.fps,
             audio=job.audio,
+            thresholds_dps=plan.thresholds_dps,
+            opacity_used=not job.view.mitigation.local,
         )
     try:
         result = render_video(

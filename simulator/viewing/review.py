@@ -91,6 +91,10 @@ class ReviewWriter:
     preset, crf : x264 settings of the review video (ultrafast: it must cost little
         beside the eye videos)
     audio : None, or a :class:`simulator.media.audio.AudioSource` carried into the review video
+    thresholds_dps : the opacity rule's (0, 1) thresholds, deg/s: drawn as dashed lines on
+        the strip, labelled (None or NaN: not drawn)
+    opacity_used : False when the render ignores the per-frame opacity (``local-grf``:
+        each cell's own flow drives it): the strip and sheet then show no opacity
     """
 
     def __init__(
@@ -112,12 +116,17 @@ class ReviewWriter:
         preset: str = "ultrafast",
         crf: int = 23,
         audio=None,
+        thresholds_dps=None,
+        opacity_used: bool = True,
     ):
         self.t = np.asarray(times_s, float)
         self.yaw, self.pitch = np.asarray(yaw_deg, float), np.asarray(pitch_deg, float)
         self.roll = np.asarray(roll_deg, float)
         self.epof, self.op = np.asarray(epof_dps, float), np.asarray(opacity, float)
         self.fov = (float(hfov_deg), float(vfov_deg))
+        th = [float(v) for v in (thresholds_dps or ())]
+        self.thresholds = th if len(th) == 2 and all(np.isfinite(th)) else None
+        self.opacity_used = bool(opacity_used)
         self.ph = int(height) // 2 * 2
         self.pw = 2 * self.ph
         self.strip_h = max(60, self.ph // 3) // 2 * 2
@@ -151,13 +160,30 @@ class ReviewWriter:
 
         fin = self.epof[np.isfinite(self.epof)]
         self.epof_max = float(fin.max()) * 1.05 if fin.size and fin.max() > 0 else 1.0
+        if self.thresholds:
+            self.epof_max = max(self.epof_max, self.thresholds[1] * 1.05)
+            for v, name in zip(self.thresholds, ("opacity 0", "opacity 1")):
+                y = round(bot - min(v / self.epof_max, 1.0) * (bot - top))
+                for x0 in range(8, w - 8, 12):  # dashed
+                    cv2.line(img, (x0, y), (min(x0 + 6, w - 8), y), _EPOF_RGB, 1)
+                cv2.putText(img, f"{name} below/above {v:.0f} deg/s" if name == "opacity 0"
+                            else f"{name} at {v:.0f} deg/s", (w - 210, max(y - 3, 10)),
+                            cv2.FONT_HERSHEY_SIMPLEX, 0.35, _EPOF_RGB, 1, cv2.LINE_AA)  # fmt: skip
         curve(self.epof, self.epof_max, _EPOF_RGB)
-        curve(self.op, 1.0, _OP_RGB)
-        cv2.putText(img, f"EPOF (0..{self.epof_max:.0f} deg/s)", (8, h - 5),
+        if self.opacity_used:
+            curve(self.op, 1.0, _OP_RGB)
+        cv2.putText(img, f"EPOF, deg/s (strip height = {self.epof_max:.0f} deg/s)", (8, h - 5),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.38, _EPOF_RGB, 1, cv2.LINE_AA)  # fmt: skip
-        cv2.putText(img, "opacity (0..1)", (200, h - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38,
+        label = "opacity, 0 to 1 (strip height = 1)" if self.opacity_used else (
+            "opacity: per cell (local-grf), not per frame")  # fmt: skip
+        cv2.putText(img, label, (330, h - 5), cv2.FONT_HERSHEY_SIMPLEX, 0.38,
                     _OP_RGB, 1, cv2.LINE_AA)  # fmt: skip
         return img
+
+    def _numbers(self, j: int) -> str:
+        """EPOF (and opacity, where the render uses it) of frame ``j``, with units."""
+        op = f"  opacity {self.op[j]:.2f}" if self.opacity_used else ""
+        return f"EPOF {self.epof[j]:.1f} deg/s{op}"
 
     # ------------------------------------------------------------------ frames
     def add(self, equirect: NDArray[np.uint8], eye_rgb: NDArray[np.uint8]) -> None:
@@ -178,7 +204,7 @@ class ReviewWriter:
         cv2.line(strip, (cx, 0), (cx, self.strip_h - 16), _WHITE, 1)
         text = (
             f"t {self.t[j]:.2f} s  yaw {self.yaw[j]:.0f}  pitch {self.pitch[j]:.0f}  "
-            f"EPOF {self.epof[j]:.1f} deg/s  opacity {self.op[j]:.2f}"
+            + self._numbers(j)
         )
         cv2.putText(strip, text, (max(8, self.size[0] - 470), self.strip_h - 5),
                     cv2.FONT_HERSHEY_SIMPLEX, 0.4, _WHITE, 1, cv2.LINE_AA)  # fmt: skip
@@ -213,7 +239,7 @@ class ReviewWriter:
             tile[:240] = img
             lines = (
                 f"t {self.t[j]:.2f} s  yaw {self.yaw[j]:.0f}  pitch {self.pitch[j]:.0f}",
-                f"EPOF {self.epof[j]:.1f} deg/s  opacity {self.op[j]:.2f}",
+                self._numbers(j),
             )
             for k, s in enumerate(lines):
                 cv2.putText(tile, s, (4, 258 + 18 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.4,

@@ -118,6 +118,7 @@ def test_k_of_hand_table() -> None:
         np.array([2.0, 6.0, 5.0]),
         np.array([100.0, 200.0, 50.0]),
         ["G1", "G1", "G2"],
+        "paper",
     )
     np.testing.assert_allclose(out, [25.0, 75.0, 600.0])
 
@@ -162,7 +163,7 @@ def test_group_sum_ignores_excluded_participants(tmp_path: Path) -> None:
             ("c", "NR", 30.0, 5.0, 50.0),
         ],
     )
-    an = analyze_study(read_study(data), exclude_below=10.0)
+    an = analyze_study(read_study(data), exclude_below=10.0, k_of_formula="paper")
     assert [q.id for q in an.included] == ["a", "b", "c"]
     assert an.excluded == (("x", "flow 5 < 10 (--exclude-below)"),)
     # as in test_k_of_hand_table: GR sum = 8 (x's 40 not counted), NR sum = 5

@@ -123,7 +123,7 @@ def test_extractor_from_cache_equals_built(cdir):
 
 def test_preprocess_no_cache_flag(tmp_path, cdir):
     vid = write_clip(tmp_path / "v.mp4", noise_frames(3))
-    args = ["preprocess", str(vid), "--window-size", "16", "--no-progress"]
+    args = ["preprocess", str(vid), "--window-size", "16", "--method", "paper", "--no-progress"]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert main([*args, "-o", str(tmp_path / "a.npz"), "--no-cache"]) == 0

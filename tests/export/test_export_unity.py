@@ -416,12 +416,14 @@ def test_cli_bad_input_one_line_exit_2(tmp_path, capsys):
     assert rc == 2 and "not written by vimsim export" in err
     assert (tmp_path / "w" / "VimsimEpof.cs").read_text() == "// my own code\n"
     assert not (tmp_path / "w" / DATA_FILE).exists()  # nothing half written
-    # Opacity options as vimsim epof's: a viewing's percentiles cannot be exported; the paper
-    # rule with easing is a contradiction. One line, exit 2, nothing written.
-    for opts, what in (
-        (["--opacity-source", "viewing"], "cannot be exported"),
-        (["--opacity-rule", "paper", "--ease-in", "1"], "--ease-in"),
-    ):
+    # Opacity options as vimsim epof's: a viewing's percentiles cannot be exported (the
+    # option value is not even offered); the paper rule with easing is a contradiction.
+    # One line, exit 2, nothing written.
+    with pytest.raises(SystemExit) as e:
+        main(["export", str(grid), "-o", str(tmp_path / "o"), "--opacity-source", "viewing"])
+    err = capsys.readouterr().err
+    assert e.value.code == 2 and err.count("\n") == 1 and "invalid choice: 'viewing'" in err
+    for opts, what in ((["--opacity-rule", "paper", "--ease-in", "1"], "--ease-in"),):
         rc, err = _run(["export", str(grid), "-o", str(tmp_path / "o"), *opts], capsys)
         assert rc == 2 and err.count("\n") == 1 and what in err, err
         assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())

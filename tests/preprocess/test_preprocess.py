@@ -82,7 +82,7 @@ def ref_long(tmp_path_factory, videos):
 
 
 def _cli(*argv):
-    return main(["preprocess", *map(str, argv), "--no-progress"])
+    return main(["preprocess", "--method", "paper", *map(str, argv), "--no-progress"])
 
 
 # ---------------------------------------------------------------------- reduction

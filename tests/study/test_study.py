@@ -123,7 +123,8 @@ def test_study_outputs(ran, base, capsys):
     assert "ends at 0.500 s" in bad[0]["status"] and "\n" not in bad[0]["status"]
     assert bad[0]["frames"] == ""
     s = json.loads((out / "study.json").read_text())
-    assert s["counts"] == {"viewings": 9, "ok": 8, "failed": 1, "resumed": 0, "renders": 1}
+    assert s["counts"] == {"viewings": 9, "ok": 8, "with_warnings": 0, "failed": 1, "resumed": 0,
+                           "renders": 1}  # fmt: skip
     assert s["failures"][0]["viewing"] == "clip-short"
     for r in rows:
         if r["status"] != "ok":

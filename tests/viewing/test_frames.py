@@ -159,7 +159,9 @@ def test_cli_frames_compare_exit_codes(ctx, clip, golden, tmp_path, capsys):
     assert main(["frames", *args]) == 0
     capsys.readouterr()
     assert main(["compare", str(shifted), str(golden)]) == 1
-    assert "FAIL frame t0000.250_both.png" in capsys.readouterr().err
+    cap = capsys.readouterr()
+    assert "FAIL frame t0000.250_both.png" in cap.err
+    assert cap.out.startswith("vimsim compare: the input files differ: video")  # before figures
     g2 = tmp_path / "g2"
     assert main(["compare", str(out), str(g2), "--update"]) == 0  # creates the goldens
     assert main(["compare", str(shifted), str(g2), "--update"]) == 0

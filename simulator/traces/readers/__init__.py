@@ -9,27 +9,37 @@ of each dataset's axes to ours is documented in ``docs/headpath.md`` and beside 
 from __future__ import annotations
 
 import os
+import warnings
 
 from simulator.core.choices import HEADPATH_FORMATS as FORMATS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import CANONICAL_COLUMNS, HeadPath
-from simulator.traces.readers.avtrack360 import _read_avtrack360
-from simulator.traces.readers.canonical import _read_canonical, _read_keyframes_json, _read_quat
+from simulator.traces.readers import avtrack360, canonical, corbillon, salient360, vidstr360
 from simulator.traces.readers.columns import load_columns, parse_column_map
 from simulator.traces.readers.common import _first_line, _warn_if_coarse
-from simulator.traces.readers.corbillon import _read_corbillon, _read_corbillon_euler
-from simulator.traces.readers.salient360 import _read_salient360_dyn, _read_salient360_static
-from simulator.traces.readers.vidstr360 import _360vidstr_user, _parse_360vidstr, _read_360vidstr
+from simulator.traces.readers.formats import Sniff, TraceFormat
+
+#: Every head-trace format, by name: one entry per reader module (each declares its own
+#: formats and how to recognise them, ``TRACE_FORMATS``). A new format: a new module here.
+REGISTRY: dict[str, TraceFormat] = {
+    f.name: f
+    for module in (avtrack360, canonical, corbillon, salient360, vidstr360)
+    for f in module.TRACE_FORMATS
+}
 
 __all__ = [
     "FORMATS",
+    "REGISTRY",
+    "TraceFile",
     "detect_format",
     "load_all_users",
     "load_columns",
     "load_headpath",
     "load_keyframes",
+    "n_users",
     "parse_column_map",
+    "sampling_warnings",
 ]
 
 
@@ -37,31 +47,10 @@ def detect_format(path: str | os.PathLike) -> str:
     """Guess the format (one of :data:`FORMATS`) from the file's content."""
     p = check_input_file(path, "head path")
     head = _first_line(p)
-    low = head.lower()
-    if head.startswith(("{", "[")):
-        with open(p, encoding="utf-8-sig", errors="replace") as fh:
-            text = fh.read(1 << 16)
-        if "pitch_yaw_roll_data_hmd" in text:
-            return "avtrack360"
-        return "keyframes-json"
-    toks = set(low.replace(",", " ").replace('"', " ").replace("'", " ").split())
-    if {"timestamp", "viewpoint", "w", "x", "y", "z"} <= toks:
-        return "corbillon"
-    if {"timestamp", "viewpoint", "yaw", "pitch", "roll"} <= toks:
-        return "corbillon-euler"
-    if {"cam_pitch", "cam_yaw", "cam_roll"} <= toks:
-        return "salient360-dyn"
-    if "camerarotation.x" in toks and "camerarotation.w" in toks:
-        return "salient360-static"
-    if "time_s" in toks and {"qw", "qx", "qy", "qz"} <= toks:
-        return "quat"
-    if "time_s" in toks:
-        return "canonical"
-    try:
-        [float(v) for v in head.split()]
-        return "360vidstr"
-    except ValueError:
-        pass
+    sniff = Sniff(p, head)
+    for f in sorted(REGISTRY.values(), key=lambda f: f.rank):
+        if f.sniff(sniff):
+            return f.name
     n = len(head.replace(",", " ").split())
     raise InputError(  # the line itself is not quoted: messages never echo file content
         f"{p}: cannot tell the head path format from its first line ({n} fields, not a "
@@ -95,29 +84,13 @@ def load_headpath(
     """
     p = check_input_file(path, "head path")
     fmt = detect_format(p) if format == "auto" else format
-    if fmt not in FORMATS:
+    if fmt not in REGISTRY:
         raise InputError(
-            f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(FORMATS)}"
+            f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(REGISTRY)}"
         )
-    if fmt == "avtrack360":
-        hp = _read_avtrack360(p, video)
-    elif fmt == "360vidstr":
-        hp = _read_360vidstr(p, user)
-    else:
-        hp = _READERS[fmt](p)
+    hp = REGISTRY[fmt].read(p, video=video, user=user)
     _warn_if_coarse(hp)
     return hp
-
-
-_READERS = {
-    "canonical": _read_canonical,
-    "quat": _read_quat,
-    "keyframes-json": _read_keyframes_json,
-    "corbillon": _read_corbillon,
-    "corbillon-euler": _read_corbillon_euler,
-    "salient360-dyn": _read_salient360_dyn,
-    "salient360-static": _read_salient360_static,
-}
 
 
 def load_keyframes(path: str | os.PathLike) -> HeadPath:
@@ -131,19 +104,69 @@ def load_keyframes(path: str | os.PathLike) -> HeadPath:
     return load_headpath(p, fmt)
 
 
-def load_all_users(path: str | os.PathLike, format: str = "auto") -> dict[int, HeadPath]:
+class TraceFile:
+    """A head path file parsed once for many viewings: each user's path, and each viewing
+    gets the warnings that belong to it (the file's own, and its user's sampling).
+
+    ``user(u)`` (None or 1 for a file of one trace) re-issues the file's warnings and the
+    user's sampling warning, so a caller catching warnings per viewing attributes them
+    right however many viewings share the parsed file.
+    """
+
+    def __init__(self, path: str | os.PathLike, format: str = "auto"):
+        p = check_input_file(path, "head path")
+        self.path, self.format = p, detect_format(p) if format == "auto" else format
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            self.users = load_all_users(p, self.format, warn=False)
+        self.file_warnings = [(w.message, w.category) for w in caught]
+        self.multi = REGISTRY[self.format].read_all is not None
+
+    def user(self, u: int | None) -> HeadPath:
+        """User ``u``'s path (1-based; None: the file's only trace), warnings issued."""
+        for msg, cat in self.file_warnings:
+            warnings.warn(msg, cat, stacklevel=2)
+        k = 1 if u is None and len(self.users) == 1 else u
+        if k not in self.users:
+            raise InputError(f"{self.path}: no user {u}; the file holds {len(self.users)}")
+        if self.multi:
+            _warn_if_coarse(self.users[k])
+        return self.users[k]
+
+
+def sampling_warnings(hp: HeadPath) -> None:
+    """Warn (CoarseSamplingWarning) about ``hp``'s sampling, as the readers do for each path."""
+    _warn_if_coarse(hp)
+
+
+def load_all_users(
+    path: str | os.PathLike, format: str = "auto", *, warn: bool = True
+) -> dict[int, HeadPath]:
     """Every user of a head path file, read once: ``{user (1-based): HeadPath}``.
 
     360VidStr aggregated files hold many users (one pair of lines each); any other format
     holds one trace and gives ``{1: path}`` (read as :func:`load_headpath` reads it). A
     user whose samples are bad raises InputError naming the file and the user.
+    ``warn=False``: no sampling warnings here; :func:`sampling_warnings` gives one user's
+    (so that each warning belongs to the viewing of its user).
     """
     p = check_input_file(path, "head path")
     fmt = detect_format(p) if format == "auto" else format
-    if fmt != "360vidstr":
+    if fmt not in REGISTRY:
+        raise InputError(f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(REGISTRY)}")
+    read_all = REGISTRY[fmt].read_all
+    if read_all is None:
         return {1: load_headpath(p, fmt)}
-    rows = _parse_360vidstr(p)
-    out = {u: _360vidstr_user(p, rows, u) for u in range(1, (len(rows) - 1) // 2 + 1)}
-    for hp in out.values():
+    out = read_all(p)
+    for hp in out.values() if warn else ():
         _warn_if_coarse(hp)
     return out
+
+
+def n_users(path: str | os.PathLike, format: str = "auto") -> tuple[str, int]:
+    """``(format, number of users)`` of a head path file, cheaply (no parsing where the
+    format can count its users from the file's layout)."""
+    p = check_input_file(path, "head path")
+    fmt = detect_format(p) if format == "auto" else format
+    count = REGISTRY[fmt].count_users if fmt in REGISTRY else None
+    return fmt, (count(p) if count else 1)

@@ -10,6 +10,7 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.traces.path import HeadPath
 from simulator.traces.readers.common import _check_finite, _check_increasing, _dedupe_times
+from simulator.traces.readers.formats import TraceFormat
 
 
 def _read_avtrack360(p: Path, video: str | None) -> HeadPath:
@@ -64,3 +65,10 @@ def _read_avtrack360(p: Path, video: str | None) -> HeadPath:
     return HeadPath.from_angles_deg(
         data[:, 0], data[:, 1], -data[:, 2], data[:, 3], source=f"{p}:{want}"
     )
+
+
+#: The format this module reads (the registry of ``simulator.traces.readers``).
+TRACE_FORMATS = (
+    TraceFormat("avtrack360", lambda p, video=None, **_: _read_avtrack360(p, video),
+                lambda s: s.is_json and "pitch_yaw_roll_data_hmd" in s.text, rank=10),
+)  # fmt: skip

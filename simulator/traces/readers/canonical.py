@@ -21,6 +21,7 @@ from simulator.traces.readers.common import (
     _warn_if_milliseconds,
     _warn_if_radians,
 )
+from simulator.traces.readers.formats import TraceFormat
 
 QUAT_COLUMNS: tuple[str, ...] = ("time_s", "qw", "qx", "qy", "qz")
 
@@ -103,3 +104,14 @@ def _read_keyframes_json(p: Path) -> HeadPath:
     _check_pitch(p, data[:, 2], lines, "keyframe")
     _warn_if_radians(p, data[:, 1], data[:, 2], data[:, 3])
     return HeadPath.from_angles_deg(data[:, 0], data[:, 1], data[:, 2], data[:, 3], source=str(p))
+
+
+#: The formats this module reads (the registry of ``simulator.traces.readers``).
+TRACE_FORMATS = (
+    TraceFormat("quat", lambda p, **_: _read_quat(p),
+                lambda s: s.has("time_s", "qw", "qx", "qy", "qz"), rank=40),
+    TraceFormat("canonical", lambda p, **_: _read_canonical(p), lambda s: s.has("time_s"),
+                rank=45),
+    TraceFormat("keyframes-json", lambda p, **_: _read_keyframes_json(p),
+                lambda s: s.is_json, rank=11),
+)  # fmt: skip

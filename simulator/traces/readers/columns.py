@@ -1,13 +1,22 @@
-"""Any lab's head log: a delimited table read through a column map (``headpath convert --columns``).
+"""Any lab's head log, a delimited table or a JSON log, read through a column map (``--columns``).
 
 A map names the file's column of each quantity, ``time=COL,yaw=COL,pitch=COL[,roll=COL]``;
 a leading ``-`` flips that angle's sign (``pitch=-deg_pitch``). Angles are in degrees or
 radians (``angles``), yaw + right, pitch + up, roll + right ear down *after* the sign
 flips, applied yaw, then pitch, then roll (intrinsic: SPEC's order, which is also Unity's
 ``transform.eulerAngles`` Z, X, Y extrinsic order). Angles in [0, 360) are wrapped to
-+-180. Time is the column times ``time_scale`` (0.001 for milliseconds), minus the first
-time if ``time_from_first``. Rows repeating the previous time are dropped (loggers that
-sample faster than the pose updates).
++-180. Time is the column times ``time_scale`` (0.001 for milliseconds), or, with
+``time_format`` (a ``strptime`` format such as ``%Y%m%dZ-%H%M%S_%fZ``), the clock time
+it spells, in seconds; minus the first kept row's time if ``time_from_first`` (always with
+``time_format``: a wall clock has no video origin). Rows repeating the previous time are
+dropped (loggers that sample faster than the pose updates); ``skip_rows`` drops the first
+data rows, ``drop_zero_rows`` the rows whose mapped angles are all exactly 0 (Unity's
+first sample before the headset reports). Times that look like clock timestamps (over
+1e8 s) without ``time_from_first`` give a :class:`ClockTimeWarning`.
+
+A JSON log is an object keyed by timestamps (``{"20210510Z-200400_686Z": {"rot": {"x":
+..}}, ..}``, the SIT-VR shape) or a list of objects; ``time=key`` names the object's key,
+nested fields go by dotted names (``yaw=rot.y``).
 
 A Unity-style log (left-handed, x right, y up, z forward; Euler degrees in [0, 360);
 pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
@@ -15,8 +24,11 @@ pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
 
 from __future__ import annotations
 
+import json
 import math
 import os
+import warnings
+from datetime import UTC, datetime
 
 import numpy as np
 
@@ -25,7 +37,15 @@ from simulator.core.fileio import check_input_file
 from simulator.traces.path import HeadPath
 from simulator.traces.readers.common import _check_increasing, _dedupe_times, _hint, _value
 
-__all__ = ["COLUMN_KEYS", "load_columns", "parse_column_map"]
+__all__ = ["COLUMN_KEYS", "ClockTimeWarning", "load_columns", "parse_column_map"]
+
+#: Times beyond this many seconds (about 3 years) look like clock timestamps.
+CLOCK_TIME_S = 1e8
+
+
+class ClockTimeWarning(UserWarning):
+    """Times of a head log look like clock timestamps (seconds since 1970), not seconds
+    from the video start."""
 
 #: Quantities of a column map; ``roll`` is optional (0 when absent).
 COLUMN_KEYS: tuple[str, ...] = ("time", "yaw", "pitch", "roll")
@@ -68,6 +88,99 @@ def _split(line: str, delim: str | None) -> list[str]:
     return [f.strip().strip('"') for f in (line.split(delim) if delim else line.split())]
 
 
+def _flatten(obj, prefix: str, out: dict) -> dict:
+    """Nested JSON objects (and lists) as ``{"a.b.c": value}``."""
+    items = obj.items() if isinstance(obj, dict) else enumerate(obj)
+    for k, v in items:
+        name = f"{prefix}{k}"
+        if isinstance(v, (dict, list)):
+            _flatten(v, name + ".", out)
+        else:
+            out[name] = v
+    return out
+
+
+def _json_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
+    """Columns and rows (label, {column: value}) of a JSON log (see the module doc)."""
+    try:
+        obj = json.loads(text)
+    except RecursionError:
+        raise InputError(f"{p}: JSON nested too deeply") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{p}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    if isinstance(obj, dict):
+        entries = [(f"entry {i + 1}", {"key": k}, v) for i, (k, v) in enumerate(obj.items())]
+    elif isinstance(obj, list):
+        entries = [(f"entry {i + 1}", {}, v) for i, v in enumerate(obj)]
+    else:
+        raise InputError(f"{p}: expected a JSON object keyed by time, or a list of objects")
+    rows, cols = [], {}
+    for label, row, v in entries:
+        if isinstance(v, (dict, list)):
+            _flatten(v, "", row)
+        else:
+            row["value"] = v
+        cols.update(dict.fromkeys(row))
+        rows.append((label, row))
+    return list(cols), rows
+
+
+def _text_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
+    """Columns and rows (label, {column: value}) of a delimited log; the delimiter is the
+    header's (comma, semicolon, tab, else whitespace); ``#`` lines are comments."""
+    lines = [(k + 1, ln) for k, ln in enumerate(text.splitlines()) if ln.strip()]
+    lines = [(k, ln) for k, ln in lines if not ln.lstrip().startswith("#")]
+    if not lines:
+        raise InputError(f"{p}: head path file is empty")
+    delim = next((d for d in (",", ";", "\t") if d in lines[0][1]), None)
+    cols = _split(lines[0][1], delim)
+    return cols, [(f"line {k}", dict(zip(cols, _split(ln, delim)))) for k, ln in lines[1:]]
+
+
+def _read_table(p) -> tuple[list[str], list[tuple[str, dict]]]:
+    with open(p, encoding="utf-8-sig", errors="replace") as fh:
+        text = fh.read()
+    if text.lstrip().startswith(("{", "[")):
+        return _json_table(p, text)
+    return _text_table(p, text)
+
+
+def _clock_seconds(p, label: str, value, fmt: str) -> float:
+    """Seconds since 1970 (UTC) of a clock time ``value`` in ``strptime`` format ``fmt``."""
+    try:
+        d = datetime.strptime(str(value).strip(), fmt)
+    except ValueError:
+        raise InputError(
+            f"{p}: {label}: time {_value(str(value))} does not match --time-format {fmt!r}"
+        ) from None
+    return (d if d.tzinfo else d.replace(tzinfo=UTC)).timestamp()
+
+
+def _numbers(p, cmap: dict, keys: list[str], rows, time_format: str | None):
+    """The mapped values of every row as floats, (N, len(keys)); errors name row and column."""
+    data = np.empty((len(rows), len(keys)))
+    for r, (label, row) in enumerate(rows):
+        for j, key in enumerate(keys):
+            col = cmap[key][0]
+            if col not in row:
+                raise InputError(f"{p}: {label} has no column {col!r}")
+            v = row[col]
+            if key == "time" and time_format:
+                data[r, j] = _clock_seconds(p, label, v, time_format)
+                continue
+            try:
+                if isinstance(v, bool):
+                    raise TypeError(col)
+                data[r, j] = float(v)
+            except (TypeError, ValueError):
+                raise InputError(
+                    f"{p}: {label}, column {col!r} ({key}): non-numeric value {_value(str(v))}"
+                ) from None
+            if not math.isfinite(data[r, j]):
+                raise InputError(f"{p}: {label}, column {col!r}: value is not finite")
+    return data
+
+
 def load_columns(
     path: str | os.PathLike,
     columns: str | dict,
@@ -75,64 +188,55 @@ def load_columns(
     angles: str = "deg",
     time_scale: float = 1.0,
     time_from_first: bool = False,
+    time_format: str | None = None,
+    skip_rows: int = 0,
+    drop_zero_rows: bool = False,
 ) -> HeadPath:
-    """Read a head log through a column map (see the module doc). The delimiter is taken
-    from the header line (comma, semicolon, tab, else whitespace). InputError, naming the
+    """Read a head log through a column map (see the module doc). InputError, naming the
     file, for unknown columns (the file's columns are listed), a row without a mapped
-    column, a non-numeric value (line and column named), or times not increasing."""
+    column, a non-numeric value or a time not in ``time_format`` (row and column named),
+    or times not increasing; ClockTimeWarning for clock timestamps."""
     p = check_input_file(path, "head path")
     cmap = parse_column_map(columns) if isinstance(columns, str) else dict(columns)
     if angles not in ("deg", "rad"):
         raise InputError(f"--angles must be deg or rad; got {angles!r}")
     if not (math.isfinite(time_scale) and time_scale != 0):
         raise InputError(f"--time-scale must be a finite non-zero factor; got {time_scale}")
-    with open(p, encoding="utf-8-sig", errors="replace") as fh:
-        lines = [(k + 1, ln) for k, ln in enumerate(fh.read().splitlines()) if ln.strip()]
-    lines = [(k, ln) for k, ln in lines if not ln.lstrip().startswith("#")]
-    if not lines:
-        raise InputError(f"{p}: head path file is empty")
-    head = lines[0][1]
-    delim = next((d for d in (",", ";", "\t") if d in head), None)
-    cols = _split(head, delim)
+    if skip_rows < 0:
+        raise InputError(f"--skip-rows must be >= 0; got {skip_rows}")
+    cols, rows = _read_table(p)
     unknown = [c for c, _ in cmap.values() if c not in cols]
     if unknown:
         raise InputError(
             f"{p}: no column {', '.join(map(repr, unknown))} among its {len(cols)} columns"
             f"{_hint(unknown[0], cols)}"
         )
-    if len(lines) < 2:
-        raise InputError(f"{p}: head path file has a header but no data rows")
+    rows = rows[skip_rows:]
+    if not rows:
+        raise InputError(f"{p}: head path file has no data rows" + (
+            f" after --skip-rows {skip_rows}" if skip_rows else ""))  # fmt: skip
     keys = [k for k in COLUMN_KEYS if k in cmap]
-    idx = [cols.index(cmap[k][0]) for k in keys]
-    data = np.empty((len(lines) - 1, len(keys)))
-    line_no = []
-    for r, (k, ln) in enumerate(lines[1:]):
-        f = _split(ln, delim)
-        for j, (key, i) in enumerate(zip(keys, idx)):
-            if i >= len(f):
-                raise InputError(
-                    f"{p}: line {k} has {len(f)} fields, no column {cmap[key][0]!r} (field {i + 1})"
-                )
-            try:
-                data[r, j] = float(f[i])
-            except ValueError:
-                raise InputError(
-                    f"{p}: line {k}, column {cmap[key][0]!r} ({key}): non-numeric value {_value(f[i])}"
-                ) from None
-        line_no.append(k)
-    bad = ~np.isfinite(data)
-    if bad.any():
-        r, j = np.argwhere(bad)[0]
-        raise InputError(
-            f"{p}: line {line_no[r]}, column {cmap[keys[j]][0]!r}: value is not finite"
-        )
-    t = data[:, 0] * float(time_scale)
+    data = _numbers(p, cmap, keys, rows, time_format)
+    labels = [label for label, _ in rows]
+    if drop_zero_rows:
+        nonzero = np.any(data[:, 1:] != 0.0, axis=1)
+        data, labels = data[nonzero], [x for x, k in zip(labels, nonzero) if k]
+        if not len(data):
+            raise InputError(f"{p}: every row's angles are 0 (--drop-zero-rows left nothing)")
+    t = data[:, 0] * (1.0 if time_format else float(time_scale))
     keep = _dedupe_times(t)
     t, data = t[keep], data[keep]
-    line_no = [ln for ln, k in zip(line_no, keep) if k]
-    if time_from_first:
+    labels = [x for x, k in zip(labels, keep) if k]
+    if time_from_first or time_format:
         t = t - t[0]
-    _check_increasing(p, t, line_no)
+    elif abs(float(t[0])) > CLOCK_TIME_S:
+        warnings.warn(
+            f"{p}: times start at {float(t[0]):.4g} s: these look like CLOCK TIMESTAMPS, not "
+            "seconds from the video start; pass --time-from-first (or --time-format) if so",
+            ClockTimeWarning,
+            stacklevel=2,
+        )
+    _check_increasing(p, t, [x.split(" ", 1)[1] for x in labels], labels[0].split(" ")[0])
     ang = {}
     for key in ("yaw", "pitch", "roll"):
         if key not in cmap:

@@ -15,6 +15,7 @@ from simulator.traces.readers.common import (
     _parse_table,
     _quats_to_rotation,
 )
+from simulator.traces.readers.formats import TraceFormat
 
 # Corbillon frame -> ours: their (x forward, y right, z up) -> our (z forward, x right, y up).
 # A cyclic permutation (det +1): ours = _C2O @ theirs, for world and head vectors alike.
@@ -55,3 +56,12 @@ def _read_corbillon_euler(p: Path) -> HeadPath:
     e = data[:, [ix["yaw"], ix["pitch"], ix["roll"]]]
     r_c = _CORB_P * Rotation.from_euler("YXZ", e) * _CORB_P.inv()
     return HeadPath(t, _C2O * r_c * _C2O.inv(), str(p))
+
+
+#: The formats this module reads (the registry of ``simulator.traces.readers``).
+TRACE_FORMATS = (
+    TraceFormat("corbillon", lambda p, **_: _read_corbillon(p),
+                lambda s: s.has("timestamp", "viewpoint", "w", "x", "y", "z"), rank=20),
+    TraceFormat("corbillon-euler", lambda p, **_: _read_corbillon_euler(p),
+                lambda s: s.has("timestamp", "viewpoint", "yaw", "pitch", "roll"), rank=20),
+)  # fmt: skip

@@ -19,6 +19,7 @@ from simulator.traces.readers.common import (
     _quats_to_rotation,
     _value,
 )
+from simulator.traces.readers.formats import TraceFormat
 
 
 def _read_salient360_dyn(p: Path) -> HeadPath:
@@ -123,3 +124,12 @@ def _parse_salient_static(p: Path):
         except (ValueError, IndexError):
             raise InputError(f"{p}: line {k + 2}: missing or non-numeric head pose") from None
     return cols, data, list(range(2, len(lines) + 1))
+
+
+#: The formats this module reads (the registry of ``simulator.traces.readers``).
+TRACE_FORMATS = (
+    TraceFormat("salient360-dyn", lambda p, **_: _read_salient360_dyn(p),
+                lambda s: s.has("cam_pitch", "cam_yaw", "cam_roll"), rank=30),
+    TraceFormat("salient360-static", lambda p, **_: _read_salient360_static(p),
+                lambda s: s.has("camerarotation.x", "camerarotation.w"), rank=30),
+)  # fmt: skip

@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.traces.path import HeadPath
 from simulator.traces.readers.common import _check_finite, _check_increasing
+from simulator.traces.readers.formats import TraceFormat
 
 
 def _read_360vidstr(p: Path, user: int | None) -> HeadPath:
@@ -58,3 +59,30 @@ def _360vidstr_user(p: Path, rows: list[NDArray], user: int) -> HeadPath:
     return HeadPath.from_angles_deg(
         t, np.degrees(yaw[:n]), np.degrees(pitch[:n]), 0.0, source=f"{p}:user{user}"
     )
+
+
+def _all_users(p: Path) -> dict[int, HeadPath]:
+    rows = _parse_360vidstr(p)
+    return {u: _360vidstr_user(p, rows, u) for u in range(1, (len(rows) - 1) // 2 + 1)}
+
+
+def _count_users(p: Path) -> int:
+    """Users of a 360VidStr file from its line count (no parsing)."""
+    with open(p, encoding="utf-8", errors="replace") as fh:
+        n = sum(1 for ln in fh if ln.strip())
+    return max(1, (n - 1) // 2)
+
+
+def _numeric_line(s) -> bool:
+    try:
+        [float(v) for v in s.head.split()]
+    except ValueError:
+        return False
+    return True
+
+
+#: The format this module reads (the registry of ``simulator.traces.readers``).
+TRACE_FORMATS = (
+    TraceFormat("360vidstr", lambda p, user=None, **_: _read_360vidstr(p, user), _numeric_line,
+                rank=60, read_all=_all_users, count_users=_count_users),
+)  # fmt: skip

@@ -1,0 +1,106 @@
+"""Typed values of one manifest table, with errors naming the manifest and the entry, and user specs.
+
+A user spec (``user = ...`` and ``render = ...`` of a ``[[viewings]]`` entry) is a number, a
+list of numbers and ranges, a range such as ``"1-12"`` (or ``"1-3,7"``) or ``"all"``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+from simulator.core.errors import InputError
+from simulator.sphere.headsets import resolve_fov
+
+__all__ = ["Entry", "user_numbers"]
+
+
+class Entry:
+    """Reads typed values from one table of the manifest; errors name manifest and entry."""
+
+    def __init__(self, manifest: Path, where: str, table: object, allowed: tuple[str, ...]):
+        self.m, self.where = manifest, where
+        if not isinstance(table, dict):
+            self.fail(f"expected a table, got {type(table).__name__}")
+        self.t = table
+        unknown = [k for k in table if k not in allowed]
+        if unknown:
+            self.fail(f"unknown key {unknown[0]!r}; expected one of {', '.join(allowed)}")
+
+    def fail(self, msg: str):
+        raise InputError(f"{self.m}: {self.where}: {msg}")
+
+    def get(self, key, types, default=None, *, required=False, choices=None):
+        if key not in self.t:
+            if required:
+                self.fail(f"key {key!r} missing")
+            return default
+        v = self.t[key]
+        if isinstance(v, bool) and bool not in types:
+            self.fail(f"{key} = {v!r}: expected {'/'.join(t.__name__ for t in types)}")
+        if not isinstance(v, types):
+            self.fail(f"{key} = {v!r}: expected {'/'.join(t.__name__ for t in types)}")
+        if isinstance(v, float) and not math.isfinite(v):
+            self.fail(f"{key} = {v!r}: expected a finite number")
+        if choices is not None and v not in choices:
+            self.fail(f"{key} = {v!r}: expected one of {', '.join(map(str, choices))}")
+        return v
+
+    def number(self, key, default=None, *, lo=None, hi=None, integer=False, lo_open=False):
+        v = self.get(key, (int,) if integer else (int, float), default)
+        if v is None:
+            return None
+        if (lo is not None and (v < lo or (lo_open and v == lo))) or (hi is not None and v > hi):
+            rng = f"{'(' if lo_open else '['}{lo if lo is not None else '-inf'}, {hi if hi is not None else 'inf'}]"
+            self.fail(f"{key} = {v!r}: expected a number in {rng}")
+        return v if integer else float(v)
+
+    def fov(self, default):
+        try:
+            return resolve_fov(
+                headset=self.get("headset", (str,)),
+                fov_deg=self.number("fov"),
+                hfov_deg=self.number("hfov"),
+                vfov_deg=self.number("vfov"),
+                default=default,
+            )
+        except InputError as e:
+            self.fail(str(e))
+
+    def path(self, key, base: Path, *, required=True) -> Path | None:
+        v = self.get(key, (str,), required=required)
+        if v is None:
+            return None
+        p = Path(v).expanduser()
+        return p if p.is_absolute() else base / p
+
+
+_USER_PART = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
+_USER_HELP = 'expected a number >= 1, a list, a range such as "1-12" (or "1-3,7") or "all"'
+
+
+def user_numbers(e: Entry, key: str, value) -> list[int]:
+    """The users a spec names, in order, without repeats (not checked against a file)."""
+    out: list[int] = []
+    for item in value if isinstance(value, list) else [value]:
+        if isinstance(item, bool) or not isinstance(item, (int, str)):
+            e.fail(f"{key} = {value!r}: {_USER_HELP}")
+        parts = [item] if isinstance(item, int) else item.split(",")
+        for part in parts:
+            if isinstance(part, int):
+                lo = hi = part
+            else:
+                mt = _USER_PART.match(part)
+                if not mt:
+                    e.fail(f"{key} = {value!r}: {_USER_HELP}")
+                lo = int(mt.group(1))
+                hi = int(mt.group(2)) if mt.group(2) else lo
+                if hi < lo:
+                    e.fail(f"{key} = {value!r}: range {part.strip()!r} is empty")
+            if lo < 1:
+                e.fail(f"{key} = {value!r}: {_USER_HELP}")
+            out += [u for u in range(lo, hi + 1) if u not in out]
+    if not out:
+        e.fail(f"{key} = {value!r}: names no user; {_USER_HELP}")
+    return out

@@ -1,0 +1,239 @@
+"""The plan of a study: grid keys, what the cache holds, which viewings are unchanged, and the dry run's checks.
+
+:func:`plan_study` is what a run does before any work (and all a ``--dry-run`` does): the
+cache key of each video's grid (the video's content hash and its preprocessing options),
+whether the cache holds it, the key of each viewing (grid, trace bytes, user, options)
+and whether an earlier run's record on OUTDIR matches it. :func:`check_plan` adds what
+only a dry run reads: every trace parsed (a multi-user file once), its time range
+checked against its video's, and each render range against the video's length.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from simulator import __version__
+from simulator.core.errors import InputError
+from simulator.core.mapcache import cache_dir
+from simulator.media.gridfile import VERSION as GRID_VERSION
+from simulator.media.gridfile import content_hash
+from simulator.media.video import probe
+from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
+from simulator.traces.readers import TraceFile, load_headpath
+
+__all__ = [
+    "Plan",
+    "base_row",
+    "check_outputs",
+    "check_plan",
+    "default_cache_dir",
+    "dry_run",
+    "plan_study",
+    "study_folders",
+    "viewing_key",
+]
+
+
+def default_cache_dir() -> Path:
+    """vimsim's cache folder (:func:`simulator.core.mapcache.cache_dir`: ``$VIMSIM_CACHE_DIR``,
+    else the deprecated ``$VIMSIM_CACHE``, else ``$XDG_CACHE_HOME/vimsim`` or
+    ``~/.cache/vimsim``)."""
+    return cache_dir()
+
+
+def _sha(obj) -> str:
+    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def _file_sha(path: Path, memo: dict) -> str:
+    key = str(path)
+    if key not in memo:
+        h = hashlib.sha256()
+        with open(path, "rb") as fh:
+            for b in iter(lambda: fh.read(1 << 20), b""):
+                h.update(b)
+        memo[key] = h.hexdigest()
+    return memo[key]
+
+
+def _grid_key(v: VideoSpec) -> str:
+    return _sha({"video": content_hash(v.path), "options": v.options(), "grid": GRID_VERSION,
+                 "vimsim": __version__})  # fmt: skip
+
+
+def viewing_key(m: Manifest, w: ViewingSpec, grid: Path, memo: dict) -> str:
+    """The hash of everything a viewing's outputs depend on (its resume record's key)."""
+    return _sha({
+        "grid": grid.name, "trace": _file_sha(w.trace, memo), "format": w.format,
+        "user": w.user, "epof": m.epof, "vimsim": __version__,
+        "render": [w.render_opts, m.grf] if w.render else None, "plot": w.plot,
+    })  # fmt: skip
+
+
+def read_state(p: Path) -> dict | None:
+    """A viewing's resume record, or None (missing or unreadable: recomputed)."""
+    try:
+        d = json.loads(p.read_text())
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) else None
+
+
+@dataclass
+class Plan:
+    """What a run would do: grid paths and cache hits, viewing keys, unchanged viewings
+    (their recorded rows), the viewings to compute, and the number of tasks."""
+
+    grids: dict[str, Path]
+    hits: dict[str, bool]
+    keys: dict[str, str]
+    unchanged: dict[str, dict]
+    todo: list[ViewingSpec]
+    problems: list[str] = field(default_factory=list)
+
+    @property
+    def n_tasks(self) -> int:
+        """What the run's progress bar counts: a preprocess per grid missing from the cache,
+        an EPOF per viewing to compute (chunked when run), a render per rendering one."""
+        return sum(not hit for hit in self.hits.values()) + sum(1 + w.render for w in self.todo)
+
+
+def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
+    """The plan of ``m`` into ``out`` with the grid cache ``cache`` (reads no video frame)."""
+    memo: dict = {}
+    grids = {v.id: cache / "grids" / f"{_grid_key(v)[:32]}.npz" for v in m.videos}
+    plan = Plan(grids, {k: p.is_file() for k, p in grids.items()}, {}, {}, [])
+    for w in m.viewings:
+        plan.keys[w.id] = viewing_key(m, w, grids[w.video], memo)
+        prev = read_state(out / "state" / f"{w.id}.json") if resume else None
+        if (
+            prev is not None
+            and prev.get("key") == plan.keys[w.id]
+            and prev.get("row", {}).get("status") == "ok"
+            and (out / "epof" / f"{w.id}.csv").is_file()
+            and (not w.render or (out / "render" / w.id / "summary.json").is_file())
+        ):
+            plan.unchanged[w.id] = prev["row"]
+        else:
+            plan.todo.append(w)
+    return plan
+
+
+def _trace_of(w: ViewingSpec, parsed: dict):
+    """The head path of a viewing, a multi-user file parsed once (``parsed`` memo)."""
+    if w.user is None:
+        return load_headpath(w.trace, w.format)
+    key = (str(w.trace), w.format)
+    if key not in parsed:
+        parsed[key] = TraceFile(w.trace, w.format)
+    return parsed[key].user(w.user)
+
+
+def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
+    """What a dry run checks beyond the manifest: each viewing still to compute has a
+    readable trace covering its video (unless ``[epof] hold_last``), and a render range
+    inside the video. Returns ``{viewing: [warning lines]}``; problems (one line each,
+    naming the viewing) go to ``plan.problems``."""
+    videos = {}
+    for v in m.videos:
+        if any(w.video == v.id for w in plan.todo):
+            try:
+                info = probe(v.path)
+                videos[v.id] = ((info.n_frames - 1) / info.fps, info.n_frames / info.fps)
+            except InputError as e:
+                plan.problems.append(f"video {v.id}: {e}")
+    parsed: dict = {}
+    found: dict[str, list[str]] = {}
+    for w in plan.todo:
+        if w.video not in videos:
+            continue
+        last_s, length_s = videos[w.video]
+        try:
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                hp = _trace_of(w, parsed)  # with this viewing's warnings only
+            found[w.id] = sorted({" ".join(str(c.message).split()) for c in caught})
+            hp.check_covers(last_s, hold=m.epof["hold_last"], video=str(m.video(w.video).path))
+            r = w.render_opts or {}
+            if r.get("start_s") is not None and r["start_s"] >= length_s:
+                raise InputError(f"render start = {r['start_s']:g} s is beyond the video "
+                                 f"({length_s:.3f} s)")  # fmt: skip
+        except InputError as e:
+            plan.problems.append(f"viewing {w.id}: {' '.join(str(e).split())}")
+    return found
+
+
+def check_outputs(m: Manifest, out: Path, cache: Path) -> None:
+    """Refuse an OUTDIR or cache that would overwrite an input (or is one)."""
+    inputs = {p.resolve() for p in m.input_files()}
+    for d, what in ((out, "output folder"), (cache, "cache folder")):
+        r = d.resolve()
+        if r in inputs or (d.exists() and not d.is_dir()):
+            raise InputError(f"{d}: {what} is a file (an input?); give a folder")
+    roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
+    for p in inputs:
+        if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
+            raise InputError(
+                f"{p}: is an input and would be overwritten by the study; choose another -o"
+            )
+        if any(p.is_relative_to(r) for r in roots):
+            raise InputError(
+                f"{p}: is an input inside the study's output folders; choose another -o"
+            )
+
+
+def study_folders(manifest: Manifest, outdir, cache_dir) -> tuple[Path, Path]:
+    # Absolute: workers (Ray's especially) need not share the driver's working directory.
+    out = Path(outdir).absolute()
+    cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
+    check_outputs(manifest, out, cache)
+    return out, cache
+
+
+def dry_run(manifest: Manifest, outdir, *, cache_dir=None, resume: bool = True) -> dict:
+    """What ``run_study`` would do, checked and planned; writes nothing.
+
+    Returns ``videos`` (grid, ``hit``/``miss``, whether it would be preprocessed),
+    ``viewings`` (id, video, trace, user, condition, ``compute`` or ``unchanged``,
+    render range), ``tasks`` (the count the run's progress bar would show),
+    ``problems`` (one line each, naming the viewing or video: the run would fail them)
+    and ``warnings`` (``{viewing: [lines]}``, the trace readers' warnings)."""
+    t0 = time.perf_counter()
+    out, cache = study_folders(manifest, outdir, cache_dir)
+    plan = plan_study(manifest, out, cache, resume)
+    warns = check_plan(manifest, plan)
+    todo = {w.id for w in plan.todo}
+    need = {w.video for w in plan.todo}
+    videos = {
+        v.id: {"grid": str(plan.grids[v.id]), "cache": "hit" if plan.hits[v.id] else "miss",
+               "preprocess": v.id in need and not plan.hits[v.id], "method": v.method}
+        for v in manifest.videos
+    }  # fmt: skip
+    viewings = []
+    for w in manifest.viewings:
+        r = w.render_opts or {}
+        viewings.append({
+            **base_row(w), "action": "compute" if w.id in todo else "unchanged",
+            "render": w.render, "start_s": r.get("start_s"), "end_s": r.get("end_s"),
+            "review": bool(r.get("review")),
+        })  # fmt: skip
+    return {"videos": videos, "viewings": viewings, "tasks": plan.n_tasks,
+            "problems": plan.problems, "warnings": warns, "cache": str(cache),
+            "seconds": time.perf_counter() - t0}  # fmt: skip
+
+
+def base_row(w: ViewingSpec) -> dict:
+    """The identifying cells of a viewing's row in ``viewings.csv``."""
+    return {
+        "viewing": w.id,
+        "participant": w.participant,
+        "condition": w.condition,
+        "video": w.video,
+        "trace": str(w.trace),
+        "user": "" if w.user is None else w.user,
+    }
