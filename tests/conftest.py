@@ -64,3 +64,19 @@ def ctx():
     assert c.error == "GL_NO_ERROR"
     yield c
     assert c.error == "GL_NO_ERROR"
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """One headless Chromium session for every ``browser`` test (tests/browser_support.py);
+    a missing browser fails the test with the reason (make test installs it)."""
+    from tests.browser_support import Browser, available
+
+    why = available()
+    if why:
+        pytest.fail(f"browser test cannot run: {why}")
+    b = Browser()
+    try:
+        yield b
+    finally:
+        b.close()
