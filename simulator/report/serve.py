@@ -8,6 +8,7 @@ import os
 import re
 import threading
 from pathlib import Path
+from typing import ClassVar
 
 __all__ = ["ReportServer", "start_server"]
 
@@ -19,9 +20,9 @@ class _Handler(http.server.SimpleHTTPRequestHandler):
     """Static files of one folder; ``Range: bytes=a-b`` answered with 206 (browsers seek
     in a video by range requests); no directory listings; nothing logged."""
 
-    extensions_map = {**http.server.SimpleHTTPRequestHandler.extensions_map,
+    extensions_map: ClassVar[dict[str, str]] = {**http.server.SimpleHTTPRequestHandler.extensions_map,
                       ".js": "text/javascript", ".mjs": "text/javascript", ".mp4": "video/mp4",
-                      ".bin": "application/octet-stream", ".json": "application/json"}  # noqa: RUF012  # fmt: skip
+                      ".bin": "application/octet-stream", ".json": "application/json"}  # fmt: skip
 
     def log_message(self, format, *args):
         return
