@@ -11,7 +11,8 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 .PHONY: demo test setup sysdeps lint bench clean
 
 # Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser;
-# Mono's C# compiler for the Unity export (simulator/export/unity/*.cs).
+# Mono's C# compiler for the Unity export (simulator/export/unity/*.cs);
+# headless Chromium for the browser tests (report, web export).
 sysdeps:
 	@if ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
 		echo "installing Debian packages libegl1 libgl1-mesa-dri (headless EGL, llvmpipe)"; \
@@ -24,6 +25,13 @@ sysdeps:
 		echo "installing Debian packages mono-mcs mono-runtime (C# compiler for the Unity export check)"; \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends mono-mcs mono-runtime; \
+	fi
+	@# Headless Chromium and its WebDriver: the browser tests of the study report and the web
+	@# runtime (tests marked browser; WebGL2 through SwiftShader, no GPU, nothing downloaded).
+	@if ! dpkg -s chromium chromium-driver >/dev/null 2>&1; then \
+		echo "installing Debian packages chromium chromium-driver (headless browser tests)"; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends chromium chromium-driver; \
 	fi
 
 $(STAMP): pyproject.toml

@@ -54,6 +54,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="grid cache (default: $VIMSIM_CACHE, else $XDG_CACHE_HOME/vimsim or ~/.cache/vimsim)",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--no-report",
+        action="store_true",
+        help="do not write OUTDIR/report/ (the HTML report; vimsim report OUTDIR makes it later)",
+    )
     p.set_defaults(func=run)
 
 
@@ -66,6 +71,12 @@ def run(args: argparse.Namespace) -> int:
 
     parse_executor(args.executor)  # an unknown executor is a usage error before anything
     manifest = load_manifest(args.manifest)
+    if not args.no_report:  # a report folder holding others' files: refused before any work
+        from pathlib import Path
+
+        from simulator.report.build import check_report_folder
+
+        check_report_folder(Path(args.output) / "report")
     bars: list = []  # made on the first report: nothing is drawn before the work starts
 
     def progress(done: int, failed: int, total: int) -> None:
@@ -92,6 +103,12 @@ def run(args: argparse.Namespace) -> int:
         for bar in bars:
             bar.close()
     c = s["counts"]
+    if not args.no_report:
+        from simulator.report.build import build_report
+
+        rep = build_report(args.output)
+        print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables {s['timings_s']['outputs']:.1f} s) "
+              f"-> {rep.index}", file=sys.stderr)  # fmt: skip
     for f in s["failures"]:
         print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)
     an = s["outputs"].get("analysis")
