@@ -273,6 +273,62 @@ class SphereModel {
 
 // ------------------------------------------------------------------ grains
 
+const mul32 = (a, b) => Math.imul(a, b) >>> 0;
+
+/** numpy.random.SeedSequence(seed).generate_state(4, uint64) for an integer seed >= 0,
+ * as BigInts (numpy/random/bit_generator.pyx: hashmix, mix, pool of 4 words). */
+function seedSequenceState(seed) {
+  const INIT_A = 0x43b0d7e5, MULT_A = 0x931e8875, INIT_B = 0x8b51f9dd, MULT_B = 0x58f38ded;
+  const MIX_L = 0xca01f9dd, MIX_R = 0x4973f715;
+  const entropy = [];
+  let x = BigInt(seed);
+  do { entropy.push(Number(x & 0xffffffffn)); x >>= 32n; } while (x > 0n);
+  let hc = INIT_A;
+  const hashmix = (v) => {
+    v = (v ^ hc) >>> 0; hc = mul32(hc, MULT_A); v = mul32(v, hc);
+    return (v ^ (v >>> 16)) >>> 0;
+  };
+  const mix = (a, b) => { const r = (mul32(MIX_L, a) - mul32(MIX_R, b)) >>> 0; return (r ^ (r >>> 16)) >>> 0; };
+  const pool = [0, 1, 2, 3].map((i) => hashmix(i < entropy.length ? entropy[i] : 0));
+  for (let s = 0; s < 4; s++) for (let d = 0; d < 4; d++) if (s !== d) pool[d] = mix(pool[d], hashmix(pool[s]));
+  for (let s = 4; s < entropy.length; s++) for (let d = 0; d < 4; d++) pool[d] = mix(pool[d], hashmix(entropy[s]));
+  let hb = INIT_B;
+  const words = [];
+  for (let i = 0; i < 8; i++) {
+    let v = (pool[i % 4] ^ hb) >>> 0; hb = mul32(hb, MULT_B); v = mul32(v, hb);
+    words.push((v ^ (v >>> 16)) >>> 0);
+  }
+  return [0, 1, 2, 3].map((k) => (BigInt(words[2 * k + 1]) << 32n) | BigInt(words[2 * k]));
+}
+
+/** numpy's PCG64 (XSL-RR 128/64) seeded as numpy.random.default_rng(seed) seeds it. */
+export class Pcg64 {
+  constructor(seed) {
+    const v = seedSequenceState(seed), M = (1n << 128n) - 1n;
+    this.mult = (2549297995355413924n << 64n) + 4865540595714422341n;
+    this.M = M;
+    this.inc = ((((v[2] << 64n) | v[3]) << 1n) | 1n) & M;
+    this.state = 0n;
+    this.step();
+    this.state = (this.state + ((v[0] << 64n) | v[1])) & M;
+    this.step();
+  }
+  step() { this.state = (this.state * this.mult + this.inc) & this.M; }
+  nextU64() {
+    this.step();
+    const s = this.state, x = ((s >> 64n) ^ s) & 0xffffffffffffffffn, rot = s >> 122n;
+    return ((x >> rot) | (x << ((64n - rot) & 63n))) & 0xffffffffffffffffn;
+  }
+  /** A double in [0, 1): (next64 >> 11) * 2^-53, as numpy's random(). */
+  nextDouble() { return Number(this.nextU64() >> 11n) * (1 / 9007199254740992); }
+  /** n draws of uniform(low, high): low + (high - low) * random(). */
+  uniform(low, high, n) {
+    const out = new Float64Array(n);
+    for (let i = 0; i < n; i++) out[i] = low + (high - low) * this.nextDouble();
+    return out;
+  }
+}
+
 /** The renderer's grain layout (simulator.mitigation.grf.GrainField): world unit centres
  * (Float64Array n*3, +x right, +y up, +z forward), the grain angular radius and the cutout. */
 export class GrainLayout {
@@ -281,6 +337,23 @@ export class GrainLayout {
     this.centres = centres;
     this.count = centres.length / 3;
     this.radiusRad = (config.grain_deg * D2R) / 2;
+  }
+  /** The layout from the seed, as simulator.mitigation.grf.GrainField.from_config: grain_count
+   * grains, z = uniform(-1, 1), lon = uniform(-pi, pi) from numpy.random.default_rng(seed),
+   * centre (sqrt(1 - z^2) sin lon, z, sqrt(1 - z^2) cos lon). config: grain_deg, density,
+   * inner_deg, outer_deg, seed. */
+  static fromSeed(config) {
+    const n = GrainLayout.grainCount(config.grain_deg, config.density);
+    const rng = new Pcg64(config.seed);
+    const z = rng.uniform(-1, 1, n), lon = rng.uniform(-Math.PI, Math.PI, n);
+    const c = new Float64Array(3 * n);
+    for (let i = 0; i < n; i++) {
+      const s = Math.sqrt(1 - z[i] * z[i]);
+      c[3 * i] = s * Math.sin(lon[i]); c[3 * i + 1] = z[i]; c[3 * i + 2] = s * Math.cos(lon[i]);
+    }
+    const g = new GrainLayout({ ...config, count: n }, c);
+    g.draws = { z, lon };
+    return g;
   }
   /** grf.grain_count: grains whose union blocks `density` of the sphere. */
   static grainCount(grainDeg, density) {
