@@ -25,6 +25,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.resources
 import json
 import os
@@ -37,7 +38,7 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.epof.overlaps import viewport_overlaps
-from simulator.export.unity import DATA_FILE, export_unity
+from simulator.export.unity import DATA_FILE, _pack, export_unity
 from simulator.media.gridfile import GridFile, load_grid
 from simulator.mitigation.grf import GrainField, GrfConfig, OpacityRule, grain_count
 from simulator.sphere.windows import WindowGrid
@@ -103,6 +104,46 @@ def overlap_bytes(grid: GridFile, hfov_deg: float, vfov_deg: float) -> tuple[byt
     return b"VIMSIMOV" + bytes(8) + raw, info
 
 
+def _stored_field(g: GridFile):
+    """The grid file's field as stored (float16 from ``vimsim preprocess``), or None."""
+    if not g.path or g.field_dps is None or np.dtype(g.field_dps.dtype) != np.float16:
+        return None
+    with np.load(g.path, allow_pickle=False) as z:
+        if "field_dps" not in z.files:
+            return None
+        f = z["field_dps"]
+    return f if f.dtype == np.float16 and f.ndim == 3 else None
+
+
+def epof_blob(g: GridFile, **kw) -> tuple[bytes, dict]:
+    """``vimsim_epof.bin`` (bytes) and its header, as :func:`export_unity` writes them.
+
+    A float16 field exported as float16 (sphere mode, ``dtype`` auto or float16: stored
+    values, exact) is packed straight from the grid file: the header is made by
+    :func:`export_unity` from the first two rows of the field and given the whole field's
+    shape (the Unity path converts the whole field to float32 and back to measure a rounding
+    that is zero here: most of the cost of a long video's report)."""
+    sphere = kw.get("method", "auto") == "sphere" or (
+        kw.get("method", "auto") == "auto" and g.field_dps is not None
+    )
+    raw = _stored_field(g) if sphere and kw.get("dtype", "auto") in ("auto", "float16") else None
+    with tempfile.TemporaryDirectory(prefix="vimsim-web-") as tmp:
+        if raw is None:
+            res = export_unity(g, tmp, **kw)
+            return (Path(tmp) / DATA_FILE).read_bytes(), res.header
+        head = dataclasses.replace(g, field_dps=np.asarray(raw[:2], np.float32).astype(np.float16))
+        res = export_unity(head, tmp, **kw)
+    header = res.header
+    if header["mode"] != "sphere" or header["data"]["dtype"] != "float16":
+        raise AssertionError("export: the float16 field's header is not a float16 sphere export")
+    data = np.ascontiguousarray(raw, "<f2")
+    header["n_frames"] = int(data.shape[0])
+    header["data"]["shape"] = [int(x) for x in data.shape]
+    header["data"]["bytes"] = int(data.nbytes)
+    header["grid_file"]["name"] = os.path.basename(g.path)
+    return _pack(header, data), header
+
+
 def export_web(
     grid: GridFile | str | os.PathLike,
     out_dir: str | os.PathLike,
@@ -129,11 +170,8 @@ def export_web(
     folder = OutputFolder(out_dir, names, "export --format web")
     inputs = [g.path] if g.path else []
     folder.check(inputs)
-    with tempfile.TemporaryDirectory(prefix="vimsim-web-") as tmp:
-        res = export_unity(g, tmp, method=method, dtype=dtype, hfov_deg=hfov_deg,
-                           vfov_deg=vfov_deg, rule=rule)  # fmt: skip
-        blob = (Path(tmp) / DATA_FILE).read_bytes()
-    header = res.header
+    blob, header = epof_blob(g, method=method, dtype=dtype, hfov_deg=hfov_deg,
+                             vfov_deg=vfov_deg, rule=rule)  # fmt: skip
     contents: dict[str, bytes] = {DATA_FILE: blob, GRAINS: grain_bytes(grf)}
     manifest = {"format": "vimsim-web", "version": 1, "data": DATA_FILE, "mode": header["mode"],
                 "grains": grain_info(grf)}  # fmt: skip

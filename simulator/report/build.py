@@ -12,6 +12,7 @@ no earlier report listed in its ``.vimsim-report.json`` is refused (nothing writ
 
 from __future__ import annotations
 
+import base64
 import contextlib
 import csv
 import importlib.resources
@@ -132,8 +133,16 @@ def browser_copy(
     with av.open(str(src)) as c:
         s = c.streams.video[0]
         codec, pix = s.codec_context.name, s.codec_context.pix_fmt
+        mp4 = "mp4" in c.format.name.split(",") and len(c.streams.video) == 1
     w, h = info.width, info.height
-    if layout == "mono" and codec == "h264" and pix == "yuv420p" and max(w, h) <= MAX_WEB_SIDE:
+    playable = (
+        layout == "mono" and codec == "h264" and pix == "yuv420p" and max(w, h) <= MAX_WEB_SIDE
+    )
+    if playable and mp4:
+        with atomic_output(dst) as tmp:
+            shutil.copyfile(src, tmp)
+        return {"how": "copy of the source (H.264 MP4)", "width": w, "height": h}
+    if playable:
         with atomic_output(dst) as tmp, av.open(str(src)) as ic:
             oc = av.open(str(tmp), "w", format="mp4", options={"movflags": "+faststart"})
             try:
@@ -145,7 +154,7 @@ def browser_copy(
                     oc.mux(pkt)
             finally:
                 oc.close()
-        return {"how": "stream copy", "width": w, "height": h}
+        return {"how": "stream copy into MP4", "width": w, "height": h}
     import cv2
 
     frames = iter_frames(src, layout=layout, eye=eye)
@@ -194,15 +203,22 @@ def _video_data(
     grid = Path(vinfo.get("grid", ""))
     res = {"id": vid, "export": None, "copy": None, "plots": [], "moments": []}
     if grid.is_file():
-        e = export_web(grid, tmp / "data" / vid, method=epof.get("method", "auto"),
-                       hfov_deg=epof.get("hfov_deg"), vfov_deg=epof.get("vfov_deg"),
-                       rule=study_rule(epof), grf=_grf(s["settings"]), example=False)  # fmt: skip
-        res["export"] = {"mode": e.mode, "fps": e.header["fps"], "viewport": e.header["viewport"]}
+        key = json.dumps([_source_key(grid), epof, s["settings"].get("grf")], sort_keys=True)
+        prev = (copies.get(vid) or {}).get("export")
+        if prev and prev.get("key") == key and (old / "data" / vid).is_dir():
+            shutil.copytree(old / "data" / vid, tmp / "data" / vid, copy_function=os.link)
+            res["export"] = prev
+        else:
+            e = export_web(grid, tmp / "data" / vid, method=epof.get("method", "auto"),
+                           hfov_deg=epof.get("hfov_deg"), vfov_deg=epof.get("vfov_deg"),
+                           rule=study_rule(epof), grf=_grf(s["settings"]), example=False)  # fmt: skip
+            res["export"] = {"mode": e.mode, "fps": e.header["fps"], "key": key,
+                             "viewport": e.header["viewport"]}  # fmt: skip
     src = Path(vinfo.get("path", ""))
     (tmp / "media" / vid).mkdir(parents=True, exist_ok=True)
     if src.is_file():
         key = _source_key(src)
-        prev = copies.get(vid)
+        prev = (copies.get(vid) or {}).get("copy")
         target = tmp / "media" / f"{vid}.mp4"
         if prev and prev.get("key") == key and (old / "media" / f"{vid}.mp4").is_file():
             os.link(old / "media" / f"{vid}.mp4", target)
@@ -230,12 +246,26 @@ def _viewing_data(out: Path, row: dict, s: dict) -> dict | None:
     p = out / "epof" / f"{row['viewing']}.csv"
     if row.get("status") != "ok" or not p.is_file():
         return None
-    r = read_epof_csv(p)
-    cols = {c: np.round(np.asarray(getattr(r, c), np.float64), 6).tolist() for c in EPOF_COLUMNS}
+    cols = {c: base64.b64encode(np.ascontiguousarray(v, "<f4").tobytes()).decode()
+            for c, v in _epof_columns(p).items()}  # fmt: skip
     rs = s["settings"].get("render") or {}
     return {"viewing": row["viewing"], "video": row["video"], "columns": cols,
             "render": rs, "grf": s["settings"].get("grf"),
             "rendered": (out / "render" / row["viewing"] / "summary.json").is_file()}  # fmt: skip
+
+
+def _epof_columns(path: Path) -> dict:
+    """The EPOF CSV's columns (:data:`EPOF_COLUMNS`), float64: a fast read of the file the
+    study wrote; anything unusual goes through :func:`read_epof_csv` (the checked reader)."""
+    try:
+        lines = [ln for ln in path.read_text(encoding="utf-8").splitlines() if ln and ln[0] != "#"]
+        head = lines[0].split(",")
+        idx = [head.index(c) for c in EPOF_COLUMNS]
+        a = np.array(",".join(lines[1:]).split(","), np.float64).reshape(len(lines) - 1, len(head))
+        return {c: a[:, i] for c, i in zip(EPOF_COLUMNS, idx)}
+    except (ValueError, IndexError):
+        r = read_epof_csv(path)
+        return {c: np.asarray(getattr(r, c), np.float64) for c in EPOF_COLUMNS}
 
 
 def _write(folder: Path, rel: str, data: bytes | str, written: list[str]) -> None:
@@ -285,7 +315,7 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
             rel = p.relative_to(tmp).as_posix()
             if p.is_file() and rel not in written:
                 written.append(rel)
-        copies = {v: d["copy"] for v, d in videos.items() if d["copy"]}
+        copies = {v: {"copy": d["copy"], "export": d["export"]} for v, d in videos.items()}
         (tmp / MANIFEST).write_text(
             json_text({"command": "report", "files": sorted(written), "copies": copies}) + "\n"
         )

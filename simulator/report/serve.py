@@ -6,6 +6,7 @@ import functools
 import http.server
 import os
 import re
+import sys
 import threading
 from pathlib import Path
 from typing import ClassVar
@@ -64,12 +65,15 @@ class _Handler(http.server.SimpleHTTPRequestHandler):
         n = getattr(self, "_remaining", None)
         if n is None:
             return super().copyfile(source, outputfile)
-        while n > 0:
-            buf = source.read(min(n, 1 << 16))
-            if not buf:
-                break
-            outputfile.write(buf)
-            n -= len(buf)
+        try:
+            while n > 0:
+                buf = source.read(min(n, 1 << 16))
+                if not buf:
+                    break
+                outputfile.write(buf)
+                n -= len(buf)
+        except (ConnectionError, TimeoutError):  # the browser dropped a range it no longer needs
+            pass
         return None
 
     def end_headers(self):
@@ -77,13 +81,21 @@ class _Handler(http.server.SimpleHTTPRequestHandler):
         super().end_headers()
 
 
+class _Server(http.server.ThreadingHTTPServer):
+    daemon_threads = True
+
+    def handle_error(self, request, client_address):
+        """A browser that drops a connection (seeking a video does) is not an error."""
+        if not isinstance(sys.exc_info()[1], (ConnectionError, TimeoutError)):
+            super().handle_error(request, client_address)
+
+
 class ReportServer:
     """A running loopback server: ``url`` of the folder, :meth:`close` to stop."""
 
     def __init__(self, folder: str | os.PathLike, port: int = 0):
         handler = functools.partial(_Handler, directory=str(Path(folder)))
-        self.httpd = http.server.ThreadingHTTPServer((LOOPBACK, int(port)), handler)
-        self.httpd.daemon_threads = True
+        self.httpd = _Server((LOOPBACK, int(port)), handler)
         self.url = f"http://{LOOPBACK}:{self.httpd.server_address[1]}/"
         self.thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
 

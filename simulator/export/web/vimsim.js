@@ -219,37 +219,54 @@ class SphereModel {
     let b = this.bins.get(key);
     if (b) return b;
     const st = this.st, R = headRotation(isub * st, ip * st, ir * st);
-    const nw = this.normals.map((n) => [R[0] * n[0] + R[1] * n[1] + R[2] * n[2],
-      R[3] * n[0] + R[4] * n[1] + R[5] * n[2], R[6] * n[0] + R[7] * n[1] + R[8] * n[2]]);
-    const axisLat = Math.asin(Math.max(-1, Math.min(1, R[5])));
-    const c = this.c, nLon = this.nLon;
+    const nw = new Float64Array(12);
+    for (let k = 0; k < 4; k++) {
+      const n = this.normals[k];
+      for (let i = 0; i < 3; i++) nw[3 * k + i] = R[3 * i] * n[0] + R[3 * i + 1] * n[1] + R[3 * i + 2] * n[2];
+    }
+    const axisLat = Math.asin(Math.max(-1, Math.min(1, R[5]))), axisLon = Math.atan2(R[2], R[8]);
+    const c = this.c, nLon = this.nLon, nLat = this.nLat;
     const i0 = Math.max(0, Math.floor((Math.PI / 2 - axisLat - this.radius) / c));
-    const i1 = Math.min(this.nLat, Math.floor((Math.PI / 2 - axisLat + this.radius) / c) + 1);
-    const lo = i0 * nLon, hi = i1 * nLon, w = new Float64Array(hi - lo);
-    let wmax = 0;
+    const i1 = Math.min(nLat, Math.floor((Math.PI / 2 - axisLat + this.radius) / c) + 1);
+    // Per row, only the columns within the viewport's radius (+ a cell) of its axis can weigh
+    // anything (every other cell lies outside a frustum plane: weight exactly 0, as in vimsim).
+    const cosR = Math.cos(Math.min(Math.PI, this.radius + c));
+    const sa0 = Math.sin(axisLat), ca0 = Math.cos(axisLat);
+    const cap = (i1 - i0) * nLon, cols = new Int32Array(cap), rows = new Int32Array(cap), w = new Float64Array(cap);
     const { centre, east, north, sa } = this;
-    for (let q = lo; q < hi; q++) {
-      let cov = 1;
-      for (let k = 0; k < 4 && cov > 0; k++) {
-        const n = nw[k];
-        const d = n[0] * centre[3 * q] + n[1] * centre[3 * q + 1] + n[2] * centre[3 * q + 2];
-        const hw = Math.abs(n[0] * east[3 * q] + n[1] * east[3 * q + 1] + n[2] * east[3 * q + 2])
-          + Math.abs(n[0] * north[3 * q] + n[1] * north[3 * q + 1] + n[2] * north[3 * q + 2]) + 1e-9;
-        cov *= Math.min(1, Math.max(0, 0.5 + 0.5 * d / hw));
+    let cnt = 0, wmax = 0;
+    for (let i = i0; i < i1; i++) {
+      const lat = Math.PI / 2 - (i + 0.5) * c, den = Math.cos(lat) * ca0;
+      const x = den > 1e-12 ? (cosR - Math.sin(lat) * sa0) / den : -2;
+      if (x > 1) continue;
+      let jA = 0, jB = nLon - 1;
+      if (x > -1) {
+        const half = Math.acos(x) + c;
+        jA = Math.floor((axisLon - half + Math.PI) / c); jB = Math.ceil((axisLon + half + Math.PI) / c);
+        if (jB - jA + 1 >= nLon) { jA = 0; jB = nLon - 1; }
       }
-      const x = cov * sa[q];
-      w[q - lo] = x;
-      if (x > wmax) wmax = x;
-    }
-    const rows = [], cols = [], ws = [];
-    let wsum = 0;
-    for (let q = lo; q < hi; q++) {
-      const x = w[q - lo];
-      if (x > wmax * 1e-7) {
-        rows.push(Math.floor(q / nLon) * nLon); cols.push(q % nLon); ws.push(x); wsum += x;
+      for (let jj = jA; jj <= jB; jj++) {
+        const j = jj < 0 ? jj + nLon : jj >= nLon ? jj - nLon : jj, q = i * nLon + j, q3 = 3 * q;
+        let cov = 1;
+        for (let k = 0; k < 12; k += 3) {
+          const d = nw[k] * centre[q3] + nw[k + 1] * centre[q3 + 1] + nw[k + 2] * centre[q3 + 2];
+          const hw = Math.abs(nw[k] * east[q3] + nw[k + 1] * east[q3 + 1] + nw[k + 2] * east[q3 + 2])
+            + Math.abs(nw[k] * north[q3] + nw[k + 1] * north[q3 + 1] + nw[k + 2] * north[q3 + 2]) + 1e-9;
+          const f = 0.5 + 0.5 * d / hw;
+          if (f <= 0) { cov = 0; break; }
+          if (f < 1) cov *= f;
+        }
+        if (cov === 0) continue;
+        const v = cov * sa[q];
+        rows[cnt] = i * nLon; cols[cnt] = j; w[cnt] = v; cnt++;
+        if (v > wmax) wmax = v;
       }
     }
-    b = { rows: Int32Array.from(rows), cols: Int32Array.from(cols), w: Float64Array.from(ws), wsum };
+    let m = 0, wsum = 0;
+    for (let q = 0; q < cnt; q++) {
+      if (w[q] > wmax * 1e-7) { rows[m] = rows[q]; cols[m] = cols[q]; w[m] = w[q]; wsum += w[q]; m++; }
+    }
+    b = { rows: rows.slice(0, m), cols: cols.slice(0, m), w: w.slice(0, m), wsum };
     if (this.bins.size >= this.cacheSize) this.bins.delete(this.bins.keys().next().value);
     this.bins.set(key, b);
     return b;

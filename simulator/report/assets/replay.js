@@ -115,12 +115,12 @@ async function main() {
   });
   setupXR(rt, mitigation, video, state);
 
-  /** Upload + draw + finish n times at the current frame: the replay's frame rate. */
-  function measure(count) {
+  /** Upload (optional) + draw + a 1-pixel read, n times at the current frame: frames per second. */
+  function measure(count, upload = true) {
     const px = new Uint8Array(4);
     const t0 = performance.now();
     for (let k = 0; k < count; k++) {
-      eye.upload(video);
+      if (upload) eye.upload(video);
       eye.render(state.yaw, state.pitch, state.roll, 0.5);
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     }

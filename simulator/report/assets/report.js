@@ -46,12 +46,20 @@
   const canvas = document.getElementById("timeline");
   if (!dataEl || !canvas) return;
   const data = JSON.parse(dataEl.textContent);
+  // Columns arrive as base64 float32 little-endian (frame, time_s, yaw/pitch/roll_deg, epof_dps, opacity).
+  const decode = (b64) => {
+    const s = atob(b64), u = new Uint8Array(s.length);
+    for (let i = 0; i < s.length; i++) u[i] = s.charCodeAt(i);
+    return new Float32Array(u.buffer);
+  };
+  for (const k of Object.keys(data.columns)) data.columns[k] = decode(data.columns[k]);
   const c = data.columns;
   const n = c.time_s.length;
   const ctx = canvas.getContext("2d");
   const pad = { l: 40, r: 40, t: 10, b: 22 };
   const t0 = n ? c.time_s[0] : 0, t1 = n ? c.time_s[n - 1] : 1;
-  const emax = Math.max(1e-6, ...c.epof_dps.filter(Number.isFinite));
+  let emax = 1e-6;
+  for (const v of c.epof_dps) if (Number.isFinite(v) && v > emax) emax = v;
   const W = canvas.width, H = canvas.height, pw = W - pad.l - pad.r, ph = H - pad.t - pad.b;
   const X = (t) => pad.l + ((t - t0) / Math.max(t1 - t0, 1e-9)) * pw;
   const listeners = [];
