@@ -105,7 +105,7 @@ def _browser_figures(out: Path, rng) -> dict:
     n = 2000
     poses = np.column_stack([rng.uniform(0, 160, n), rng.uniform(-180, 180, n),
                              rng.uniform(-90, 90, n), rng.uniform(-180, 180, n)])  # fmt: skip
-    ep = sorted((out / "epof").glob("*.csv"))[0]
+    ep = min((out / "epof").glob("*.csv"))
     rows = [ln.split(",") for ln in ep.read_text().splitlines() if ln and ln[0] != "#"][1:]
     path = [[float(r[1]), float(r[2]), float(r[3]), float(r[4])] for r in rows]
     srv = start_server(report)
@@ -130,7 +130,7 @@ def _browser_figures(out: Path, rng) -> dict:
 
         for mode in ("paper", "sphere"):
             shutil.rmtree(report / f"bench-{mode}", ignore_errors=True)
-    return {"epof": epof, "fps": fps, "renderer": renderer}
+    return {"epof": epof, "fps": fps, "renderer": renderer, "path_frames": len(path)}
 
 
 def _python_per_call(out: Path, rng) -> dict:
@@ -181,7 +181,7 @@ def main() -> int:
     for mode, goal in (("paper", 50), ("sphere", 100)):
         e = br["epof"][mode]
         print(f"  JS EPOF {mode:6s}      {e['path']:6.1f} us/call along a viewing's head path "
-              f"({len(rows)} frames, fresh cache); random poses {e['cold']:.1f} us first pass, "
+              f"({br['path_frames']} frames, fresh cache); random poses {e['cold']:.1f} us first pass, "
               f"{e['warm']:.1f} us repeated (goal <= {goal}); Python one query {py[mode]:.1f} us: "
               f"ratio JS/Python {e['warm'] / py[mode]:.2f}x")  # fmt: skip
     if br["fps"]:
