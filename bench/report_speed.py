@@ -174,7 +174,9 @@ def main() -> int:
     print(f"48 users x 4120 frames (sphere grid): plots and tables of the study {ref:.2f} s")
     print(f"  report build        {first.seconds:6.2f} s  ratio {first.seconds / ref:.2f}x  "
           f"(first build; browser copy: {json.dumps(first.copies)})")  # fmt: skip
-    print(f"  report rebuild      {again.seconds:6.2f} s  ratio {again.seconds / ref:.2f}x  (goal <= 1.5x)")
+    print(
+        f"  report rebuild      {again.seconds:6.2f} s  ratio {again.seconds / ref:.2f}x  (goal <= 1.5x)"
+    )
     rng = np.random.default_rng(1)
     py = _python_per_call(out, rng)
     br = _browser_figures(out, rng)
