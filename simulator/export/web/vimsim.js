@@ -197,20 +197,18 @@ class SphereModel {
     this.normals = [[Math.cos(lf), 0, Math.sin(lf)], [-Math.cos(lf), 0, Math.sin(lf)],
       [0, Math.cos(up), Math.sin(up)], [0, -Math.cos(up), Math.sin(up)]];
     this.radius = Math.atan(Math.hypot(Math.tan(lf), Math.tan(up))) + c;
-    const n = this.nLat * this.nLon;
-    this.centre = new Float64Array(3 * n); this.east = new Float64Array(3 * n);
-    this.north = new Float64Array(3 * n); this.sa = new Float64Array(n);
+    this.rowCl = new Float64Array(this.nLat); this.rowSl = new Float64Array(this.nLat);
+    this.rowHe = new Float64Array(this.nLat); this.rowSa = new Float64Array(this.nLat);
     for (let i = 0; i < this.nLat; i++) {
-      const lat = Math.PI / 2 - (i + 0.5) * c, cl = Math.cos(lat), sl = Math.sin(lat);
-      const he = 0.5 * c * Math.max(cl, Math.abs(Math.cos(lat - Math.sign(lat) * c / 2)));
-      const sa = c * (Math.sin(lat + c / 2) - Math.sin(lat - c / 2));
-      for (let j = 0; j < this.nLon; j++) {
-        const lon = -Math.PI + (j + 0.5) * c, co = Math.cos(lon), so = Math.sin(lon), q = i * this.nLon + j;
-        this.centre.set([cl * so, sl, cl * co], 3 * q);
-        this.east.set([co * he, 0, -so * he], 3 * q);
-        this.north.set([-sl * so * 0.5 * c, cl * 0.5 * c, -sl * co * 0.5 * c], 3 * q);
-        this.sa[q] = sa;
-      }
+      const lat = Math.PI / 2 - (i + 0.5) * c;
+      this.rowCl[i] = Math.cos(lat); this.rowSl[i] = Math.sin(lat);
+      this.rowHe[i] = 0.5 * c * Math.max(this.rowCl[i], Math.abs(Math.cos(lat - Math.sign(lat) * c / 2)));
+      this.rowSa[i] = c * (Math.sin(lat + c / 2) - Math.sin(lat - c / 2));
+    }
+    this.colSin = new Float64Array(this.nLon); this.colCos = new Float64Array(this.nLon);
+    for (let j = 0; j < this.nLon; j++) {
+      const lon = -Math.PI + (j + 0.5) * c;
+      this.colSin[j] = Math.sin(lon); this.colCos[j] = Math.cos(lon);
     }
     this.bins = new Map();
   }
@@ -232,12 +230,16 @@ class SphereModel {
     // anything (every other cell lies outside a frustum plane: weight exactly 0, as in vimsim).
     const cosR = Math.cos(Math.min(Math.PI, this.radius + c));
     const sa0 = Math.sin(axisLat), ca0 = Math.cos(axisLat);
-    const cap = (i1 - i0) * nLon, cols = new Int32Array(cap), rows = new Int32Array(cap), w = new Float64Array(cap);
-    const { centre, east, north, sa } = this;
+    if (!this.scratch) this.scratch = { rows: new Int32Array(nLat * nLon), cols: new Int32Array(nLat * nLon), w: new Float64Array(nLat * nLon) };
+    const { rows, cols, w } = this.scratch;
+    const { colSin, colCos, rowCl, rowSl, rowHe, rowSa } = this, hn = 0.5 * c;
+    // Per cell and plane (n = world normal): with so, co = sin, cos of the cell's longitude,
+    // cl, sl of its latitude, A = nx so + nz co: d = n . centre = cl A + ny sl, and the half
+    // extent hw = |he (nx co - nz so)| + |hn (ny cl - sl A)| + 1e-9 (simulator.sphere.cells).
     let cnt = 0, wmax = 0;
     for (let i = i0; i < i1; i++) {
-      const lat = Math.PI / 2 - (i + 0.5) * c, den = Math.cos(lat) * ca0;
-      const x = den > 1e-12 ? (cosR - Math.sin(lat) * sa0) / den : -2;
+      const cl = rowCl[i], sl = rowSl[i], he = rowHe[i], area = rowSa[i], den = cl * ca0;
+      const x = den > 1e-12 ? (cosR - sl * sa0) / den : -2;
       if (x > 1) continue;
       let jA = 0, jB = nLon - 1;
       if (x > -1) {
@@ -246,18 +248,18 @@ class SphereModel {
         if (jB - jA + 1 >= nLon) { jA = 0; jB = nLon - 1; }
       }
       for (let jj = jA; jj <= jB; jj++) {
-        const j = jj < 0 ? jj + nLon : jj >= nLon ? jj - nLon : jj, q = i * nLon + j, q3 = 3 * q;
+        const j = jj < 0 ? jj + nLon : jj >= nLon ? jj - nLon : jj, so = colSin[j], co = colCos[j];
         let cov = 1;
         for (let k = 0; k < 12; k += 3) {
-          const d = nw[k] * centre[q3] + nw[k + 1] * centre[q3 + 1] + nw[k + 2] * centre[q3 + 2];
-          const hw = Math.abs(nw[k] * east[q3] + nw[k + 1] * east[q3 + 1] + nw[k + 2] * east[q3 + 2])
-            + Math.abs(nw[k] * north[q3] + nw[k + 1] * north[q3 + 1] + nw[k + 2] * north[q3 + 2]) + 1e-9;
-          const f = 0.5 + 0.5 * d / hw;
+          const nx = nw[k], ny = nw[k + 1], nz = nw[k + 2], A = nx * so + nz * co;
+          const d = cl * A + ny * sl;
+          const hw = Math.abs(he * (nx * co - nz * so)) + Math.abs(hn * (ny * cl - sl * A)) + 1e-9;
+          const f = 0.5 + (0.5 * d) / hw;
           if (f <= 0) { cov = 0; break; }
           if (f < 1) cov *= f;
         }
         if (cov === 0) continue;
-        const v = cov * sa[q];
+        const v = cov * area;
         rows[cnt] = i * nLon; cols[cnt] = j; w[cnt] = v; cnt++;
         if (v > wmax) wmax = v;
       }
