@@ -22,7 +22,7 @@ EYE = (160, 120)
 
 @pytest.fixture(scope="module")
 def study(tmp_path_factory) -> Path:
-    """A tiny rendered study (one video, two viewings); returns OUTDIR (with report/)."""
+    """A tiny study (one video, two viewings; [render] settings for the replay, no render)."""
     from simulator.synth import SynthConfig, synthesize
 
     d = tmp_path_factory.mktemp("rep")
@@ -42,7 +42,6 @@ video = "clip"
 trace = "P0[12].csv"
 participant = "{{stem}}"
 condition = "GR"
-render = true
 [render]
 eye_size = "{EYE[0]}x{EYE[1]}"
 hfov = 100
