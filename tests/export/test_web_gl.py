@@ -159,3 +159,27 @@ def test_eye_renderer_matches_vimsim_renderer(browser, site, ctx):
         scores.append(_psnr(js, ref))
         print(f"\n{kind} at {pose}: EyeRenderer vs vimsim's renderer PSNR {scores[-1]:.1f} dB")
     assert min(scores) >= 30.0, scores
+
+
+_QUAT = """
+const [qs] = args;
+const m = await import('./vimsim.js');
+return qs.map((q) => m.headRotation(...m.anglesFromQuaternion({x: q[0], y: q[1], z: q[2], w: q[3]})));
+"""
+
+
+@pytest.mark.browser
+def test_angles_from_a_minus_z_forward_quaternion(browser, site):
+    """three.js / WebXR orientation -> vimsim angles: the view axis and the up vector equal the
+    quaternion's, mirrored in z (the video's centre at the frame's -z)."""
+    from scipy.spatial.transform import Rotation
+
+    _, srv = site
+    rng = np.random.default_rng(3)
+    q = Rotation.random(200, random_state=rng)
+    browser.get(srv.url + "example.html")
+    got = np.asarray(browser.run_async(_QUAT, q.as_quat().tolist())).reshape(-1, 3, 3)
+    fwd, up = q.apply([0.0, 0.0, -1.0]), q.apply([0.0, 1.0, 0.0])
+    flip = np.array([1.0, 1.0, -1.0])
+    assert np.allclose(got[:, :, 2], fwd * flip, atol=1e-9)
+    assert np.allclose(got[:, :, 1], up * flip, atol=1e-9)

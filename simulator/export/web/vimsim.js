@@ -65,6 +65,18 @@ export function headAngles(R) {
   return [yaw, pitch, roll];
 }
 
+/** vimsim yaw, pitch, roll (degrees) of a head orientation given as a quaternion {x, y, z, w}
+ * in a frame that looks along -z with +y up (three.js cameras, WebXR poses), the video's
+ * centre placed at that frame's -z: yaw = -Y, pitch = X, roll = -Z of its YXZ Euler angles
+ * (THREE.Euler order "YXZ"). */
+export function anglesFromQuaternion(q) {
+  const { x, y, z, w } = q;
+  const ey = Math.atan2(2 * (x * z + w * y), 1 - 2 * (x * x + y * y));
+  const ex = Math.asin(Math.max(-1, Math.min(1, 2 * (w * x - y * z))));
+  const ez = Math.atan2(2 * (x * y + w * z), 1 - 2 * (x * x + z * z));
+  return [-ey / D2R, ex / D2R, -ez / D2R];
+}
+
 function halfToFloat(h) {
   const s = h & 0x8000 ? -1 : 1, e = (h >> 10) & 0x1f, m = h & 0x3ff;
   if (e === 0) return s * m * 2 ** -24;

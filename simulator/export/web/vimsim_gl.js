@@ -42,6 +42,7 @@ uniform mat3 u_head;
 uniform vec2 u_tan_half;
 uniform vec2 u_tan_offset;
 uniform vec2 u_size;
+uniform vec2 u_origin;     // the viewport's lower-left corner in the framebuffer (pixels)
 out vec4 frag_color;
 const float PI = 3.14159265358979;
 vec4 cubic_weights(float t) {
@@ -85,7 +86,7 @@ uniform vec3 u_vignette_color;
 #endif
 void main() {
   // Image row 0 is the top: GL's row 0 is the bottom of the canvas.
-  vec2 ij = vec2(gl_FragCoord.x, u_size.y - gl_FragCoord.y);
+  vec2 ij = vec2(gl_FragCoord.x - u_origin.x, u_size.y - (gl_FragCoord.y - u_origin.y));
   vec2 uv = vec2((ij.x / u_size.x * 2.0 - 1.0) * u_tan_half.x + u_tan_offset.x,
                  (1.0 - ij.y / u_size.y * 2.0) * u_tan_half.y + u_tan_offset.y);
   vec3 d_head = normalize(vec3(uv, 1.0));
@@ -215,7 +216,7 @@ export class EyeRenderer {
     gl.linkProgram(p);
     if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error("vimsim_gl: " + gl.getProgramInfoLog(p));
     const u = (n) => gl.getUniformLocation(p, n);
-    const prog = { p, head: u("u_head"), opacity: u("u_opacity"), vignette: u("u_vignette") };
+    const prog = { p, head: u("u_head"), opacity: u("u_opacity"), vignette: u("u_vignette"), origin: u("u_origin") };
     gl.useProgram(p);
     gl.uniform2f(u("u_tan_half"), this.tanHalf[0], this.tanHalf[1]);
     gl.uniform2f(u("u_tan_offset"), this.tanOffset[0], this.tanOffset[1]);
@@ -248,8 +249,9 @@ export class EyeRenderer {
     if (this.mips) gl.generateMipmap(gl.TEXTURE_2D);
     this.texSize = [w, h];
   }
-  /** Draw the eye (or the overlay) for a head orientation (degrees) and opacity 0..1. */
-  render(yawDeg, pitchDeg, rollDeg, opacity) {
+  /** Draw the eye (or the overlay) for a head orientation (degrees) and opacity 0..1, into
+   * the framebuffer bound now at viewport [x, y] (default [0, 0]; e.g. an XR view's). */
+  render(yawDeg, pitchDeg, rollDeg, opacity, origin = [0, 0]) {
     const gl = this.gl;
     const prog = this._program(this.video && this.mips);
     gl.useProgram(prog.p);
@@ -266,7 +268,8 @@ export class EyeRenderer {
       gl.activeTexture(gl.TEXTURE1);
       gl.bindTexture(gl.TEXTURE_2D, this.grainTex);
     }
-    gl.viewport(0, 0, this.width, this.height);
+    gl.uniform2f(prog.origin, origin[0], origin[1]);
+    gl.viewport(origin[0], origin[1], this.width, this.height);
     if (!this.video) {
       gl.enable(gl.BLEND);
       gl.blendFunc(gl.ONE, gl.ONE_MINUS_SRC_ALPHA);

@@ -6,7 +6,7 @@
 // then computed live from the grid (vimsim.js). WebXR where the browser offers it.
 // window.vimsimReplay: seek(t) (resolves when that frame is drawn), state, measure(n).
 
-import { loadExport } from "./vimsim.js";
+import { anglesFromQuaternion, loadExport } from "./vimsim.js";
 import { EyeRenderer } from "./vimsim_gl.js";
 
 const $ = (id) => document.getElementById(id);
@@ -156,14 +156,10 @@ async function setupXR(rt, mitigation, video, state) {
           e = new EyeRenderer(xc, { width: vp.width, height: vp.height, frustum, grains: rt.grains, mitigation });
           eyes.set(view.eye, e);
         }
-        const q = view.transform.orientation; // XR: -z forward; vimsim: +z forward
-        const yaw = (Math.atan2(-2 * (q.x * q.z + q.w * q.y), 1 - 2 * (q.x * q.x + q.y * q.y)) * 180) / Math.PI;
-        const pitch = (Math.asin(Math.max(-1, Math.min(1, 2 * (q.w * q.x - q.y * q.z)))) * 180) / Math.PI;
-        const roll = (-Math.atan2(2 * (q.x * q.y + q.w * q.z), 1 - 2 * (q.x * q.x + q.z * q.z)) * 180) / Math.PI;
-        const t = video.currentTime, ep = rt.epof(t, -yaw, pitch, roll);
-        xc.viewport(vp.x, vp.y, vp.width, vp.height);
+        const [yaw, pitch, roll] = anglesFromQuaternion(view.transform.orientation); // XR: -z forward
+        const t = video.currentTime, ep = rt.epof(t, yaw, pitch, roll);
         e.upload(video);
-        e.render(-yaw, pitch, roll, rt.opacity(ep));
+        e.render(yaw, pitch, roll, rt.opacity(ep), [vp.x, vp.y]);
         state.epof = ep;
       }
     };
