@@ -136,12 +136,28 @@ def test_replay_matches_vimsim_frames(browser, study, tmp_path):
               const s = await window.vimsimReplay.seek(t);
               out.push({png: window.vimsimReplay.canvas.toDataURL('image/png'), opacity: s.opacity});
             }
-            return out;""",
+            // Free look at the last time: the live EPOF at the recorded pose, then after a drag.
+            const st = window.vimsimReplay.state, rec = st.epof, pose = [st.yaw, st.pitch];
+            document.getElementById('freelook').click();
+            const live = st.epof;
+            const cv = window.vimsimReplay.canvas, r = cv.getBoundingClientRect();
+            const ev = (type, x) => new PointerEvent(type, {clientX: r.left + x, clientY: r.top + 10, bubbles: true});
+            cv.dispatchEvent(ev('pointerdown', 10));
+            window.dispatchEvent(ev('pointermove', 60));
+            window.dispatchEvent(ev('pointerup', 60));
+            return {frames: out, rec, live, pose, moved: [st.yaw, st.pitch], after: st.epof,
+                    label: document.getElementById('mode').textContent};""",
             times,
         )
         renderer = browser.gl_renderer()
     finally:
         srv.close()
+    free = got
+    got = got["frames"]
+    # Free look: the runtime's live EPOF at the recorded pose is the recorded EPOF (vimsim epof).
+    assert abs(free["live"] - free["rec"]) <= 1e-5 * abs(free["rec"]), free
+    assert free["moved"][0] != free["pose"][0] and free["after"] != free["live"]
+    assert "live" in free["label"]
     files = sorted(frames_dir.glob("*.png"))
     assert len(files) == len(times) == len(got), (files, meta)
     scores = []
