@@ -28,7 +28,9 @@ from __future__ import annotations
 import dataclasses
 import importlib.resources
 import json
+import math
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +42,7 @@ from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.epof.overlaps import viewport_overlaps
 from simulator.export.unity import DATA_FILE, _pack, export_unity
 from simulator.media.gridfile import GridFile, load_grid
+from simulator.media.lazyfield import field_chunks, take_rows
 from simulator.mitigation.grf import GrainField, GrfConfig, OpacityRule, grain_count
 from simulator.sphere.windows import WindowGrid
 
@@ -104,44 +107,42 @@ def overlap_bytes(grid: GridFile, hfov_deg: float, vfov_deg: float) -> tuple[byt
     return b"VIMSIMOV" + bytes(8) + raw, info
 
 
-def _stored_field(g: GridFile):
-    """The grid file's field as stored (float16 from ``vimsim preprocess``), or None."""
-    if not g.path or g.field_dps is None or np.dtype(g.field_dps.dtype) != np.float16:
-        return None
-    with np.load(g.path, allow_pickle=False) as z:
-        if "field_dps" not in z.files:
-            return None
-        f = z["field_dps"]
-    return f if f.dtype == np.float16 and f.ndim == 3 else None
+def _float16_field(g: GridFile) -> bool:
+    """The grid holds a float16 field (``vimsim preprocess``'s default): stored values, exact."""
+    return g.field_dps is not None and np.dtype(g.field_dps.dtype) == np.float16
 
 
-def epof_blob(g: GridFile, **kw) -> tuple[bytes, dict]:
-    """``vimsim_epof.bin`` (bytes) and its header, as :func:`export_unity` writes them.
+def write_epof(g: GridFile, target: Path, **kw) -> dict:
+    """Write ``vimsim_epof.bin`` to ``target`` as :func:`export_unity` writes it; returns
+    its header. ``kw``: export_unity's options.
 
-    A float16 field exported as float16 (sphere mode, ``dtype`` auto or float16: stored
-    values, exact) is packed straight from the grid file: the header is made by
-    :func:`export_unity` from the first two rows of the field and given the whole field's
-    shape (the Unity path converts the whole field to float32 and back to measure a rounding
-    that is zero here: most of the cost of a long video's report)."""
-    sphere = kw.get("method", "auto") == "sphere" or (
-        kw.get("method", "auto") == "auto" and g.field_dps is not None
-    )
-    raw = _stored_field(g) if sphere and kw.get("dtype", "auto") in ("auto", "float16") else None
+    A float16 field exported as float16 (sphere mode, ``dtype`` auto or float16) is streamed
+    from the grid file chunk by chunk (memory flat in the video's length): the header is
+    made by :func:`export_unity` from the field's first two rows and given the whole field's
+    shape (the Unity path holds the whole field as float32, twice, to measure a rounding that
+    is zero here)."""
+    method = kw.get("method", "auto")
+    sphere = method == "sphere" or (method == "auto" and g.field_dps is not None)
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as tmp:
-        if raw is None:
+        if not (sphere and _float16_field(g) and kw.get("dtype", "auto") in ("auto", "float16")):
             res = export_unity(g, tmp, **kw)
-            return (Path(tmp) / DATA_FILE).read_bytes(), res.header
-        head = dataclasses.replace(g, field_dps=np.asarray(raw[:2], np.float32).astype(np.float16))
-        res = export_unity(head, tmp, **kw)
+            shutil.copyfile(Path(tmp) / DATA_FILE, target)
+            return res.header
+        first = np.asarray(take_rows(g.field_dps, [0, min(1, g.n_frames - 1)]), np.float16)
+        res = export_unity(dataclasses.replace(g, field_dps=first), tmp, **kw)
     header = res.header
     if header["mode"] != "sphere" or header["data"]["dtype"] != "float16":
         raise AssertionError("export: the float16 field's header is not a float16 sphere export")
-    data = np.ascontiguousarray(raw, "<f2")
-    header["n_frames"] = int(data.shape[0])
-    header["data"]["shape"] = [int(x) for x in data.shape]
-    header["data"]["bytes"] = int(data.nbytes)
-    header["grid_file"]["name"] = os.path.basename(g.path)
-    return _pack(header, data), header
+    shape = [int(x) for x in g.field_dps.shape]
+    header["n_frames"] = shape[0]
+    header["data"]["shape"] = shape
+    header["data"]["bytes"] = 2 * math.prod(shape)
+    with open(target, "wb") as f:
+        f.write(_pack(header, np.zeros(0, "<f2")))  # the prefix and header only
+        f.writelines(
+            np.ascontiguousarray(block, "<f2").tobytes() for _, block in field_chunks(g.field_dps)
+        )
+    return header
 
 
 def export_web(
@@ -170,27 +171,40 @@ def export_web(
     folder = OutputFolder(out_dir, names, "export --format web")
     inputs = [g.path] if g.path else []
     folder.check(inputs)
-    blob, header = epof_blob(g, method=method, dtype=dtype, hfov_deg=hfov_deg,
-                             vfov_deg=vfov_deg, rule=rule)  # fmt: skip
-    contents: dict[str, bytes] = {DATA_FILE: blob, GRAINS: grain_bytes(grf)}
-    manifest = {"format": "vimsim-web", "version": 1, "data": DATA_FILE, "mode": header["mode"],
-                "grains": grain_info(grf)}  # fmt: skip
-    if header["mode"] == "paper":
-        vp = header["viewport"]
-        contents[OVERLAPS], manifest["overlaps"] = overlap_bytes(g, vp["hfov_deg"], vp["vfov_deg"])
-        names.insert(2, OVERLAPS)
-        folder = OutputFolder(out_dir, names, "export --format web")
-        folder.check(inputs)
-    contents[MANIFEST] = (json_text(manifest) + "\n").encode()
-    for n in JS_FILES:
-        contents[n] = js_source(n)
-    if example:
-        contents[EXAMPLE] = js_source(EXAMPLE)
-    out = folder.prepare(inputs)
-    for name in names:
-        with atomic_output(out / name) as t:
-            Path(t).write_bytes(contents[name])
-    folder.complete()
+    kw = {
+        "method": method,
+        "dtype": dtype,
+        "hfov_deg": hfov_deg,
+        "vfov_deg": vfov_deg,
+        "rule": rule,
+    }
+    with tempfile.TemporaryDirectory(prefix="vimsim-web-") as work:
+        data_tmp = Path(work) / DATA_FILE  # bad options fail here, before anything is written
+        header = write_epof(g, data_tmp, **kw)
+        contents: dict[str, bytes] = {GRAINS: grain_bytes(grf)}
+        manifest = {"format": "vimsim-web", "version": 1, "data": DATA_FILE,
+                    "mode": header["mode"], "grains": grain_info(grf)}  # fmt: skip
+        if header["mode"] == "paper":
+            vp = header["viewport"]
+            contents[OVERLAPS], manifest["overlaps"] = overlap_bytes(
+                g, vp["hfov_deg"], vp["vfov_deg"]
+            )
+            names.insert(2, OVERLAPS)
+            folder = OutputFolder(out_dir, names, "export --format web")
+            folder.check(inputs)
+        contents[MANIFEST] = (json_text(manifest) + "\n").encode()
+        for n in JS_FILES:
+            contents[n] = js_source(n)
+        if example:
+            contents[EXAMPLE] = js_source(EXAMPLE)
+        out = folder.prepare(inputs)
+        for name in names:
+            with atomic_output(out / name) as t:
+                if name == DATA_FILE:
+                    shutil.move(data_tmp, t)
+                else:
+                    Path(t).write_bytes(contents[name])
+        folder.complete()
     return WebExport(out, tuple(out / n for n in names), header["mode"], manifest, header)
 
 

@@ -142,3 +142,15 @@ def test_export_unknown_format(grid_path, tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert "--format" in err[-1] and "invalid choice" in err[-1]
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("method", ["auto", "paper"])
+def test_web_data_file_is_the_unity_export(grid_path, tmp_path, method):
+    """vimsim_epof.bin of the web export (streamed from the grid for a float16 field) is
+    byte for byte the Unity export's."""
+    from simulator.export.unity import export_unity
+
+    export_unity(grid_path, tmp_path / "u", method=method)
+    export_web(grid_path, tmp_path / "w", method=method)
+    a = (tmp_path / "u" / "vimsim_epof.bin").read_bytes()
+    assert a == (tmp_path / "w" / "vimsim_epof.bin").read_bytes()

@@ -84,12 +84,15 @@ function halfToFloat(h) {
   return s * (1 + m / 1024) * 2 ** (e - 15);
 }
 
-/** Parse vimsim_epof.bin: {header, data (Float32Array, C order)}. Throws Error naming the problem. */
+let HALF = null; // binary16 -> float32 for all 65536 bit patterns
+
+/** Parse vimsim_epof.bin: {header, values (Uint16Array of binary16 or Float32Array, C order,
+ * views of the buffer: no copy)}. Throws Error naming the problem. */
 export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
   const b = new Uint8Array(buffer);
   if (b.length < 16 || String.fromCharCode(...b.subarray(0, 8)) !== MAGIC)
     throw new Error(`${name}: not a vimsim export (no VIMSIMEP signature)`);
-  const dv = new DataView(buffer instanceof ArrayBuffer ? buffer : b.buffer, b.byteOffset);
+  const dv = new DataView(buffer);
   const version = dv.getUint32(8, true), hlen = dv.getUint32(12, true);
   if (16 + hlen > b.length) throw new Error(`${name}: truncated header`);
   const header = JSON.parse(new TextDecoder().decode(b.subarray(16, 16 + hlen)));
@@ -98,15 +101,17 @@ export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
   const d = header.data, n = d.shape.reduce((x, y) => x * y, 1), off = d.offset;
   const size = d.dtype === "float16" ? 2 : 4;
   if (off + n * size !== b.length) throw new Error(`${name}: truncated or padded data`);
-  const data = new Float32Array(n);
-  if (d.dtype === "float16") {
-    const lut = new Float32Array(65536);
-    for (let i = 0; i < 65536; i++) lut[i] = halfToFloat(i);
-    for (let i = 0; i < n; i++) data[i] = lut[dv.getUint16(off + 2 * i, true)];
-  } else {
-    for (let i = 0; i < n; i++) data[i] = dv.getFloat32(off + 4 * i, true);
+  // Little-endian typed arrays (every browser's platform); offset is a multiple of 16.
+  const values = d.dtype === "float16" ? new Uint16Array(buffer, off, n) : new Float32Array(buffer, off, n);
+  return { header, values };
+}
+
+function halfTable() {
+  if (!HALF) {
+    HALF = new Float32Array(65536);
+    for (let i = 0; i < 65536; i++) HALF[i] = halfToFloat(i);
   }
-  return { header, data };
+  return HALF;
 }
 
 // ------------------------------------------------------------------ opacity
@@ -439,10 +444,11 @@ export class GrainLayout {
 /** EPOF (deg/s) and GRF opacity of a viewport at a video time, from a vimsim export. */
 export class VimsimEpof {
   constructor(manifest, epofBin, overlapsBin = null, grainsBin = null) {
-    const { header, data } = parseEpofBinary(epofBin);
+    const { header, values } = parseEpofBinary(epofBin);
     this.manifest = manifest;
     this.header = header;
-    this.data = data;
+    this.values = values; // the file's data, undecoded: memory = the file's size
+    this.half = values instanceof Uint16Array ? halfTable() : null;
     this.mode = header.mode;
     this.fps = header.fps;
     this.startFrame = header.start_frame;
@@ -452,6 +458,8 @@ export class VimsimEpof {
     const o = header.opacity;
     this.lowDps = o.low_dps; this.highDps = o.high_dps;
     this.rowLength = header.data.shape[1] * header.data.shape[2];
+    this.rowBuf = new Float32Array(this.rowLength); // the frame last queried, as float32
+    this.rowOf = -1;
     if (this.mode === "paper") {
       if (!overlapsBin) throw new Error("paper mode needs vimsim_overlaps.bin");
       const ov = manifest.overlaps, n = ov.shape.reduce((x, y) => x * y, 1);
@@ -477,7 +485,17 @@ export class VimsimEpof {
   epofAtFrame(frame, yawDeg, pitchDeg, rollDeg = 0) {
     const row = Math.min(Math.max(frame - this.startFrame, 0), this.frameCount - 1);
     if (![yawDeg, pitchDeg, rollDeg].every(Number.isFinite)) throw new Error("orientation must be finite degrees");
-    return this.model.query(this.data, row * this.rowLength, yawDeg, pitchDeg, rollDeg);
+    return this.model.query(this.frameRow(row), 0, yawDeg, pitchDeg, rollDeg);
+  }
+  /** Row `row` of the data (one frame), decoded to float32 (kept until another is asked). */
+  frameRow(row) {
+    if (row !== this.rowOf) {
+      const L = this.rowLength, o = row * L, v = this.values, h = this.half, out = this.rowBuf;
+      if (h) for (let i = 0; i < L; i++) out[i] = h[v[o + i]];
+      else out.set(v.subarray(o, o + L));
+      this.rowOf = row;
+    }
+    return this.rowBuf;
   }
   /** GRF opacity 0..1 of an EPOF (deg/s): linear between the exported thresholds, clamped. */
   opacity(epofDps) {
