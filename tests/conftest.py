@@ -70,7 +70,7 @@ def ctx():
 def browser():
     """One headless Chromium session for every ``browser`` test (tests/browser_support.py);
     a missing browser fails the test with the reason (make test installs it)."""
-    from tests.browser_support import Browser, available
+    from browser_support import Browser, available  # tests/ is on sys.path (conftest's folder)
 
     why = available()
     if why:

@@ -285,6 +285,7 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
     old_copies = {}
     with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
         old_copies = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["copies"]
+    _remove_stale(out)
     tmp = out / f".report-tmp-{os.getpid()}"
     shutil.rmtree(tmp, ignore_errors=True)
     try:
@@ -324,6 +325,18 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
         shutil.rmtree(tmp, ignore_errors=True)
     return ReportResult(folder, folder / "index.html", len(written), time.perf_counter() - t0,
                         copies)  # fmt: skip
+
+
+def _remove_stale(out: Path) -> None:
+    """Temporary folders of builds that were killed (their process is gone)."""
+    for p in [*out.glob(".report-tmp-*"), *out.glob(".report-old-*")]:
+        try:
+            pid = int(p.name.rsplit("-", 1)[1])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(p, ignore_errors=True)
+        except (ValueError, PermissionError, OSError):
+            continue
 
 
 def _swap(folder: Path, tmp: Path, listed: set[str]) -> None:

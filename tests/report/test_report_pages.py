@@ -66,3 +66,14 @@ def test_serve_prints_a_loopback_address_and_stops_on_sigint(tmp_path):
         rc = p.wait(timeout=20)
     assert rc == 130, (rc, p.stderr.read())
     assert os.path.isfile(out / "report" / "index.html")
+
+
+def test_stale_build_folders_of_dead_processes_are_removed(tmp_path):
+    from simulator.report.build import _remove_stale
+
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    (tmp_path / f".report-tmp-{dead.pid}").mkdir()
+    (tmp_path / f".report-old-{os.getpid()}").mkdir()  # a live process's: kept
+    _remove_stale(tmp_path)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f".report-old-{os.getpid()}"]
