@@ -183,3 +183,42 @@ def test_angles_from_a_minus_z_forward_quaternion(browser, site):
     flip = np.array([1.0, 1.0, -1.0])
     assert np.allclose(got[:, :, 2], fwd * flip, atol=1e-9)
     assert np.allclose(got[:, :, 1], up * flip, atol=1e-9)
+
+
+_OVERLAY = """
+const [opts, pose, grey] = args;
+const m = await import('./vimsim.js');
+const gl_ = await import('./vimsim_gl.js');
+const canvas = document.createElement('canvas');
+canvas.width = opts.width; canvas.height = opts.height;
+const gl = canvas.getContext('webgl2', {preserveDrawingBuffer: true, antialias: false});
+const grains = m.GrainLayout.fromSeed({grain_deg: 1.5, density: 0.5, inner_deg: 18, outer_deg: 40, seed: 0});
+const eye = new gl_.EyeRenderer(gl, {...opts, grains, video: false});
+gl.clearColor(grey, grey, grey, 1); gl.clear(gl.COLOR_BUFFER_BIT);
+eye.render(pose[0], pose[1], pose[2], pose[3]);
+return canvas.toDataURL('image/png');
+"""
+
+
+@pytest.mark.browser
+@pytest.mark.gl
+@pytest.mark.parametrize("kind", ["grf", "grf+vignette"])
+def test_overlay_over_a_scene_matches_the_renderer(browser, site, ctx, kind):
+    """The overlay alone (video: false, premultiplied, blended over what is drawn) over a
+    uniform grey scene = vimsim's renderer on a uniform grey panorama."""
+    from simulator.mitigation.kinds import Mitigation
+    from simulator.render.eye import RenderConfig, render_view
+
+    _, srv = site
+    grey, pose, opacity = 120, (40.0, 10.0, -20.0), 0.8
+    img = np.full((256, 512, 3), grey, np.uint8)
+    cfg = RenderConfig(eye_size=EYE, hfov_deg=100, vfov_deg=80, grf=GrfConfig(),
+                       mitigation=Mitigation(kind))  # fmt: skip
+    ref = render_view(ctx, img, *pose, config=cfg, opacity=opacity)
+    opts = {"width": EYE[0], "height": EYE[1], "hfovDeg": 100, "vfovDeg": 80,
+            "mitigation": {"kind": kind, "apertureMinDeg": 60, "featherDeg": 10, "color": [0, 0, 0]}}  # fmt: skip
+    browser.get(srv.url + "example.html")
+    url = browser.run_async(_OVERLAY, opts, [*pose, opacity], grey / 255)
+    js = np.asarray(Image.open(io.BytesIO(base64.b64decode(url.split(",", 1)[1]))).convert("RGB"))
+    assert (ref < grey - 30).mean() > 0.05  # grains (and the vignette) are drawn
+    assert _psnr(js, ref) >= 40.0, _psnr(js, ref)
