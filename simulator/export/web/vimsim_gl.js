@@ -235,19 +235,27 @@ export class EyeRenderer {
   upload(source, width, height) {
     const gl = this.gl;
     const w = width || source.videoWidth || source.width, h = height || source.videoHeight || source.height;
-    if (!this.tex) this.tex = gl.createTexture();
     gl.activeTexture(gl.TEXTURE0);
-    gl.bindTexture(gl.TEXTURE_2D, this.tex);
-    this.mips = this.pixelAngle > (0.95 * Math.PI) / h;
     gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
     gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, w, h, 0, gl.RGBA, gl.UNSIGNED_BYTE, source);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.REPEAT);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, this.mips ? gl.LINEAR_MIPMAP_LINEAR : gl.LINEAR);
+    if (!this.tex || this.texSize[0] !== w || this.texSize[1] !== h) {
+      // Allocated once per size (immutable storage, with mip levels when some pixel minifies);
+      // each frame then only replaces level 0.
+      if (this.tex) gl.deleteTexture(this.tex);
+      this.tex = gl.createTexture();
+      gl.bindTexture(gl.TEXTURE_2D, this.tex);
+      this.mips = this.pixelAngle > (0.95 * Math.PI) / h;
+      const levels = this.mips ? Math.floor(Math.log2(Math.max(w, h))) + 1 : 1;
+      gl.texStorage2D(gl.TEXTURE_2D, levels, gl.RGBA8, w, h);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.REPEAT);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
+      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, this.mips ? gl.LINEAR_MIPMAP_LINEAR : gl.LINEAR);
+      this.texSize = [w, h];
+    }
+    gl.bindTexture(gl.TEXTURE_2D, this.tex);
+    gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, source);
     if (this.mips) gl.generateMipmap(gl.TEXTURE_2D);
-    this.texSize = [w, h];
   }
   /** Draw the eye (or the overlay) for a head orientation (degrees) and opacity 0..1, into
    * the framebuffer bound now at viewport [x, y] (default [0, 0]; e.g. an XR view's). */
