@@ -21,8 +21,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "and options), every viewing's EPOF and opacity computed, the viewings with render = "
         "true rendered. Writes OUTDIR/viewings.csv, OUTDIR/epof/<viewing>.csv, "
         "OUTDIR/render/<viewing>/, OUTDIR/videos/<video>/ (plots, provocative moments), "
-        "OUTDIR/analysis/ (with questionnaires) and, last, OUTDIR/study.json. Exit status 3 "
-        "when some viewings failed (their status says why), 2 for a bad manifest.",
+        "OUTDIR/analysis/ (with questionnaires), OUTDIR/study.json and then the HTML report "
+        "OUTDIR/report/ (docs/report.md). Exit status 3 when some viewings failed (their "
+        "status says why) or the analysis or the report could not be made, 2 for a bad manifest.",
     )
     p.add_argument("manifest", metavar="STUDY.toml", help="the study manifest")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
@@ -103,12 +104,18 @@ def run(args: argparse.Namespace) -> int:
         for bar in bars:
             bar.close()
     c = s["counts"]
+    report_error = None
     if not args.no_report:
+        from simulator.core.errors import InputError
         from simulator.report.build import build_report
 
-        rep = build_report(args.output)
-        print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables {s['timings_s']['outputs']:.1f} s) "
-              f"-> {rep.index}", file=sys.stderr)  # fmt: skip
+        try:
+            rep = build_report(args.output)
+            print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables "
+                  f"{s['timings_s']['outputs']:.1f} s) -> {rep.index}", file=sys.stderr)  # fmt: skip
+        except InputError as e:  # the study is complete; only its report is missing
+            report_error = str(e)
+            print(f"vimsim study: report not made: {e}", file=sys.stderr)
     for f in s["failures"]:
         print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)
     an = s["outputs"].get("analysis")
@@ -121,4 +128,4 @@ def run(args: argparse.Namespace) -> int:
         f"vimsim study: {c['ok']} of {c['viewings']} viewings ok ({c['resumed']} unchanged), "
         f"{c['failed']} failed, {s['timings_s']['total']:.1f} s -> {args.output}/study.json"
     )
-    return 3 if c["failed"] or (an and an.get("error")) else 0
+    return 3 if c["failed"] or (an and an.get("error")) or report_error else 0
