@@ -7,6 +7,7 @@ import base64
 import io
 import json
 import shutil
+import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,14 @@ def study(tmp_path_factory) -> Path:
     from simulator.synth import SynthConfig, synthesize
 
     d = tmp_path_factory.mktemp("rep")
-    synthesize(SynthConfig("coaster", seconds=1.5, fps=10, size=(256, 128)), d / "clip.mp4")
+    synthesize(SynthConfig("coaster", seconds=1.5, fps=10, size=(256, 128)), d / "full.mp4")
+    # Anamorphic, as many 360 videos (1920x1080 shown 2:1): stored 192x128, SAR 4:3 (the
+    # browser's videoWidth is the display width, 256).
+    import imageio_ffmpeg
+
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-i", str(d / "full.mp4"),
+                    "-vf", "scale=192:128,setsar=4/3", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                    str(d / "clip.mp4")], check=True)  # fmt: skip
     for i in range(2):
         save_headpath_csv(d / f"P0{i + 1}.csv", synth("look-around", 2.0, rate_hz=30, seed=i))
     (d / "study.toml").write_text(f"""

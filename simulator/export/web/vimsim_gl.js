@@ -175,7 +175,7 @@ export class EyeRenderer {
     this.grainLod = false;
     if (this.grains) this.grainTex = this._grainMask();
     this.programs = {};
-    this.tex = null; this.texSize = null; this.mips = false;
+    this.tex = null; this.mips = false;
   }
   /** The grain coverage texture, sized as vimsim's renderer sizes it (texels no larger than
    * the eye's largest pixel, 512 .. 8192 wide), mipmapped when some pixel outside the
@@ -231,30 +231,28 @@ export class EyeRenderer {
     return prog;
   }
   /** Upload the current equirect frame (a video element, image, canvas or ImageBitmap;
-   * texel row 0 = the image's top row), mipmapped only if some pixel minifies. */
-  upload(source, width, height) {
+   * texel row 0 = the image's top row) at the size the browser decodes it (a video's
+   * videoWidth may be its display width: anamorphic frames are uploaded as stored or
+   * scaled by the browser; the equirect mapping does not depend on the texture's size),
+   * mipmapped only if some pixel minifies. `height`: the frame's height if not the source's. */
+  upload(source, height) {
     const gl = this.gl;
-    const w = width || source.videoWidth || source.width, h = height || source.videoHeight || source.height;
+    const h = height || source.videoHeight || source.naturalHeight || source.height;
     gl.activeTexture(gl.TEXTURE0);
-    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
-    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
-    if (!this.tex || this.texSize[0] !== w || this.texSize[1] !== h) {
-      // Allocated once per size (immutable storage, with mip levels when some pixel minifies);
-      // each frame then only replaces level 0.
-      if (this.tex) gl.deleteTexture(this.tex);
+    if (!this.tex) {
       this.tex = gl.createTexture();
       gl.bindTexture(gl.TEXTURE_2D, this.tex);
-      this.mips = this.pixelAngle > (0.95 * Math.PI) / h;
-      const levels = this.mips ? Math.floor(Math.log2(Math.max(w, h))) + 1 : 1;
-      gl.texStorage2D(gl.TEXTURE_2D, levels, gl.RGBA8, w, h);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.REPEAT);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
       gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, gl.LINEAR);
-      gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, this.mips ? gl.LINEAR_MIPMAP_LINEAR : gl.LINEAR);
-      this.texSize = [w, h];
     }
     gl.bindTexture(gl.TEXTURE_2D, this.tex);
-    gl.texSubImage2D(gl.TEXTURE_2D, 0, 0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, source);
+    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);
+    gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+    this.mips = this.pixelAngle > (0.95 * Math.PI) / h;
+    gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, this.mips ? gl.LINEAR_MIPMAP_LINEAR : gl.LINEAR);
+    // The source's own size (no width/height: WebGL2's sized form takes a sub-rectangle).
+    gl.texImage2D(gl.TEXTURE_2D, 0, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, source);
     if (this.mips) gl.generateMipmap(gl.TEXTURE_2D);
   }
   /** Draw the eye (or the overlay) for a head orientation (degrees) and opacity 0..1, into
