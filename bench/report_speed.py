@@ -122,7 +122,21 @@ def _browser_figures(out: Path, rng) -> dict:
             if (!window.vimsimReplay) return null;
             await window.vimsimReplay.seek(30.0);
             window.vimsimReplay.measure(3);
-            return [window.vimsimReplay.measure(30), window.vimsimReplay.measure(30, false)];""")
+            return [window.vimsimReplay.measure(30), window.vimsimReplay.measure(30, false),
+                    window.vimsimReplay.canvas.toDataURL('image/png')];""")
+        console, _ = b.drain()
+        if fps:
+            import base64
+            import io
+
+            from PIL import Image
+
+            png = Image.open(io.BytesIO(base64.b64decode(fps.pop().split(",", 1)[1])))
+            level = float(np.asarray(png.convert("L")).mean())
+            if level < 5 or console:  # a black view or a WebGL complaint: not a measurement
+                raise SystemExit(
+                    f"replay drew nothing (mean level {level:.1f}) or complained: {console}"
+                )
         renderer = b.gl_renderer()
     finally:
         b.close()
