@@ -107,8 +107,10 @@ class Site:
                     cells.append(f'<a href="{viewing_href(v)}">{_e(v)}</a>')
                 elif c == "video":
                     cells.append(f'<a href="{video_href(v)}">{_e(v)}</a>')
+                elif c == "trace":
+                    cells.append(f'<span title="{_e(v)}">{_e(Path(v).name)}</span>')
                 else:
-                    cells.append(_e(v))
+                    cells.append(_short_number(v))
             body.append(cells)
         filters = "".join(
             f'<label>{_e(c)} <select data-filter="{_e(c)}"><option value="">all</option>'
@@ -210,6 +212,16 @@ EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></s
             parts += ["<h2>Report (formula used, exclusions)</h2>",
                       f"<pre>{_e((folder / 'report.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip
         return _page("Analysis", "\n".join(parts) or "<p>No analysis files.</p>")
+
+
+def _short_number(v: str) -> str:
+    """A long decimal shown with 4 significant digits (the full value as its title)."""
+    if "." in v and len(v) > 8:
+        try:
+            return f'<span title="{_e(v)}">{float(v):.4g}</span>'
+        except ValueError:
+            pass
+    return _e(v)
 
 
 def _copy_text(c: dict | None) -> str:
