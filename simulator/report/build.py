@@ -148,7 +148,7 @@ def browser_copy(
             try:
                 st = oc.add_stream_from_template(ic.streams.video[0])
                 for pkt in ic.demux(ic.streams.video[0]):
-                    if pkt.dts is None:
+                    if pkt.size == 0:  # the demuxer's end-of-stream flush packet
                         continue
                     pkt.stream = st
                     oc.mux(pkt)

@@ -77,3 +77,45 @@ def test_stale_build_folders_of_dead_processes_are_removed(tmp_path):
     (tmp_path / f".report-old-{os.getpid()}").mkdir()  # a live process's: kept
     _remove_stale(tmp_path)
     assert sorted(p.name for p in tmp_path.iterdir()) == [f".report-old-{os.getpid()}"]
+
+
+def _clip(path: Path, size: str, codec: list[str], frames: int = 3) -> Path:
+    import imageio_ffmpeg
+
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    f"testsrc2=size={size}:rate=10", "-frames:v", str(frames), *codec, str(path)],
+                   check=True)  # fmt: skip
+    return path
+
+
+def test_browser_copy_kinds(tmp_path):
+    """The browser copy: a copy of an H.264 MP4, a stream copy of H.264 in another container,
+    a re-encoding otherwise (another codec; one eye of a stereo video; larger than 4096)."""
+    import av
+
+    from simulator.report.build import MAX_WEB_SIDE, browser_copy
+
+    def info(p):
+        with av.open(str(p)) as c:
+            s = c.streams.video[0]
+            return s.codec_context.name, s.codec_context.pix_fmt, s.width, s.height, s.frames
+
+    h264 = ["-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    cases = [
+        (_clip(tmp_path / "a.mp4", "128x64", h264), "mono", "copy of the source", (128, 64)),
+        (_clip(tmp_path / "b.mkv", "128x64", h264), "mono", "stream copy", (128, 64)),
+        (_clip(tmp_path / "c.avi", "128x64", ["-c:v", "mpeg4"]), "mono", "re-encoded", (128, 64)),
+        (_clip(tmp_path / "d.mp4", "128x128", h264), "top-bottom", "re-encoded", (128, 64)),
+        (
+            _clip(tmp_path / "e.mp4", "4200x2100", h264, 1),
+            "mono",
+            "re-encoded",
+            (MAX_WEB_SIDE, 2048),
+        ),
+    ]
+    for src, layout, how, size in cases:
+        dst = tmp_path / f"{src.stem}.web.mp4"
+        r = browser_copy(src, dst, layout=layout)
+        assert how in r["how"] and (r["width"], r["height"]) == size, (src.name, r)
+        codec, pix, w, h, _ = info(dst)
+        assert (codec, pix, w, h) == ("h264", "yuv420p", *size), (src.name, codec, pix, w, h)
