@@ -199,3 +199,24 @@ def test_report_bad_input(study, tmp_path, capsys):
     (full / "report" / "media" / "notes.txt").unlink()
     assert main(["report", str(full)]) == 0
     assert (full / "report" / "index.html").is_file()
+
+
+def test_report_without_grid_or_source(study, tmp_path):
+    """A study copied elsewhere (its grid cache and source video gone): the pages are made,
+    the replay says why it cannot play, and a failed viewing has a page saying so."""
+    moved = tmp_path / "moved"
+    shutil.copytree(study, moved, ignore=shutil.ignore_patterns("report"))
+    s = json.loads((moved / "study.json").read_text())
+    s["videos"]["clip"].update(grid=str(tmp_path / "gone.npz"), path=str(tmp_path / "gone.mp4"))
+    s["failures"] = [{"viewing": "clip-P02-GR", "status": "bad trace"}]
+    (moved / "study.json").write_text(json.dumps(s))
+    lines = (moved / "viewings.csv").read_text().splitlines()
+    lines[-1] = lines[-1].rsplit(",", 1)[0] + ",bad trace"
+    (moved / "viewings.csv").write_text("\n".join(lines) + "\n")
+    assert main(["report", str(moved)]) == 0
+    rep = moved / "report"
+    assert not (rep / "data").exists() and not (rep / "media" / "clip.mp4").exists()
+    page = (rep / "viewing-clip-P01-GR.html").read_text()
+    assert '"media":null' in page and '"export":null' in page
+    assert "No EPOF for this viewing" in (rep / "viewing-clip-P02-GR.html").read_text()
+    assert "bad trace" in (rep / "index.html").read_text()
