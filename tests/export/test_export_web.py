@@ -160,3 +160,14 @@ def test_web_data_file_is_the_unity_export(grid_path, tmp_path, method):
     export_web(grid_path, tmp_path / "w", method=method)
     a = (tmp_path / "u" / "vimsim_epof.bin").read_bytes()
     assert a == (tmp_path / "w" / "vimsim_epof.bin").read_bytes()
+
+
+@pytest.mark.browser
+def test_example_from_the_file_system_says_to_serve_it(browser, grid_path, tmp_path):
+    export_web(grid_path, tmp_path / "w", method="paper")
+    browser.get((tmp_path / "w" / "example.html").as_uri())
+    note = browser.driver.find_element("id", "note").text
+    console, urls = browser.drain()
+    assert "Serve this folder over http" in note
+    assert not [c for c in console if c["level"] == "SEVERE"], console
+    assert all(u.startswith(("file://", "data:")) for u in urls), urls
