@@ -12,7 +12,8 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 # Headless OpenGL: libEGL (glvnd) + Mesa's llvmpipe software rasteriser;
 # Mono's C# compiler for the Unity export (simulator/export/unity/*.cs); glslang and
-# spirv-cross for its overlay shader (VimsimOverlay.hlsl).
+# spirv-cross for its overlay shader (VimsimOverlay.hlsl); headless Chromium for the
+# browser tests (report, web export).
 sysdeps:
 	@if ! dpkg -s libegl1 libgl1-mesa-dri >/dev/null 2>&1; then \
 		echo "installing Debian packages libegl1 libgl1-mesa-dri (headless EGL, llvmpipe)"; \
@@ -32,6 +33,13 @@ sysdeps:
 		echo "installing Debian packages glslang-tools spirv-cross (the Unity overlay shader check)"; \
 		$(SUDO) apt-get update -qq && \
 		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends glslang-tools spirv-cross; \
+	fi
+	@# Headless Chromium and its WebDriver: the browser tests of the study report and the web
+	@# runtime (tests marked browser; WebGL2 through SwiftShader, no GPU, nothing downloaded).
+	@if ! dpkg -s chromium chromium-driver >/dev/null 2>&1; then \
+		echo "installing Debian packages chromium chromium-driver (headless browser tests)"; \
+		$(SUDO) apt-get update -qq && \
+		DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq --no-install-recommends chromium chromium-driver; \
 	fi
 
 $(STAMP): pyproject.toml

@@ -72,7 +72,12 @@ def ctx():
 
 #: Fixtures that decide a marker: a test using one gets it (with the explicit marks on
 #: tests that make a context or read the data some other way, e.g. through the CLI).
-FIXTURE_MARKERS = {"ctx": "gl", "real_dir": "real_data", "shared_dir": "real_data"}
+FIXTURE_MARKERS = {
+    "ctx": "gl",
+    "real_dir": "real_data",
+    "shared_dir": "real_data",
+    "browser": "browser",
+}
 
 
 def pytest_collection_modifyitems(config, items):
@@ -82,3 +87,19 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         for fixture in set(getattr(item, "fixturenames", ())) & FIXTURE_MARKERS.keys():
             item.add_marker(FIXTURE_MARKERS[fixture])
+
+
+@pytest.fixture(scope="session")
+def browser():
+    """One headless Chromium session for every ``browser`` test (tests/browser_support.py);
+    a missing browser fails the test with the reason (make test installs it)."""
+    from browser_support import Browser, available  # tests/ is on sys.path (conftest's folder)
+
+    why = available()
+    if why:
+        pytest.fail(f"browser test cannot run: {why}")
+    b = Browser()
+    try:
+        yield b
+    finally:
+        b.close()

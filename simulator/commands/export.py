@@ -1,5 +1,5 @@
-"""``vimsim export GRID.npz -o DIR [--format unity]``: the POF matrix or the sphere-mode field
-for a game engine, with its runtime (Unity: ``VimsimEpof.cs``)."""
+"""``vimsim export GRID.npz -o DIR [--format unity|web]``: the POF matrix or the sphere-mode field
+for a game engine or a web player, with its runtime (Unity: ``VimsimEpof.cs``; web: ``vimsim.js``)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from simulator.commands._types import (
 
 __all__ = ["register", "run"]
 
-_FORMATS = ("unity",)
+_FORMATS = ("unity", "web")
 _METHODS = ("auto", "paper", "sphere")  # = simulator.export.unity.METHODS (light import)
 _DTYPES = ("auto", "float16", "float32")  # = simulator.export.unity.DTYPES
 #: = simulator.core.choices.MITIGATIONS; local-grf is refused with its reason (the overlay
@@ -43,7 +43,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("grid", metavar="GRID.npz", help="grid file from vimsim preprocess")
     p.add_argument("-o", "--output", required=True, metavar="DIR", help="output folder (created)")
     p.add_argument(
-        "--format", choices=_FORMATS, default="unity", help="engine runtime (default unity)"
+        "--format",
+        choices=_FORMATS,
+        default="unity",
+        help="unity (default): vimsim_epof.bin + the C# runtime; web: the same data, the overlap "
+        "table and grain layout with an ES-module runtime (vimsim.js, vimsim_gl.js) and "
+        "example.html (docs/web.md)",
     )
     p.add_argument(
         "--method",
@@ -122,6 +127,8 @@ def run(args: argparse.Namespace) -> int:
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = rule_from_args(args)
+    if args.format == "web":
+        return _run_web(args, hfov, vfov, rule)
     grf, mitigation = _overlay_from_args(args)
     res = export_unity(
         args.grid,
@@ -146,5 +153,20 @@ def run(args: argparse.Namespace) -> int:
         f"{h['opacity']['high_dps']:.3g} deg/s ({h['opacity']['name']} rule: ease-in "
         f"{h['opacity']['ease_in_s']:g} s, ease-out {h['opacity']['ease_out_s']:g} s, smoothing "
         f"{h['opacity']['smoothing_s']:g} s)"
+    )
+    return 0
+
+
+def _run_web(args: argparse.Namespace, hfov, vfov, rule) -> int:
+    from simulator.export.web import export_web
+
+    res = export_web(args.grid, args.output, method=args.method, dtype=args.dtype,
+                     hfov_deg=hfov, vfov_deg=vfov, rule=rule)  # fmt: skip
+    h = res.header
+    print(
+        f"wrote {res.out_dir}: {', '.join(f.name for f in res.files)} ({res.mode} mode; viewport "
+        f"{h['viewport']['hfov_deg']:g} x {h['viewport']['vfov_deg']:g} deg; opacity 0 at "
+        f"{h['opacity']['low_dps']:.3g}, 1 at {h['opacity']['high_dps']:.3g} deg/s); open "
+        "example.html over http (docs/web.md)"
     )
     return 0

@@ -21,8 +21,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "and options), every viewing's EPOF and opacity computed, the viewings with render = "
         "true rendered. Writes OUTDIR/viewings.csv, OUTDIR/epof/<viewing>.csv, "
         "OUTDIR/render/<viewing>/, OUTDIR/videos/<video>/ (plots, provocative moments), "
-        "OUTDIR/analysis/ (with questionnaires) and, last, OUTDIR/study.json. Exit status 3 "
-        "when some viewings failed (their status says why), 2 for a bad manifest.",
+        "OUTDIR/analysis/ (with questionnaires), OUTDIR/study.json and then the HTML report "
+        "OUTDIR/report/ (docs/report.md). Exit status 3 when some viewings failed (their "
+        "status says why) or the analysis or the report could not be made, 2 for a bad manifest.",
     )
     p.add_argument("manifest", metavar="STUDY.toml", help="the study manifest")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
@@ -61,6 +62,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="check everything the run would (globs, users, that every trace covers its "
         "video, render ranges, cache hits and misses) and print the plan and the count of "
         "tasks; writes nothing (exit 2 when a viewing would fail)",
+    )
+    p.add_argument(
+        "--no-report",
+        action="store_true",
+        help="do not write OUTDIR/report/ (the HTML report; vimsim report OUTDIR makes it later)",
     )
     p.set_defaults(func=run)
 
@@ -115,6 +121,12 @@ def run(args: argparse.Namespace) -> int:
     manifest = load_manifest(args.manifest)
     if args.dry_run:
         return _dry_run(args, manifest)
+    if not args.no_report:  # a report folder holding others' files: refused before any work
+        from pathlib import Path
+
+        from simulator.report.build import check_report_folder
+
+        check_report_folder(Path(args.output) / "report")
     from tqdm import tqdm  # not for a dry run: importing it costs 0.2 s
     bars: list = []  # made on the first report: nothing is drawn before the work starts
     stream = None if args.no_progress else progress_stream()  # a terminal only
@@ -145,6 +157,18 @@ def run(args: argparse.Namespace) -> int:
         for bar in bars:
             bar.close()
     c = s["counts"]
+    report_error = None
+    if not args.no_report:
+        from simulator.core.errors import InputError
+        from simulator.report.build import build_report
+
+        try:
+            rep = build_report(args.output)
+            print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables "
+                  f"{s['timings_s']['outputs']:.1f} s) -> {rep.index}", file=sys.stderr)  # fmt: skip
+        except InputError as e:  # the study is complete; only its report is missing
+            report_error = str(e)
+            print(f"vimsim study: report not made: {e}", file=sys.stderr)
     _print_warnings([(w["viewing"], w["warning"]) for w in s["warnings"]])
     for f in s["failures"]:
         print(f"vimsim study: failed {f['viewing']}: {f['status']}", file=sys.stderr)
@@ -161,4 +185,4 @@ def run(args: argparse.Namespace) -> int:
         f"(of {c['viewings']} viewings; {c['resumed']} unchanged), "
         f"{s['timings_s']['total']:.1f} s -> {args.output}/study.json"
     )
-    return 3 if c["failed"] or (an and an.get("error")) else 0
+    return 3 if c["failed"] or (an and an.get("error")) or report_error else 0

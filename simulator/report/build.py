@@ -1,0 +1,354 @@
+"""Build ``OUTDIR/report/``: read a complete study, write the pages, the browser copies of the videos and the web runtime's data.
+
+The folder is self-contained (no request outside it; nothing from a network): ``index.html``
+(summary), ``viewings.html`` (table), ``video-<id>.html``, ``viewing-<id>.html`` (timeline and
+replay), ``analysis.html``; ``assets/`` (CSS, the pages' scripts, the web runtime
+``vimsim.js`` and ``vimsim_gl.js``), ``data/<video>/`` (:func:`simulator.export.web.export_web`
+of the video's grid with the study's opacity rule and grains), ``media/`` (the study's plots
+and thumbnails, and ``<video>.mp4``, the browser copy: :func:`browser_copy`). It is built in a
+temporary folder beside it and swapped in when complete; a report folder holding a file that
+no earlier report listed in its ``.vimsim-report.json`` is refused (nothing written).
+"""
+
+from __future__ import annotations
+
+import base64
+import contextlib
+import csv
+import importlib.resources
+import json
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, json_text
+from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
+from simulator.export.web import JS_FILES, export_web, js_source
+from simulator.media.video import VideoWriter, iter_frames, probe
+from simulator.mitigation.grf import GrfConfig
+from simulator.report import pages
+from simulator.study.tasks import _rule as study_rule
+
+__all__ = [
+    "MANIFEST",
+    "MAX_WEB_SIDE",
+    "ReportResult",
+    "browser_copy",
+    "build_report",
+    "check_report_folder",
+    "check_study",
+]
+
+MANIFEST = ".vimsim-report.json"
+ASSETS = ("report.css", "report.js", "replay.js")
+#: Largest side (pixels) of a browser copy: WebGL2 guarantees 2048, every current desktop
+#: browser 4096 or more; a larger or non-H.264 source is re-encoded to fit.
+MAX_WEB_SIDE = 4096
+
+
+@dataclass(frozen=True)
+class ReportResult:
+    """What :func:`build_report` wrote: the folder, its index page, file count, seconds."""
+
+    folder: Path
+    index: Path
+    files: int
+    seconds: float
+    copies: dict
+
+
+def check_study(outdir: str | os.PathLike) -> tuple[Path, dict]:
+    """``(OUTDIR, study.json)`` of a complete study; InputError naming what is missing."""
+    out = Path(outdir)
+    if not out.is_dir():
+        raise InputError(f"{out}: no such study folder (run vimsim study -o {out} first)")
+    sj = out / "study.json"
+    try:
+        s = json.loads(sj.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(
+            f"{out}: not a complete vimsim study (no study.json: the study did not finish)"
+        ) from None
+    except (OSError, ValueError) as e:
+        raise InputError(f"{sj}: unreadable study summary ({e.__class__.__name__})") from None
+    if not isinstance(s, dict) or s.get("format") != "vimsim-study":
+        raise InputError(f"{sj}: not a vimsim study summary")
+    for need in ("viewings.csv", "epof"):
+        if not (out / need).exists():
+            raise InputError(f"{out}: not a complete vimsim study ({need} is missing)")
+    return out, s
+
+
+def check_report_folder(folder: Path) -> set[str]:
+    """Files an earlier report wrote into ``folder``; InputError for any other file."""
+    if not folder.exists():
+        return set()
+    if not folder.is_dir():
+        raise InputError(f"{folder}: exists and is not a folder; refusing to replace it")
+    try:
+        listed = set(json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        listed = set()
+    for p in sorted(folder.rglob("*")):
+        rel = p.relative_to(folder).as_posix()
+        if p.is_dir() and not p.is_symlink() or rel == MANIFEST:
+            continue
+        if rel not in listed:
+            raise InputError(
+                f"{p}: was not written by vimsim report; refusing to replace the report "
+                "folder (move the file away)"
+            )
+    return listed
+
+
+def _viewings(out: Path) -> list[dict]:
+    """viewings.csv rows (columns read by name; extra columns kept)."""
+    with open(out / "viewings.csv", newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    for need in ("viewing", "video", "status"):
+        if rows and need not in rows[0]:
+            raise InputError(f"{out / 'viewings.csv'}: no {need!r} column")
+    return rows
+
+
+def _source_key(path: Path) -> str:
+    st = path.stat()
+    return f"{st.st_size}:{st.st_mtime_ns}"
+
+
+def browser_copy(
+    src: str | os.PathLike, dst: Path, layout: str = "mono", eye: str = "left"
+) -> dict:
+    """The study's browser copy of a video: H.264 yuv420p MP4 (no audio), the source's
+    (left-eye) equirect at its own resolution when no side exceeds :data:`MAX_WEB_SIDE`
+    (stream-copied when the source already is H.264 yuv420p mono), else scaled to fit."""
+    import av
+
+    info = probe(src)
+    with av.open(str(src)) as c:
+        s = c.streams.video[0]
+        codec, pix = s.codec_context.name, s.codec_context.pix_fmt
+        mp4 = "mp4" in c.format.name.split(",") and len(c.streams.video) == 1
+    w, h = info.width, info.height
+    playable = (
+        layout == "mono" and codec == "h264" and pix == "yuv420p" and max(w, h) <= MAX_WEB_SIDE
+    )
+    if playable and mp4:
+        with atomic_output(dst) as tmp:
+            shutil.copyfile(src, tmp)
+        return {"how": "copy of the source (H.264 MP4)", "width": w, "height": h}
+    if playable:
+        with atomic_output(dst) as tmp, av.open(str(src)) as ic:
+            oc = av.open(str(tmp), "w", format="mp4", options={"movflags": "+faststart"})
+            try:
+                st = oc.add_stream_from_template(ic.streams.video[0])
+                for pkt in ic.demux(ic.streams.video[0]):
+                    if pkt.size == 0:  # the demuxer's end-of-stream flush packet
+                        continue
+                    pkt.stream = st
+                    oc.mux(pkt)
+            finally:
+                oc.close()
+        return {"how": "stream copy into MP4", "width": w, "height": h}
+    import cv2
+
+    frames = iter_frames(src, layout=layout, eye=eye)
+    first = next(frames)
+    fh, fw = first.shape[:2]
+    k = min(1.0, MAX_WEB_SIDE / max(fw, fh))
+    size = (max(2, round(fw * k / 2) * 2), max(2, round(fh * k / 2) * 2))
+    with VideoWriter(dst, info.fps, size, crf=18) as vw:
+        for f in _chain(first, frames):
+            vw.write(f if (f.shape[1], f.shape[0]) == size else
+                     cv2.resize(f, size, interpolation=cv2.INTER_AREA))  # fmt: skip
+    return {"how": "re-encoded (H.264 crf 18)", "width": size[0], "height": size[1]}
+
+
+def _layout(grid: Path) -> tuple[str, str]:
+    """The stereo layout and eye the grid was made from (mono, left when unknown)."""
+    try:
+        with np.load(grid, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+        return str(meta.get("layout") or "mono"), str(meta.get("eye") or "left")
+    except (OSError, ValueError, KeyError):
+        return "mono", "left"
+
+
+def _chain(first, rest):
+    yield first
+    yield from rest
+
+
+def _asset(name: str) -> bytes:
+    return importlib.resources.files("simulator.report").joinpath("assets", name).read_bytes()
+
+
+def _grf(settings: dict) -> GrfConfig:
+    g = settings.get("grf") or {}
+    return GrfConfig(**{k: g[k] for k in ("grain_deg", "density", "inner_deg", "outer_deg",
+                                          "seed") if k in g})  # fmt: skip
+
+
+def _video_data(
+    out: Path, tmp: Path, s: dict, vid: str, vinfo: dict, old: Path, copies: dict
+) -> dict:
+    """data/<vid>/ (the web export), media/<vid>.mp4 (the browser copy, reused from the old
+    report when the source is unchanged), media/<vid>/ (the study's plots, thumbnails)."""
+    epof = s["settings"]["epof"]
+    grid = Path(vinfo.get("grid", ""))
+    res = {"id": vid, "export": None, "copy": None, "plots": [], "moments": []}
+    if grid.is_file():
+        key = json.dumps([_source_key(grid), epof, s["settings"].get("grf")], sort_keys=True)
+        prev = (copies.get(vid) or {}).get("export")
+        if prev and prev.get("key") == key and (old / "data" / vid).is_dir():
+            shutil.copytree(old / "data" / vid, tmp / "data" / vid, copy_function=os.link)
+            res["export"] = prev
+        else:
+            e = export_web(grid, tmp / "data" / vid, method=epof.get("method", "auto"),
+                           hfov_deg=epof.get("hfov_deg"), vfov_deg=epof.get("vfov_deg"),
+                           rule=study_rule(epof), grf=_grf(s["settings"]), example=False)  # fmt: skip
+            res["export"] = {"mode": e.mode, "fps": e.header["fps"], "key": key,
+                             "viewport": e.header["viewport"]}  # fmt: skip
+    src = Path(vinfo.get("path", ""))
+    (tmp / "media" / vid).mkdir(parents=True, exist_ok=True)
+    if src.is_file():
+        key = _source_key(src)
+        prev = (copies.get(vid) or {}).get("copy")
+        target = tmp / "media" / f"{vid}.mp4"
+        if prev and prev.get("key") == key and (old / "media" / f"{vid}.mp4").is_file():
+            os.link(old / "media" / f"{vid}.mp4", target)
+            res["copy"] = prev
+        else:
+            layout, eye = _layout(grid)
+            res["copy"] = {**browser_copy(src, target, layout=layout, eye=eye), "key": key}
+    vdir = out / "videos" / vid
+    for name in ("epof_viewers.png", "provocative.png"):
+        if (vdir / name).is_file():
+            shutil.copyfile(vdir / name, tmp / "media" / vid / name)
+            res["plots"].append(name)
+    if (vdir / "moments.csv").is_file():
+        with open(vdir / "moments.csv", newline="", encoding="utf-8") as f:
+            for m in csv.DictReader(f):
+                th = m.get("thumbnail", "")
+                if th and (vdir / th).is_file():
+                    shutil.copyfile(vdir / th, tmp / "media" / vid / th)
+                res["moments"].append(m)
+    return res
+
+
+def _viewing_data(out: Path, row: dict, s: dict) -> dict | None:
+    """Timeline and replay data of one viewing (its EPOF CSV), or None when it has none."""
+    p = out / "epof" / f"{row['viewing']}.csv"
+    if row.get("status") != "ok" or not p.is_file():
+        return None
+    cols = {c: base64.b64encode(np.ascontiguousarray(v, "<f4").tobytes()).decode()
+            for c, v in _epof_columns(p).items()}  # fmt: skip
+    rs = s["settings"].get("render") or {}
+    return {"viewing": row["viewing"], "video": row["video"], "columns": cols,
+            "render": rs, "grf": s["settings"].get("grf"),
+            "rendered": (out / "render" / row["viewing"] / "summary.json").is_file()}  # fmt: skip
+
+
+def _epof_columns(path: Path) -> dict:
+    """The EPOF CSV's columns (:data:`EPOF_COLUMNS`), float64: a fast read of the file the
+    study wrote; anything unusual goes through :func:`read_epof_csv` (the checked reader)."""
+    try:
+        lines = [ln for ln in path.read_text(encoding="utf-8").splitlines() if ln and ln[0] != "#"]
+        head = lines[0].split(",")
+        idx = [head.index(c) for c in EPOF_COLUMNS]
+        a = np.array(",".join(lines[1:]).split(","), np.float64).reshape(len(lines) - 1, len(head))
+        return {c: a[:, i] for c, i in zip(EPOF_COLUMNS, idx)}
+    except (ValueError, IndexError):
+        r = read_epof_csv(path)
+        return {c: np.asarray(getattr(r, c), np.float64) for c in EPOF_COLUMNS}
+
+
+def _write(folder: Path, rel: str, data: bytes | str, written: list[str]) -> None:
+    p = folder / rel
+    p.parent.mkdir(parents=True, exist_ok=True)
+    p.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
+    written.append(rel)
+
+
+def build_report(outdir: str | os.PathLike) -> ReportResult:
+    """Write ``OUTDIR/report/`` for a complete study (see the module docstring)."""
+    t0 = time.perf_counter()
+    out, s = check_study(outdir)
+    folder = out / "report"
+    listed = check_report_folder(folder)
+    rows = _viewings(out)
+    old_copies = {}
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+        old_copies = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["copies"]
+    _remove_stale(out)
+    tmp = out / f".report-tmp-{os.getpid()}"
+    shutil.rmtree(tmp, ignore_errors=True)
+    try:
+        tmp.mkdir()
+        written: list[str] = []
+        for n in ASSETS:
+            _write(tmp, f"assets/{n}", _asset(n), written)
+        for n in JS_FILES:
+            _write(tmp, f"assets/{n}", js_source(n), written)
+        videos = {}
+        for vid, vinfo in (s.get("videos") or {}).items():
+            videos[vid] = _video_data(out, tmp, s, vid, vinfo, folder, old_copies)
+        site = pages.Site(s, rows, videos)
+        for rel, html in site.static_pages():
+            _write(tmp, rel, html, written)
+        for row in rows:
+            data = _viewing_data(out, row, s)
+            _write(tmp, pages.viewing_href(row["viewing"]), site.viewing_page(row, data), written)
+        _write(tmp, "analysis.html", site.analysis_page(out / "analysis"), written)
+        if (out / "analysis" / "boxplots.png").is_file():
+            _write(
+                tmp,
+                "media/analysis/boxplots.png",
+                (out / "analysis" / "boxplots.png").read_bytes(),
+                written,
+            )
+        for p in sorted(tmp.rglob("*")):
+            rel = p.relative_to(tmp).as_posix()
+            if p.is_file() and rel not in written:
+                written.append(rel)
+        copies = {v: {"copy": d["copy"], "export": d["export"]} for v, d in videos.items()}
+        (tmp / MANIFEST).write_text(
+            json_text({"command": "report", "files": sorted(written), "copies": copies}) + "\n"
+        )
+        _swap(folder, tmp, listed)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return ReportResult(folder, folder / "index.html", len(written), time.perf_counter() - t0,
+                        copies)  # fmt: skip
+
+
+def _remove_stale(out: Path) -> None:
+    """Temporary folders of builds that were killed (their process is gone)."""
+    for p in [*out.glob(".report-tmp-*"), *out.glob(".report-old-*")]:
+        try:
+            pid = int(p.name.rsplit("-", 1)[1])
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            shutil.rmtree(p, ignore_errors=True)
+        except (ValueError, PermissionError, OSError):
+            continue
+
+
+def _swap(folder: Path, tmp: Path, listed: set[str]) -> None:
+    """Replace the old report (only files it listed) by the new one."""
+    if folder.exists():
+        old = folder.with_name(f".report-old-{os.getpid()}")
+        folder.rename(old)
+        try:
+            tmp.rename(folder)
+        except OSError:
+            old.rename(folder)
+            raise
+        shutil.rmtree(old, ignore_errors=True)
+    else:
+        tmp.rename(folder)
