@@ -289,8 +289,12 @@ def render_frames(
             ) from None
 
     idx = [frame_index(t, info.fps) for t in times]
-    decoded = decode_frames(video, idx)
-    decoded_right = decode_frames(source.right, idx) if source.right is not None else None
+    if source.still:  # an image made a clip: every frame is the image
+        decoded = dict.fromkeys(idx, source.read_stored("left"))
+        decoded_right = dict.fromkeys(idx, source.read_stored("right")) if source.right else None
+    else:
+        decoded = decode_frames(video, idx)
+        decoded_right = decode_frames(source.right, idx) if source.right is not None else None
     renderer = EyeRenderer(ctx, config)
     rows = []
     bar = Counter(progress, len(times))
