@@ -285,7 +285,9 @@ def render_viewing(
     # visible flow after the EPOF columns.
     write_epof_csv(
         out / "epof.csv",
-        EpofResult(frames, times, yaw, pitch, roll, epof_dps, op, thresholds),
+        EpofResult(
+            frames, times, yaw, pitch, roll, epof_dps, op, thresholds, coverage=plan.coverage
+        ),
         extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
         settings=settings,
     )
@@ -303,6 +305,7 @@ def render_viewing(
         "layout": source.layout,
         "right": source.right,
         "projection": source.projection,
+        "coverage_mean": _mean(plan.coverage) if plan.coverage is not None else None,
         "eyes": eyes,
         "audio": audio_info,
         "fps": info.fps,

@@ -49,6 +49,8 @@ class ViewingPlan:
         stereo source, else ``left``
     epof_frustum : the frustum the EPOF was computed over (that eye's; the right eye's
         mirrors the left eye's left and right half-angles)
+    coverage : ndarray, shape (N,), covered share of the viewport per frame (a grid of a
+        projection not covering the sphere), else None
     """
 
     info: MediaInfo
@@ -65,6 +67,7 @@ class ViewingPlan:
     source: Source | None = None
     epof_eye: str = "left"
     epof_frustum: Frustum | None = None
+    coverage: np.ndarray | None = None
 
     @property
     def right(self) -> str | None:
@@ -165,6 +168,7 @@ def plan_viewing(
     epof_dps = np.full(nf, np.nan)
     thresholds = (float("nan"), float("nan"))
     op_auto = None
+    coverage = None
     epof_method = None
     stereo = source.stereo
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
@@ -193,6 +197,7 @@ def plan_viewing(
         epof_dps = res.epof_dps[rows].astype(float)
         op_auto = res.opacity[rows].astype(float)
         thresholds = tuple(float(v) for v in res.thresholds_dps)
+        coverage = None if res.coverage is None else res.coverage[rows].astype(float)
     if not drawn:
         op = np.zeros(nf)
     elif op_csv is not None:
@@ -217,4 +222,5 @@ def plan_viewing(
         source,
         epof_eye,
         epof_frustum,
+        coverage,
     )
