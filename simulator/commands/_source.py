@@ -45,14 +45,20 @@ def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> 
         )
 
 
-def source_from_args(args: argparse.Namespace, path, *, layout=None, eye="left", right=None):
-    """The checked Source of ``path`` with the options of :func:`add_source_arguments`."""
+def source_from_args(
+    args: argparse.Namespace, path, *, layout=None, eye="left", right=None, layout_default="mono"
+):
+    """The checked Source of ``path`` with the options of :func:`add_source_arguments`
+    (``layout`` None: the file's metadata, else ``layout_default``); its notes (an option
+    overriding the file's spherical metadata) go to stderr, one line each."""
+    import sys
+
     from simulator.media.source import Source
 
     still = None
     if hasattr(args, "seconds") and hasattr(args, "fps"):
         still = (args.seconds, args.fps)
-    return Source.open(
+    src = Source.open(
         path,
         layout=layout,
         projection=args.projection,
@@ -60,4 +66,8 @@ def source_from_args(args: argparse.Namespace, path, *, layout=None, eye="left",
         eye=eye,
         lens_fov_deg=args.lens_fov,
         still=still,
+        layout_default=layout_default,
     )
+    for note in src.notes:
+        print(f"vimsim: note: {note}", file=sys.stderr)
+    return src

@@ -60,7 +60,9 @@ def run(args: argparse.Namespace) -> int:
     from simulator.viewing.frames import render_frames
 
     hp, grid, config, note, layout, rule = view_from_args(args, "frames")
-    source = source_from_args(args, args.video_file, layout=layout, right=args.right)
+    source = source_from_args(
+        args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
+    )
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,

@@ -67,8 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left)",
+        default=None,
+        help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left) "
+        "(default: the file's spherical metadata, else mono)",
     )
     p.add_argument(
         "--eye",

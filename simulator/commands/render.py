@@ -327,7 +327,9 @@ def run(args: argparse.Namespace) -> int:
     from simulator.viewing.job import render_viewing
 
     hp, grid, config, note, layout, rule = view_from_args(args)
-    source = source_from_args(args, args.video_file, layout=layout, right=args.right)
+    source = source_from_args(
+        args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
+    )
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,

@@ -71,8 +71,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left (default mono)",
+        default=None,
+        help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left "
+        "(default: the file's spherical metadata, else mono)",
     )
     p.add_argument(
         "--eye", choices=EYES, default="left", help="eye of a stereo source (default left)"

@@ -21,6 +21,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import EYES, LAYOUTS, PROJECTIONS, STILL_FPS, STILL_SECONDS
 from simulator.core.errors import InputError
+from simulator.media.spherical import read_spherical
 from simulator.media.video import MediaInfo, PixelFormat, iter_frames, probe, read_frame
 from simulator.sphere.geometry import split_eye
 from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, EquirectConverter, converter
@@ -51,6 +52,8 @@ class Source:
     still : an image made a clip (``Source.open(still=(seconds, fps))``): ``info`` then says
         ``n_frames = round(seconds * fps)`` frames at ``fps``, every one the image
     info : the file's :class:`simulator.media.video.MediaInfo` (of ``path``)
+    metadata : its spherical metadata (:func:`simulator.media.spherical.read_spherical`)
+    notes : one line each for the user (an option overriding the metadata)
     """
 
     path: str
@@ -61,27 +64,42 @@ class Source:
     lens_fov_deg: float | None = None
     still: bool = False
     info: MediaInfo | None = field(default=None, compare=False, repr=False)
+    metadata: dict | None = field(default=None, compare=False, repr=False)
+    notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     @classmethod
     def open(
         cls,
         path,
         *,
-        layout: str = "mono",
-        projection: str = "equirect",
+        layout: str | None = None,
+        projection: str | None = None,
         right=None,
         eye: str = "left",
         lens_fov_deg: float | None = None,
         still: tuple[float | None, float | None] | None = None,
+        layout_default: str = "mono",
     ) -> Source:
         """Check and probe a source (InputError naming the file or option on bad input).
 
-        ``still = (seconds, fps)``: an image is accepted as a clip of ``seconds`` at ``fps``
-        (None: :data:`STILL_SECONDS`, :data:`STILL_FPS`); a video ignores it.
+        ``layout`` / ``projection`` None: the file's spherical metadata
+        (:func:`simulator.media.spherical.read_spherical`), else ``layout_default`` /
+        ``equirect``; given ones win over the metadata, with a note (:attr:`notes`) when
+        they disagree. ``still = (seconds, fps)``: an image is accepted as a clip of
+        ``seconds`` at ``fps`` (None: :data:`STILL_SECONDS`, :data:`STILL_FPS`).
         """
         path = check_local_path(path)
-        layout = "mono" if layout is None else layout
-        projection = "equirect" if projection is None else projection
+        info = probe(path)
+        md = read_spherical(path) if info.is_video else {}
+        notes: list[str] = []
+        projection = _resolve(path, "projection", projection, md.get("projection"), notes)
+        layout = _resolve(path, "layout", layout, md.get("layout"), notes) or layout_default
+        projection = projection or "equirect"
+        if md.get("orientation_deg") and any(md["orientation_deg"]):
+            notes.append(
+                f"{path}: its spherical metadata gives an initial orientation (yaw/pitch/roll "
+                f"{'/'.join(f'{v:g}' for v in md['orientation_deg'])} deg); recorded, not applied"
+            )
         if layout not in LAYOUTS:
             raise InputError(
                 f"{path}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}"
@@ -93,11 +111,12 @@ class Source:
                 f"--projection {projection!r}: unknown; expected one of {', '.join(PROJECTIONS)}"
             )
         lens_fov_deg = _check_lens_fov(projection, lens_fov_deg)
-        info = probe(path)
         is_still = still is not None and not info.is_video
         if is_still:
             info = _still_info(info, *still)
         src = cls(path, layout, projection, None, eye, lens_fov_deg, is_still, info)
+        object.__setattr__(src, "metadata", md or None)
+        object.__setattr__(src, "notes", tuple(notes))
         src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
         if right is not None:
             right = check_local_path(right)
@@ -167,6 +186,10 @@ class Source:
             "projection": self.projection,
             "lens_fov_deg": self.lens_fov_deg,
             "still": self.still,
+            "bit_depth": self._info.bit_depth,
+            "transfer": self._info.transfer,
+            "pix_fmt": self._info.pix_fmt,
+            "spherical_metadata": self.metadata,
             "eye": self.eye,
             "right": self.right,
         }
@@ -284,6 +307,17 @@ def as_source(video) -> Source:
 _IMAGE_CODECS = ("image", "mjpeg", "png", "bmp", "tiff", "webp")
 
 
+def _resolve(path: str, what: str, given, from_file, notes: list[str]):
+    """An option against the file's metadata: the option wins (a note if they differ)."""
+    if given is None:
+        return from_file
+    if from_file is not None and from_file != given:
+        notes.append(
+            f"{path}: its spherical metadata says {what} {from_file}; --{what} {given} wins"
+        )
+    return given
+
+
 def _still_info(info: MediaInfo, seconds: float | None, fps: float | None) -> MediaInfo:
     """The MediaInfo of an image made a clip of ``seconds`` at ``fps``."""
     seconds = STILL_SECONDS if seconds is None else float(seconds)
@@ -320,6 +354,12 @@ def _check_right_eye(info: MediaInfo, right: str, layout: str, projection: str) 
             "is for one file holding both eyes (drop one of them)"
         )
     r = probe(right)
+    other = read_spherical(right).get("projection") if r.is_video else None
+    if other is not None and other != projection:
+        raise InputError(
+            f"{right}: a right-eye file of another projection ({other}, from its metadata); "
+            f"the left eye ({info.path}) is {projection}"
+        )
     if r.is_video != (info.codec not in _IMAGE_CODECS):
         what = "a video" if r.is_video else "a still image"
         raise InputError(

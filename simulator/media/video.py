@@ -54,6 +54,11 @@ class MediaInfo:
     n_frames : number of frames (1 for a still image)
     is_video : False for a still image
     codec : decoder name (``"image"`` for stills)
+    pix_fmt : the decoder's pixel format (e.g. ``yuv420p10le``; None for stills)
+    bit_depth : bits per sample of the source (8 for stills; 10 for HEVC Main10 etc.);
+        frames are always delivered as 8-bit (FFmpeg's swscale conversion, no tone mapping)
+    transfer : the stream's transfer characteristic (``bt709``, ``smpte2084`` = PQ,
+        ``arib-std-b67`` = HLG, ...; None when unspecified)
     """
 
     path: str
@@ -64,6 +69,9 @@ class MediaInfo:
     n_frames: int
     is_video: bool
     codec: str
+    pix_fmt: str | None = None
+    bit_depth: int = 8
+    transfer: str | None = None
 
     @property
     def duration_s(self) -> float:
@@ -133,6 +141,7 @@ def probe(path: str | os.PathLike) -> MediaInfo:
         rate = s.guessed_rate or s.base_rate or s.average_rate
         fps = float(rate) if rate else 0.0
         codec = cc.name
+        pix_fmt, depth, transfer = _depth_and_transfer(cc)
         n = _count_frames(c, s, p)
     if codec in ("mjpeg", "png", "bmp", "tiff", "webp") and n <= 1:
         return MediaInfo(str(p), w, h, sar, 1.0, 1, False, codec)
@@ -140,7 +149,25 @@ def probe(path: str | os.PathLike) -> MediaInfo:
         raise InputError(f"{p}: video stream has no frame size")
     if fps <= 0:
         raise InputError(f"{p}: video stream has no frame rate")
-    return MediaInfo(str(p), w, h, sar, fps, n, True, codec)
+    return MediaInfo(str(p), w, h, sar, fps, n, True, codec, pix_fmt, depth, transfer)
+
+
+#: ISO/IEC 23091-2 transfer characteristics (FFmpeg's AVColorTransferCharacteristic).
+_TRANSFERS = {1: "bt709", 4: "gamma22", 5: "gamma28", 6: "smpte170m", 7: "smpte240m", 8: "linear",
+              13: "iec61966-2-1", 14: "bt2020-10", 15: "bt2020-12", 16: "smpte2084",
+              18: "arib-std-b67"}  # fmt: skip
+
+
+def _depth_and_transfer(cc) -> tuple[str | None, int, str | None]:
+    """Pixel format, bits per sample and transfer name of a video codec context."""
+    fmt = cc.format
+    name = getattr(fmt, "name", None)
+    try:
+        depth = max(int(c.bits) for c in fmt.components) if fmt is not None else 8
+    except (AttributeError, ValueError):
+        depth = 8
+    trc = getattr(cc, "color_trc", None)
+    return name, depth, _TRANSFERS.get(int(trc)) if trc is not None else None
 
 
 def _count_frames(container, stream, p: Path) -> int:

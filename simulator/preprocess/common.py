@@ -75,6 +75,7 @@ def common_meta(
         "layout": source.layout,
         "eye": source.eye,
         "projection": source.projection,
+        "source": source.settings(),
         "start_frame": start_frame,
         "end_frame": start_frame + n_rows,
         "start_s": start_frame / fps,

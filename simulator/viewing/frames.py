@@ -358,6 +358,7 @@ def render_frames(
         "layout": source.layout,
         "right": source.right,
         "projection": source.projection,
+        "source": source.settings(),
         "hold": hold,
         "renderer": {
             "eye_size": [w, h],

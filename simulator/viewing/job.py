@@ -305,6 +305,7 @@ def render_viewing(
         "layout": source.layout,
         "right": source.right,
         "projection": source.projection,
+        "source": source.settings(),
         "coverage_mean": _mean(plan.coverage) if plan.coverage is not None else None,
         "eyes": eyes,
         "audio": audio_info,

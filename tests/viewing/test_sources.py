@@ -80,3 +80,47 @@ def test_bad_source_input_one_line_exit_2_nothing_written(files, capsys, args, w
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and word in err[0], err
     assert sorted(p.name for p in files.iterdir()) == before
+
+
+def _ffmpeg(*args):
+    import subprocess
+
+    from simulator.testing.reference import ffmpeg_exe
+
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", *args], check=True)
+
+
+def test_spherical_metadata_gives_the_layout_and_an_option_wins_with_a_note(tmp_path, capsys):
+    from simulator.media.source import Source
+    from simulator.media.spherical import parse_report
+
+    p = tmp_path / "sbs.mkv"
+    _ffmpeg("-f", "lavfi", "-i", "testsrc2=size=256x128:rate=10", "-t", "0.3", "-c:v", "libx264",
+            "-metadata:s:v:0", "stereo_mode=left_right", str(p))  # fmt: skip
+    s = Source.open(p)
+    assert (
+        s.layout == "side-by-side"
+        and s.settings()["spherical_metadata"]["layout"] == "side-by-side"
+    )
+    args = ["viewport", str(p), "-o", str(tmp_path / "v.png"), "--yaw", "0", "--pitch", "0"]
+    assert main([*args, "--layout", "mono", "--size", "32x32"]) == 0
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "says layout side-by-side; --layout mono wins" in err[0]
+    # what FFmpeg reports for sv3d / st3d boxes (MP4)
+    md = parse_report("    Side data:\n      spherical: half equirectangular (15.0/-2.5/0.0)\n"
+                      "      stereo3d: side by side, view: packed")  # fmt: skip
+    assert md["projection"] == "hequirect" and md["layout"] == "side-by-side"
+    assert md["orientation_deg"] == [15.0, -2.5, 0.0]
+
+
+def test_10bit_hevc_decodes_and_the_summary_records_it(ctx, tmp_path):
+    p = tmp_path / "h10.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "testsrc2=size=128x64:rate=10", "-t", "0.5", "-c:v", "libx265",
+            "-pix_fmt", "yuv420p10le", "-x265-params", "log-level=error", str(p))  # fmt: skip
+    save_headpath_csv(tmp_path / "p.csv", synth("static", 1.0, rate_hz=30.0))
+    out = tmp_path / "r"
+    assert main(["render", str(p), str(tmp_path / "p.csv"), "-o", str(out), "--opacity", "0.5",
+                 "--eye-size", "32x32", "--no-progress"]) == 0  # fmt: skip
+    s = json.loads((out / "summary.json").read_text())
+    assert s["source"]["bit_depth"] == 10 and s["source"]["pix_fmt"] == "yuv420p10le"
+    assert s["frames_written"] == 5
