@@ -406,6 +406,9 @@ def _frames(grid: GridFile) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     (``GridFile.frame_times_s`` counts from 0 regardless)."""
     start = int(grid.meta.get("start_frame", 0) or 0)
     frames = start + np.arange(grid.n_frames, dtype=np.int64)
+    times = grid.meta.get("frame_times_s")  # a variable-rate video: its timestamps
+    if times is not None and len(times) == grid.n_frames:
+        return frames, np.asarray(times, float)
     return frames, frames / float(grid.fps)
 
 

@@ -68,6 +68,7 @@ from simulator.preprocess.common import (
     PreprocessInterrupted,
     check_output_dir,
     common_meta,
+    flow_rate_scale,
     frame_range,
 )
 from simulator.sphere.geometry import perspective_rays
@@ -459,6 +460,9 @@ def preprocess_video(
     meta["reduce_stride"] = stride
     meta["window_interp"] = _INTERP
     dps_all, px_all = np.stack(dps_rows), np.stack(px_rows)
+    scale = flow_rate_scale(info, start_f, n_rows)
+    if scale is not None:  # variable frame rate: deg/s over each row's true interval
+        dps_all = dps_all * scale[:, None, None].astype(np.float32)
     cov = coverage_meta(source.covered, grid, None)
     if cov is not None:  # windows outside the projection: no flow measured
         meta["coverage"] = cov

@@ -34,7 +34,7 @@ from simulator.media.coverage import COVERED_SHARE, cell_coverage, coverage_mask
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
-from simulator.preprocess.common import check_output_dir, common_meta, frame_range
+from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -327,18 +327,23 @@ def field_from_frames(
     return _fields(est, (est.tiles(f) for f in frames), 256, progress, "")
 
 
-def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, mask=None):
+def _fields(
+    est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, mask=None,
+    scale=None,
+):  # fmt: skip
     """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
     repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
     ``source`` prefixes the error for fewer than 2 frames; ``mask``: the covered cells
-    (others 0: no flow measured outside the projection)."""
+    (others 0: no flow measured outside the projection); ``scale``: per row, the factor of
+    a variable frame rate's true interval (:func:`simulator.preprocess.common.flow_rate_scale`)."""
     out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
         if prev is not None:
             f = est.field(prev, t)
-            out.append(f if mask is None else f * mask)
+            f = f if mask is None else f * mask
+            out.append(f if scale is None else f * np.float32(scale[min(n, len(scale) - 1)]))
         prev = t
         n += 1
         if progress is not None:
@@ -376,7 +381,10 @@ def field_from_video(
     try:
         mask = None if source.covered is None else cell_coverage(source.covered, config.cell_deg)
         mask = None if mask is None else (mask >= COVERED_SHARE).astype(np.float32)
-        return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink, mask), info
+        scale = flow_rate_scale(info, int(start), last - int(start))
+        return _fields(
+            est, tiles, last - int(start), progress, f"{path}: ", sink, mask, scale
+        ), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file

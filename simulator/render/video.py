@@ -57,6 +57,7 @@ def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
             f"frame must be ({h * 3 // 2}, {w}) uint8 yuv420p; got {frame.shape} {frame.dtype}"
         )
     vf = av.VideoFrame.from_ndarray(frame, format="yuv420p")
+    vf.pts = writer.frame_pts()
     for pkt in writer._stream.encode(vf):
         writer._container.mux(pkt)
     writer.n_written += 1
@@ -202,6 +203,10 @@ def render_video(
     eyes = (wanted[0],) if same else tuple(wanted)
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
+    # a variable-rate source: the outputs keep its timing
+    out_times = (
+        info.times_s(np.arange(start_frame, start_frame + total)) if info.variable_rate else None
+    )
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
     t_start = time.perf_counter()
     n = 0
@@ -210,7 +215,14 @@ def render_video(
             writers = [
                 stack.enter_context(
                     VideoWriter(
-                        p, fps, (w, h), crf=crf, preset=preset, audio=audio, threads=threads
+                        p,
+                        fps,
+                        (w, h),
+                        crf=crf,
+                        preset=preset,
+                        audio=audio,
+                        threads=threads,
+                        times_s=out_times,
                     )
                 )
                 for p in paths[: len(eyes)]

@@ -109,6 +109,8 @@ def decode_frames(path, indices) -> dict[int, NDArray[np.uint8]]:
 
     want = sorted({int(i) for i in indices})
     info = probe(path)
+    if info.variable_rate:  # frame numbers are not pts x fps: decode in order
+        return _decode_sequential(iter_frames(path), want)
     out: dict[int, NDArray[np.uint8]] = {}
     with av.open(str(path)) as c:
         s = c.streams.video[0]
@@ -262,7 +264,8 @@ def render_frames(
         method=method,
     )
     info = plan.info
-    times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
+    rate = info.n_frames / info.duration_s  # = fps unless the rate varies
+    times = moments(info.n_frames, rate, at=at, every=every, source=str(video))
     stereo = source.stereo
     parallax = config.grf is not None and config.grf.distance_m is not None
     eyes = ("left", "right") if stereo or parallax else ("both",)
@@ -288,7 +291,10 @@ def render_frames(
                 f"{p}: cannot remove the previous run's output ({e.strerror})"
             ) from None
 
-    idx = [frame_index(t, info.fps) for t in times]
+    if info.variable_rate:  # the frame on screen by the stream's timestamps
+        idx = [max(0, int(info.frame_at(t))) for t in times]
+    else:
+        idx = [frame_index(t, info.fps) for t in times]
     if source.still:  # an image made a clip: every frame is the image
         decoded = dict.fromkeys(idx, source.read_stored("left"))
         decoded_right = dict.fromkeys(idx, source.read_stored("right")) if source.right else None

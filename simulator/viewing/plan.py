@@ -138,11 +138,13 @@ def plan_viewing(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
+    f0, f1 = frame_range(
+        info.n_frames, info.fps, start_s, end_s, video=str(video), times=info.frame_times
+    )
     ranged = (f0, f1) != (0, info.n_frames)
     nf = f1 - f0
     frames = np.arange(f0, f1)
-    times = frames / info.fps
+    times = info.times_s(frames)  # the stream's timestamps (player's clock), else i / fps
     hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
 
     if grid is not None and not isinstance(grid, GridFile):
