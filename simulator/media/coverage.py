@@ -51,7 +51,7 @@ def cell_coverage(covered: NDArray[np.bool_], cell_deg: float) -> NDArray[np.flo
 def window_coverage(covered: NDArray[np.bool_], grid: WindowGrid) -> NDArray[np.float64]:
     """Share of each window's pixels inside the projection, ``(P, Y)``."""
     H, W = covered.shape
-    ext = WindowExtractor(grid, (W, H), cache=False)
+    ext = WindowExtractor(grid, (W, H))  # the maps preprocessing built (map cache)
     win = ext(np.where(covered, 255, 0).astype(np.uint8), interp="linear")
     return win.reshape(*grid.shape, -1).mean(axis=-1) / 255.0
 

@@ -22,8 +22,9 @@ def _smooth(w=256, h=128):
     return np.stack([np.clip(127.5 + 120 * c, 0, 255) for c in ch], -1).astype(np.uint8)
 
 
-@pytest.fixture
-def files(tmp_path):
+@pytest.fixture(scope="module")
+def files(tmp_path_factory):
+    tmp_path = tmp_path_factory.mktemp("sources")
     E = _smooth()
     Image.fromarray(E).save(tmp_path / "e.png")
     Image.fromarray(v360_convert(E, "eac", (192, 128))).save(tmp_path / "eac.png")
