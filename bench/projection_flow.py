@@ -10,7 +10,8 @@ of the equirect clip, in the same run:
 - flow: the sphere-mode field of each projection vs the equirect field, per covered cell
   and frame: median relative difference (goal <= 3%), and the same for the window matrix;
 - cost: preprocess wall time of each projection / the equirect's (goal <= 1.3x), and
-  ``vimsim render`` (480x480 eyes, GRF at opacity 0.5) wall time likewise.
+  ``vimsim render`` (480x480 eyes, GRF at opacity 0.5) wall time likewise; also the
+  ratios of CPU time (all threads), steadier on a shared machine.
 """
 
 from __future__ import annotations
@@ -56,10 +57,11 @@ def _convert(src: Path, out: Path, name: str, size, opts: str) -> None:
     subprocess.run(cmd, check=True)
 
 
-def _timed(fn) -> float:
-    t0 = time.perf_counter()
+def _timed(fn) -> tuple[float, float]:
+    """(wall seconds, CPU seconds of this process, all threads)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     fn()
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main() -> None:
@@ -91,10 +93,11 @@ def main() -> None:
     ref, t_pre0, t_ren0 = run("equirect", eq)
     f0 = np.asarray(ref.field_dps[:], float)[1:]
     p0 = np.asarray(ref.pof_dps, float)[1:]
-    print(f"equirect {w}x{h}, {f0.shape[0] + 1} frames: preprocess {t_pre0:.2f} s"
-          + ("" if t_ren0 is None else f", render {t_ren0:.2f} s"))  # fmt: skip
+    print(f"equirect {w}x{h}, {f0.shape[0] + 1} frames: preprocess {t_pre0[0]:.2f} s wall, "
+          f"{t_pre0[1]:.2f} s CPU" + ("" if t_ren0 is None else
+          f"; render {t_ren0[0]:.2f} s wall, {t_ren0[1]:.2f} s CPU"))  # fmt: skip
     print("projection  stored      field med |rel diff|  windows med |rel diff|  "
-          "preprocess ratio  render ratio")  # fmt: skip
+          "preprocess ratio wall / CPU  render ratio wall / CPU")  # fmt: skip
     for name, size, opts in _cases(w, h):
         path = d / f"{name}.mp4"
         _convert(eq, path, name, size, opts)
@@ -107,10 +110,10 @@ def main() -> None:
         wm = np.ones(p0.shape[1:], bool) if wins is None else wins
         pw = np.asarray(g.pof_dps, float)[1:][:, wm]
         relw = np.abs(pw / p0[:, wm] - 1)
-        rr = "" if t_ren is None else f"{t_ren / t_ren0:6.2f}x"
+        rr = "" if t_ren is None else f"{t_ren[0] / t_ren0[0]:5.2f}x / {t_ren[1] / t_ren0[1]:5.2f}x"
         print(f"{name:10s}  {size[0]}x{size[1]:<5d}  {np.median(rel) * 100:6.2f}%"
-              f"               {np.median(relw) * 100:6.2f}%                {t_pre / t_pre0:6.2f}x"
-              f"           {rr}")  # fmt: skip
+              f"               {np.median(relw) * 100:6.2f}%                "
+              f"{t_pre[0] / t_pre0[0]:5.2f}x / {t_pre[1] / t_pre0[1]:5.2f}x     {rr}")  # fmt: skip
 
 
 if __name__ == "__main__":

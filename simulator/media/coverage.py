@@ -10,6 +10,8 @@ over the covered part of the viewport only and reports its share per frame (the
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -49,9 +51,10 @@ def cell_coverage(covered: NDArray[np.bool_], cell_deg: float) -> NDArray[np.flo
 
 
 def window_coverage(covered: NDArray[np.bool_], grid: WindowGrid) -> NDArray[np.float64]:
-    """Share of each window's pixels inside the projection, ``(P, Y)``."""
+    """Share of each window's pixels inside the projection, ``(P, Y)`` (sampled on 32 x 32
+    rays per window: a share, not an image)."""
     H, W = covered.shape
-    ext = WindowExtractor(grid, (W, H))  # the maps preprocessing built (map cache)
+    ext = WindowExtractor(replace(grid, size=(32, 32)), (W, H), cache=False)
     win = ext(np.where(covered, 255, 0).astype(np.uint8), interp="linear")
     return win.reshape(*grid.shape, -1).mean(axis=-1) / 255.0
 
