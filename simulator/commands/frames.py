@@ -13,6 +13,7 @@ __all__ = ["register", "run"]
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``frames`` parser."""
+    from simulator.commands._source import add_source_arguments
     from simulator.commands.headpath import add_reader_options
     from simulator.commands.render import add_view_options
 
@@ -38,6 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--every", type=float, metavar="S", help="every S seconds from 0 to the end of the video"
     )
     add_view_options(p)
+    add_source_arguments(p, still=True)
     p.add_argument(
         "--right",
         metavar="FILE",
@@ -53,12 +55,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Run :func:`simulator.viewing.frames.render_frames`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
+    from simulator.commands._source import source_from_args
     from simulator.commands.render import view_from_args
-    from simulator.media.source import Source
     from simulator.viewing.frames import render_frames
 
     hp, grid, view, note, layout = view_from_args(args, "frames")
-    source = Source.open(args.video_file, layout=layout, right=args.right)
+    source = source_from_args(
+        args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
+    )
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,

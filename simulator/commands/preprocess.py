@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from simulator.commands._source import add_source_arguments, source_from_args
 from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float, seconds
 from simulator.core.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
 
@@ -66,8 +67,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left)",
+        default=None,
+        help="stereo layout: mono, top-bottom (left eye on top), side-by-side (left eye left) "
+        "(default: the file's spherical metadata, else mono)",
     )
     p.add_argument(
         "--eye",
@@ -75,6 +77,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         default="left",
         help="eye of a stereo video (default left)",
     )
+    add_source_arguments(p)
     p.add_argument(
         "--start",
         type=seconds,
@@ -139,7 +142,6 @@ def run(args: argparse.Namespace) -> int:
     """Preprocess; 0 when the grid file was written, 2 on bad input, 130 when interrupted."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.core.errors import InputError
-    from simulator.media.source import Source
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
     from simulator.sphere.windows import grid_preset
 
@@ -161,7 +163,7 @@ def run(args: argparse.Namespace) -> int:
             progress_bar("preprocess (sphere)", enabled=not args.no_progress) as bar,
         ):
             out = preprocess_sphere(
-                Source.open(args.video, layout=args.layout, eye=args.eye),
+                source_from_args(args, args.video, layout=args.layout, eye=args.eye),
                 args.output,
                 grid=grid,
                 config=SphereConfig(cell_deg=args.cell),
@@ -178,7 +180,7 @@ def run(args: argparse.Namespace) -> int:
             progress_bar("preprocess", enabled=not args.no_progress) as bar,
         ):
             out = preprocess_video(
-                Source.open(args.video, layout=args.layout, eye=args.eye),
+                source_from_args(args, args.video, layout=args.layout, eye=args.eye),
                 args.output,
                 grid=grid,
                 flow=args.flow,

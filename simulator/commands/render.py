@@ -184,6 +184,7 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``render`` parser."""
+    from simulator.commands._source import add_source_arguments
     from simulator.commands.headpath import add_reader_options
 
     p = subparsers.add_parser(
@@ -247,6 +248,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="also write OUTDIR/review.mp4 (equirect frame with the viewport's outline beside "
         "the eye view, EPOF and opacity strip with a cursor) and OUTDIR/sheet.png (contact sheet)",
     )
+    add_source_arguments(p, still=True)
     p.add_argument(
         "--right",
         metavar="FILE",
@@ -268,11 +270,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Parse the options and run :func:`simulator.viewing.job.render_viewing`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
-    from simulator.media.source import Source
+    from simulator.commands._source import source_from_args
     from simulator.viewing.job import render_viewing
 
     hp, grid, view, note, layout = view_from_args(args)
-    source = Source.open(args.video_file, layout=layout, right=args.right)
+    source = source_from_args(
+        args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
+    )
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,

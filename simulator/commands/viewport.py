@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from simulator.commands._source import add_source_arguments, source_from_args
 from simulator.commands._types import (
     add_fov_arguments,
     angle_deg,
@@ -70,12 +71,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
-        default="mono",
-        help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left (default mono)",
+        default=None,
+        help="stereo layout: top-bottom = left eye on top, side-by-side = left eye on the left "
+        "(default: the file's spherical metadata, else mono)",
     )
     p.add_argument(
         "--eye", choices=EYES, default="left", help="eye of a stereo source (default left)"
     )
+    add_source_arguments(p)
     p.add_argument(
         "--interp",
         choices=INTERPS,
@@ -91,13 +94,11 @@ def run(args: argparse.Namespace) -> int:
 
     from simulator.core.fileio import atomic_output
     from simulator.core.resources import check_fits
-    from simulator.media.source import Source
-    from simulator.sphere import geometry
 
     hfov, vfov = fov_from_args(args, (DEFAULT_FOV_DEG, DEFAULT_FOV_DEG))
     # rays (float64 x 3, twice), lon/lat, maps and the image: about 120 bytes per pixel
     check_fits(args.size[0] * args.size[1] * 120, f"--size {args.size[0]}x{args.size[1]}")
-    source = Source.open(args.src, layout=args.layout, eye=args.eye)  # checks 2:1 per eye
+    source = source_from_args(args, args.src, layout=args.layout, eye=args.eye)
     info, (w, h) = source.info, source.eye_size
     if info.is_video and args.frame >= info.n_frames:
         raise InputError(
@@ -105,12 +106,42 @@ def run(args: argparse.Namespace) -> int:
         )
     if not info.is_video and args.frame != 0:
         raise InputError(f"{args.src}: a still image has only frame 0; got --frame {args.frame}")
+    if source.converter is not None:  # one resampling, straight from the projection
+        view = _projected_view(source, args, hfov, vfov)
+    else:
+        view = _equirect_view(source, args, hfov, vfov, (w, h))
+    with atomic_output(args.output) as tmp:
+        Image.fromarray(view).save(tmp, format="PNG")
+    return 0
+
+
+def _projected_view(source, args, hfov: float, vfov: float):
+    """The view of a non-equirect source, sampled in its own projection (bicubic)."""
+    import cv2
+
+    from simulator.sphere import geometry
+
+    if args.interp == "lagrange":
+        raise InputError(
+            f"--interp lagrange is for equirect sources; --projection {source.projection}"
+        )
+    flags = {"cubic": cv2.INTER_CUBIC, "linear": cv2.INTER_LINEAR, "nearest": cv2.INTER_NEAREST}
+    rays, _ = geometry.perspective_rays(args.size, hfov, vfov)
+    R = geometry.head_rotation(args.yaw, args.pitch, args.roll).as_matrix()
+    stored = source.read(args.frame, convert=False)
+    return source.converter.sample(stored, rays.astype(float) @ R.T, interp=flags[args.interp])
+
+
+def _equirect_view(source, args, hfov: float, vfov: float, size):
+    from simulator.sphere import geometry
+
+    w, h = size
     eye = source.read(args.frame)
     if eye.shape[:2] != (h, w):
         raise InputError(
             f"{args.src}: decoded eye is {eye.shape[1]}x{eye.shape[0]}; expected {w}x{h}"
         )
-    view = geometry.extract_view(
+    return geometry.extract_view(
         eye,
         args.yaw,
         args.pitch,
@@ -120,6 +151,3 @@ def run(args: argparse.Namespace) -> int:
         size=args.size,
         interp=args.interp,
     )
-    with atomic_output(args.output) as tmp:
-        Image.fromarray(view).save(tmp, format="PNG")
-    return 0

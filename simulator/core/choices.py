@@ -25,7 +25,10 @@ __all__ = [
     "MITIGATION_HELP",
     "OPACITY_SOURCES",
     "PREPROCESS_METHODS",
+    "PROJECTIONS",
     "SCENES",
+    "STILL_FPS",
+    "STILL_SECONDS",
     "SYNTH_KINDS",
     "SYNTH_LAYOUTS",
     "X264_PRESETS",
@@ -40,6 +43,14 @@ HEADSET_NAMES: tuple[str, ...] = ("vive-pro-eye", "vive-focus-3", "pimax-crystal
 #: Stereo layouts of an equirect frame: ``top-bottom`` (left eye on top),
 #: ``side-by-side`` (left eye on the left).
 LAYOUTS: tuple[str, ...] = ("mono", "top-bottom", "side-by-side")
+
+#: Input projections, ffmpeg ``v360``'s names (:data:`simulator.sphere.projections.PROJECTIONS`).
+PROJECTIONS: tuple[str, ...] = ("equirect", "eac", "c3x2", "c6x1", "dfisheye", "hequirect")
+
+#: A still image given to ``render`` / ``frames`` is a clip of this many seconds at this rate
+#: (``--seconds`` / ``--fps``).
+STILL_SECONDS = 10.0
+STILL_FPS = 30.0
 
 #: Eyes of a stereo source or render.
 Eye = Literal["left", "right"]

@@ -406,6 +406,9 @@ def _frames(grid: GridFile) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
     (``GridFile.frame_times_s`` counts from 0 regardless)."""
     start = int(grid.meta.get("start_frame", 0) or 0)
     frames = start + np.arange(grid.n_frames, dtype=np.int64)
+    times = grid.meta.get("frame_times_s")  # a variable-rate video: its timestamps
+    if times is not None and len(times) == grid.n_frames:
+        return frames, np.asarray(times, float)
     return frames, frames / float(grid.fps)
 
 
@@ -419,6 +422,7 @@ def epof_from_grid(
     hfov_deg: float | None = None,
     vfov_deg: float | None = None,
     top_k: int | None = None,
+    pof=None,
 ) -> NDArray[np.float64]:
     """EPOF in deg/s for each (frame, orientation) query, vectorised.
 
@@ -430,6 +434,8 @@ def epof_from_grid(
     hfov_deg, vfov_deg : float, degrees; viewport FOV, default the grid's window FOV
         (``vfov_deg`` defaults to ``hfov_deg`` when only that is given)
     top_k : int, optional; use only the k largest overlaps
+    pof : another (T, P, Y) or (P, Y) window matrix to average instead of ``grid.pof_dps``
+        (e.g. the covered windows, giving the covered share of each view)
 
     Returns
     -------
@@ -440,7 +446,7 @@ def epof_from_grid(
         (k, tuple(x) if isinstance(x, list) else x) for k, x in sorted(grid.meta["grid"].items())
     )
     return _overlaps_for(key, h, v).epof(
-        grid.pof_dps, yaw_deg, pitch_deg, roll_deg, frames, top_k=top_k
+        grid.pof_dps if pof is None else pof, yaw_deg, pitch_deg, roll_deg, frames, top_k=top_k
     )
 
 

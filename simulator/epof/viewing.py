@@ -22,6 +22,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
+from simulator.media.coverage import coverage_masks, fade
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
 from simulator.mitigation.grf import OpacityRule
@@ -56,7 +57,9 @@ class EpofResult:
 
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
-    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV).
+    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV). ``coverage``: the
+    covered share of each frame's viewport (a projection not covering the sphere, e.g.
+    VR180; :mod:`simulator.media.coverage`), else None; written as the ``coverage`` column.
     """
 
     frame: NDArray[np.int64]
@@ -68,6 +71,7 @@ class EpofResult:
     opacity: NDArray[np.float64]
     thresholds_dps: tuple[float, float] = (math.nan, math.nan)
     meta: dict = field(default_factory=dict, compare=False)
+    coverage: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frame)
@@ -158,6 +162,7 @@ def compute_epof(
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
+    e, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
     h, v = viewport_fov(grid, hfov_deg, vfov_deg)
@@ -172,7 +177,31 @@ def compute_epof(
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
     }
-    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
+    if cov is not None:
+        meta["coverage_rule"] = grid.meta["coverage"]["rule"]
+    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta, cov)
+
+
+def _covered_epof(grid, e, sphere: bool, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum):
+    """EPOF over the covered part of each view and its covered share (None when the
+    grid's projection covers the sphere): the mean of the flow (0 outside) over the view
+    divided by the mean of the covered mask, faded below ``MIN_COVERAGE``."""
+    wins, cells = coverage_masks(grid.meta)
+    if cells is None:
+        return e, None
+    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
+    fr = frustum or Frustum.symmetric(h, v)
+    mask = np.broadcast_to(cells.astype(np.float32), (len(e), *cells.shape))
+    share = viewport_epof(mask, grid.meta["coverage"]["cell_deg"], yaw, pitch, roll, frustum=fr)
+    share = np.clip(np.asarray(share, float), 0.0, 1.0)  # the viewport's covered share
+    if not sphere:  # paper mode: the overlap weight of the covered windows
+        norm = epof_from_grid(grid, yaw, pitch, roll, 0, hfov_deg=hfov_deg, vfov_deg=vfov_deg,
+                              top_k=top_k, pof=wins.astype(np.float32))  # fmt: skip
+        norm = np.clip(np.asarray(norm, float), 0.0, 1.0)
+    else:
+        norm = share
+    covered_mean = np.where(norm > 1e-9, e / np.maximum(norm, 1e-9), 0.0)
+    return covered_mean * fade(share), share
 
 
 def epof_settings(result: EpofResult) -> dict:
@@ -219,7 +248,9 @@ def write_epof_csv(
     The settings that produced it come first as ``# key: JSON value`` comment lines
     (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
     :func:`read_epof_csv` (and ``pandas.read_csv(path, comment="#")``) skip those lines."""
-    extra = extra or {}
+    extra = dict(extra or {})
+    if result.coverage is not None and "coverage" not in extra:
+        extra["coverage"] = result.coverage
     buf = io.StringIO()
     if settings is None and result.meta:
         settings = epof_settings(result)

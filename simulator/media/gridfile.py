@@ -81,7 +81,11 @@ class GridFile:
         return float(self.meta["grid"]["vfov_deg"])
 
     def frame_times_s(self) -> NDArray[np.float64]:
-        """Presentation time of each frame, seconds from the video start (``t / fps``)."""
+        """Presentation time of each frame, seconds from the video start (``t / fps``, or
+        the stream's timestamps of a variable-rate video, ``meta["frame_times_s"]``)."""
+        times = self.meta.get("frame_times_s")
+        if times is not None and len(times) == self.n_frames:
+            return np.asarray(times, float) - float(times[0])
         return np.arange(self.n_frames) / self.fps
 
     def check_video(

@@ -10,6 +10,7 @@ Library functions accept a Source or a plain path (:func:`as_source`: mono equir
 
 from __future__ import annotations
 
+import math
 import os
 import re
 from collections.abc import Iterator
@@ -18,15 +19,14 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.core.choices import EYES, LAYOUTS
+from simulator.core.choices import EYES, LAYOUTS, PROJECTIONS, STILL_FPS, STILL_SECONDS
 from simulator.core.errors import InputError
-from simulator.media.video import MediaInfo, PixelFormat, iter_frames, probe
+from simulator.media.spherical import read_spherical
+from simulator.media.video import MediaInfo, PixelFormat, iter_frames, probe, read_frame
 from simulator.sphere.geometry import split_eye
+from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, EquirectConverter, converter
 
-__all__ = ["PROJECTION_NAMES", "Source", "as_source", "check_local_path"]
-
-#: Input projections (ffmpeg ``v360``'s names).
-PROJECTION_NAMES: tuple[str, ...] = ("equirect",)
+__all__ = ["Source", "as_source", "check_local_path"]
 
 _URL = re.compile(r"^[A-Za-z][A-Za-z0-9+.-]*://")
 
@@ -48,7 +48,12 @@ class Source:
     projection : the input projection (:data:`PROJECTION_NAMES`)
     right : the right eye's own file (two per-eye files; layout ``mono``), or None
     eye : the eye a single-eye consumer (preprocess, viewport) takes from a stereo source
+    lens_fov_deg : a dual fisheye's lens FOV (degrees, in (180, 360)); None for the others
+    still : an image made a clip (``Source.open(still=(seconds, fps))``): ``info`` then says
+        ``n_frames = round(seconds * fps)`` frames at ``fps``, every one the image
     info : the file's :class:`simulator.media.video.MediaInfo` (of ``path``)
+    metadata : its spherical metadata (:func:`simulator.media.spherical.read_spherical`)
+    notes : one line each for the user (an option overriding the metadata)
     """
 
     path: str
@@ -56,37 +61,66 @@ class Source:
     projection: str = "equirect"
     right: str | None = None
     eye: str = "left"
+    lens_fov_deg: float | None = None
+    still: bool = False
     info: MediaInfo | None = field(default=None, compare=False, repr=False)
+    metadata: dict | None = field(default=None, compare=False, repr=False)
+    notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
 
     @classmethod
     def open(
         cls,
         path,
         *,
-        layout: str = "mono",
-        projection: str = "equirect",
+        layout: str | None = None,
+        projection: str | None = None,
         right=None,
         eye: str = "left",
+        lens_fov_deg: float | None = None,
+        still: tuple[float | None, float | None] | None = None,
+        layout_default: str = "mono",
     ) -> Source:
-        """Check and probe a source (InputError naming the file or option on bad input)."""
+        """Check and probe a source (InputError naming the file or option on bad input).
+
+        ``layout`` / ``projection`` None: the file's spherical metadata
+        (:func:`simulator.media.spherical.read_spherical`), else ``layout_default`` /
+        ``equirect``; given ones win over the metadata, with a note (:attr:`notes`) when
+        they disagree. ``still = (seconds, fps)``: an image is accepted as a clip of
+        ``seconds`` at ``fps`` (None: :data:`STILL_SECONDS`, :data:`STILL_FPS`).
+        """
         path = check_local_path(path)
+        info = probe(path)
+        md = read_spherical(path) if info.is_video else {}
+        notes: list[str] = []
+        projection = _resolve(path, "projection", projection, md.get("projection"), notes)
+        layout = _resolve(path, "layout", layout, md.get("layout"), notes) or layout_default
+        projection = projection or "equirect"
+        if md.get("orientation_deg") and any(md["orientation_deg"]):
+            notes.append(
+                f"{path}: its spherical metadata gives an initial orientation (yaw/pitch/roll "
+                f"{'/'.join(f'{v:g}' for v in md['orientation_deg'])} deg); recorded, not applied"
+            )
         if layout not in LAYOUTS:
             raise InputError(
                 f"{path}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}"
             )
         if eye not in EYES:
             raise InputError(f"{path}: unknown eye {eye!r}; expected left or right")
-        if projection not in PROJECTION_NAMES:
+        if projection not in PROJECTIONS:
             raise InputError(
-                f"--projection {projection!r}: unknown; expected one of "
-                f"{', '.join(PROJECTION_NAMES)}"
+                f"--projection {projection!r}: unknown; expected one of {', '.join(PROJECTIONS)}"
             )
-        info = probe(path)
-        src = cls(path, layout, projection, None, eye, info)
-        src.eye_size  # noqa: B018 - checks each eye is 2:1 (InputError otherwise)
+        lens_fov_deg = _check_lens_fov(projection, lens_fov_deg)
+        is_still = still is not None and not info.is_video
+        if is_still:
+            info = _still_info(info, *still)
+        src = cls(path, layout, projection, None, eye, lens_fov_deg, is_still, info)
+        object.__setattr__(src, "metadata", md or None)
+        object.__setattr__(src, "notes", tuple(notes))
+        src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
         if right is not None:
             right = check_local_path(right)
-            _check_right_eye(info, right, layout)
+            _check_right_eye(info, right, layout, projection)
             src = replace(src, right=right)
         return src
 
@@ -99,7 +133,34 @@ class Source:
     @property
     def eye_size(self) -> tuple[int, int]:
         """``(w, h)`` of the equirect frames the funnel yields for one eye."""
-        return self._info.eye_size(self.layout)
+        if self.projection == "equirect":
+            return self._info.eye_size(self.layout)
+        return self.converter.equirect_size
+
+    @property
+    def stored_eye_size(self) -> tuple[int, int]:
+        """``(w, h)`` of one eye as stored (in the source's projection)."""
+        w, h = self._info.width, self._info.height
+        if self.right is None and self.layout == "top-bottom":
+            return w, h // 2
+        if self.right is None and self.layout == "side-by-side":
+            return w // 2, h
+        return w, h
+
+    @property
+    def converter(self) -> EquirectConverter | None:
+        """The conversion to the equirect working frame (None for ``equirect``);
+        InputError when the frame size does not fit the projection's layout."""
+        if self.projection == "equirect":
+            return None
+        return converter(self.projection, self.stored_eye_size, self.lens_fov_deg)
+
+    @property
+    def covered(self):
+        """``(H, W)`` bool mask of the equirect working frame's covered directions, or
+        None when the projection covers the whole sphere."""
+        c = self.converter
+        return None if c is None or c.covered.all() else c.covered
 
     @property
     def _info(self) -> MediaInfo:
@@ -123,6 +184,12 @@ class Source:
         return {
             "layout": self.layout,
             "projection": self.projection,
+            "lens_fov_deg": self.lens_fov_deg,
+            "still": self.still,
+            "bit_depth": self._info.bit_depth,
+            "transfer": self._info.transfer,
+            "pix_fmt": self._info.pix_fmt,
+            "spherical_metadata": self.metadata,
             "eye": self.eye,
             "right": self.right,
         }
@@ -132,13 +199,15 @@ class Source:
         """The file holding ``eye``'s frames."""
         return self.right if self.right is not None and eye == "right" else self.path
 
-    def eye_view(self, frame: NDArray, eye: str | None = None) -> NDArray:
+    def eye_view(self, frame: NDArray, eye: str | None = None, *, convert: bool = True) -> NDArray:
         """``eye``'s equirect frame from a decoded frame of :meth:`file_of` ``(eye)``: the
-        stereo half (a view for ``top-bottom``) in the source's projection, converted."""
+        stereo half (a view for ``top-bottom``) converted from the source's projection
+        (``convert=False``: as stored, for :meth:`EquirectConverter.sample`)."""
         eye = self.eye if eye is None else eye
         if self.right is None and self.layout != "mono":
             frame = split_eye(frame, self.layout, eye, source=self.path)
-        return frame
+        c = self.converter
+        return frame if c is None or not convert else c(frame)
 
     def frames(
         self,
@@ -152,7 +221,7 @@ class Source:
         """One eye's equirect frames ``start <= i < end`` (``eye``: default ``self.eye``),
         one at a time; views into decoder buffers where possible (copy one to keep it)."""
         eye = self.eye if eye is None else eye
-        it = iter_frames(self.file_of(eye), fmt=fmt, start=start, end=end, threads=threads)
+        it = self._decode(self.file_of(eye), fmt, start, end, threads)
         try:
             for f in it:
                 yield self.eye_view(f, eye)
@@ -172,7 +241,7 @@ class Source:
         file is closed on every exit."""
         if self.right is None:
             eyes = EYES if self.stereo else (self.eye,)
-            it = iter_frames(self.path, fmt=fmt, start=start, end=end, threads=threads)
+            it = self._decode(self.path, fmt, start, end, threads)
             try:
                 for f in it:
                     yield tuple(np.array(self.eye_view(f, e), order="C") for e in eyes)
@@ -193,14 +262,38 @@ class Source:
             left.close()
             right.close()
 
-    def read(self, index: int = 0, *, fmt: PixelFormat = "rgb24", eye: str | None = None):
-        """One eye's equirect frame ``index`` (a copy)."""
+    def _decode(self, path: str, fmt: PixelFormat, start: int, end: int | None, threads):
+        """Stored frames of ``path``: the video's, or a still's image repeated."""
+        if not self.still:
+            yield from iter_frames(path, fmt=fmt, start=start, end=end, threads=threads)
+            return
+        img = read_frame(path, 0, fmt=fmt)
+        n = self._info.n_frames
+        for _ in range(max(0, start), n if end is None else min(int(end), n)):
+            yield img
+
+    def read_stored(self, eye: str | None = None) -> NDArray[np.uint8]:
+        """A still's stored image holding ``eye`` (RGB; InputError for a video)."""
+        if not self.still:
+            raise InputError(f"{self.path}: read_stored is for a still image")
+        return read_frame(self.file_of(self.eye if eye is None else eye), 0)
+
+    def read(
+        self,
+        index: int = 0,
+        *,
+        fmt: PixelFormat = "rgb24",
+        eye: str | None = None,
+        convert: bool = True,
+    ):
+        """One eye's equirect frame ``index`` (a copy; ``convert=False``: as stored)."""
         if index < 0:
             raise InputError(f"{self.path}: frame index must be >= 0; got {index}")
-        it = self.frames(fmt=fmt, eye=eye, start=index, end=index + 1)
+        eye = self.eye if eye is None else eye
+        it = self._decode(self.file_of(eye), fmt, index, index + 1, None)
         try:
             for f in it:
-                return np.array(f)
+                return np.array(self.eye_view(f, eye, convert=convert))
         finally:
             it.close()
         raise InputError(f"{self.path}: has no frame {index}")
@@ -211,7 +304,48 @@ def as_source(video) -> Source:
     return video if isinstance(video, Source) else Source.open(video)
 
 
-def _check_right_eye(info: MediaInfo, right: str, layout: str) -> None:
+_IMAGE_CODECS = ("image", "mjpeg", "png", "bmp", "tiff", "webp")
+
+
+def _resolve(path: str, what: str, given, from_file, notes: list[str]):
+    """An option against the file's metadata: the option wins (a note if they differ)."""
+    if given is None:
+        return from_file
+    if from_file is not None and from_file != given:
+        notes.append(
+            f"{path}: its spherical metadata says {what} {from_file}; --{what} {given} wins"
+        )
+    return given
+
+
+def _still_info(info: MediaInfo, seconds: float | None, fps: float | None) -> MediaInfo:
+    """The MediaInfo of an image made a clip of ``seconds`` at ``fps``."""
+    seconds = STILL_SECONDS if seconds is None else float(seconds)
+    fps = STILL_FPS if fps is None else float(fps)
+    if not (seconds > 0 and math.isfinite(seconds)):
+        raise InputError(
+            f"{info.path}: --seconds must be > 0 to make a clip of a still image; got {seconds:g}"
+        )
+    if not (fps > 0 and math.isfinite(fps)):
+        raise InputError(f"{info.path}: --fps must be > 0; got {fps:g}")
+    n = max(1, round(seconds * fps))
+    return replace(info, fps=fps, n_frames=n, is_video=True)
+
+
+def _check_lens_fov(projection: str, lens_fov_deg) -> float | None:
+    """The lens FOV of a dual fisheye (default :data:`DEFAULT_LENS_FOV_DEG`); InputError for
+    one outside (180, 360) or given for another projection."""
+    if lens_fov_deg is None:
+        return DEFAULT_LENS_FOV_DEG if projection == "dfisheye" else None
+    f = float(lens_fov_deg)
+    if projection != "dfisheye":
+        raise InputError(f"--lens-fov is for --projection dfisheye; got --projection {projection}")
+    if not (180.0 < f < 360.0):
+        raise InputError(f"--lens-fov must be in (180, 360) degrees, e.g. 190; got {lens_fov_deg}")
+    return f
+
+
+def _check_right_eye(info: MediaInfo, right: str, layout: str, projection: str) -> None:
     """InputError unless ``right`` is a video matching ``info`` (the left eye's file):
     same stored size, frame rate and frame count, both one eye each (layout mono)."""
     if layout != "mono":
@@ -220,14 +354,26 @@ def _check_right_eye(info: MediaInfo, right: str, layout: str) -> None:
             "is for one file holding both eyes (drop one of them)"
         )
     r = probe(right)
-    if not r.is_video and info.is_video:
-        raise InputError(f"{right}: a still image; --right needs the right eye's video")
-    r.eye_size("mono")  # 2:1, else InputError naming the file
+    other = read_spherical(right).get("projection") if r.is_video else None
+    if other is not None and other != projection:
+        raise InputError(
+            f"{right}: a right-eye file of another projection ({other}, from its metadata); "
+            f"the left eye ({info.path}) is {projection}"
+        )
+    if r.is_video != (info.codec not in _IMAGE_CODECS):
+        what = "a video" if r.is_video else "a still image"
+        raise InputError(
+            f"{right}: {what}; the left eye ({info.path}) is not: --right takes the same kind"
+        )
+    if projection == "equirect":
+        r.eye_size("mono")  # 2:1, else InputError naming the file
     if (r.width, r.height) != (info.width, info.height):
         raise InputError(
             f"{right}: right eye is {r.width}x{r.height}; the left eye ({info.path}) is "
             f"{info.width}x{info.height}: the two eye files must have the same size"
         )
+    if not r.is_video:
+        return  # two stills: the clip's rate and length are the options'
     if abs(r.fps - info.fps) > 1e-6 * info.fps:
         raise InputError(
             f"{right}: right eye is {r.fps:g} fps; the left eye ({info.path}) is {info.fps:g} fps"

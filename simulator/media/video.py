@@ -17,7 +17,7 @@ import os
 import queue
 import threading
 from collections.abc import Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
 from typing import Literal, TypeVar
@@ -54,6 +54,15 @@ class MediaInfo:
     n_frames : number of frames (1 for a still image)
     is_video : False for a still image
     codec : decoder name (``"image"`` for stills)
+    pix_fmt : the decoder's pixel format (e.g. ``yuv420p10le``; None for stills)
+    bit_depth : bits per sample of the source (8 for stills; 10 for HEVC Main10 etc.);
+        frames are always delivered as 8-bit (FFmpeg's swscale conversion, no tone mapping)
+    transfer : the stream's transfer characteristic (``bt709``, ``smpte2084`` = PQ,
+        ``arib-std-b67`` = HLG, ...; None when unspecified)
+    frame_times : None for a constant-rate stream starting at 0 (frame ``i`` at
+        ``i / fps``), else each frame's presentation time in seconds on the player's clock
+        (the container's start is 0: a video stream starting later than its audio has its
+        first frame after 0), from the stream's timestamps (:meth:`times_s`)
     """
 
     path: str
@@ -64,10 +73,38 @@ class MediaInfo:
     n_frames: int
     is_video: bool
     codec: str
+    pix_fmt: str | None = None
+    bit_depth: int = 8
+    transfer: str | None = None
+    frame_times: NDArray[np.float64] | None = field(default=None, compare=False, repr=False)
+
+    def times_s(self, frames=None) -> NDArray[np.float64]:
+        """Presentation time (seconds) of video frames ``frames`` (default: all)."""
+        idx = np.arange(self.n_frames) if frames is None else np.asarray(frames)
+        if self.frame_times is None:
+            return idx / self.fps
+        return self.frame_times[np.clip(idx, 0, self.n_frames - 1)]
+
+    def frame_at(self, t_s) -> NDArray[np.int64]:
+        """The frame on screen at time ``t_s`` (the last one starting at or before it)."""
+        t = np.asarray(t_s, float)
+        if self.frame_times is None:
+            return np.floor(t * self.fps + 1e-9).astype(np.int64)
+        return np.searchsorted(self.frame_times, t + 1e-9, side="right").astype(np.int64) - 1
+
+    @property
+    def variable_rate(self) -> bool:
+        """True when frame times are not ``i / fps`` (variable rate or a late start)."""
+        return self.frame_times is not None
 
     @property
     def duration_s(self) -> float:
-        return self.n_frames / self.fps
+        """Seconds to the end of the last frame (a variable-rate stream's last frame lasts
+        its median interval)."""
+        if self.frame_times is None:
+            return self.n_frames / self.fps
+        dt = np.diff(self.frame_times)
+        return float(self.frame_times[-1] + (np.median(dt) if dt.size else 1.0 / self.fps))
 
     def eye_size(self, layout: str = "mono") -> tuple[int, int]:
         """Stored per-eye ``(w, h)``, after checking each eye displays as 2:1."""
@@ -133,27 +170,73 @@ def probe(path: str | os.PathLike) -> MediaInfo:
         rate = s.guessed_rate or s.base_rate or s.average_rate
         fps = float(rate) if rate else 0.0
         codec = cc.name
-        n = _count_frames(c, s, p)
+        pix_fmt, depth, transfer = _depth_and_transfer(cc)
+        n, times = _count_frames(c, s, p)
     if codec in ("mjpeg", "png", "bmp", "tiff", "webp") and n <= 1:
         return MediaInfo(str(p), w, h, sar, 1.0, 1, False, codec)
     if w <= 0 or h <= 0:
         raise InputError(f"{p}: video stream has no frame size")
     if fps <= 0:
         raise InputError(f"{p}: video stream has no frame rate")
-    return MediaInfo(str(p), w, h, sar, fps, n, True, codec)
+    if times is not None and np.all(np.abs(times - np.arange(n) / fps) <= 0.25 / fps):
+        times = None  # constant rate from 0: frame i at i / fps
+    return MediaInfo(str(p), w, h, sar, fps, n, True, codec, pix_fmt, depth, transfer, times)
 
 
-def _count_frames(container, stream, p: Path) -> int:
-    """Frames a decoder delivers: non-empty packets not marked as discarded."""
+#: ISO/IEC 23091-2 transfer characteristics (FFmpeg's AVColorTransferCharacteristic).
+_TRANSFERS = {1: "bt709", 4: "gamma22", 5: "gamma28", 6: "smpte170m", 7: "smpte240m", 8: "linear",
+              13: "iec61966-2-1", 14: "bt2020-10", 15: "bt2020-12", 16: "smpte2084",
+              18: "arib-std-b67"}  # fmt: skip
+
+
+def _depth_and_transfer(cc) -> tuple[str | None, int, str | None]:
+    """Pixel format, bits per sample and transfer name of a video codec context."""
+    fmt = cc.format
+    name = getattr(fmt, "name", None)
+    try:
+        depth = max(int(c.bits) for c in fmt.components) if fmt is not None else 8
+    except (AttributeError, ValueError):
+        depth = 8
+    trc = getattr(cc, "color_trc", None)
+    return name, depth, _TRANSFERS.get(int(trc)) if trc is not None else None
+
+
+def _count_frames(container, stream, p: Path) -> tuple[int, NDArray | None]:
+    """Frames a decoder delivers (non-empty packets not marked as discarded) and their
+    presentation times on the player's clock (None when packets carry no timestamps).
+    InputError naming the frame for timestamps that repeat or go backwards."""
     n = 0
+    pts: list[int] = []
+    last_dts = None
     try:
         for pk in container.demux(stream):
             if pk.size > 0 and not getattr(pk, "is_discard", False):
+                if pk.dts is not None and last_dts is not None and pk.dts <= last_dts:
+                    raise InputError(
+                        f"{p}: video timestamps go backwards or repeat at frame {n} (decode "
+                        "order); vimsim needs strictly increasing frame times"
+                    )
+                last_dts = pk.dts if pk.dts is not None else last_dts
+                pts.append(pk.pts)
                 n += 1
+    except InputError:
+        raise
     except Exception as e:  # noqa: BLE001 - corrupt container
         if n == 0:
             raise InputError(f"{p}: unreadable video stream ({e})") from None
-    return n
+    if n == 0 or any(v is None for v in pts) or stream.time_base is None:
+        return n, None
+    order = np.sort(np.asarray(pts, np.int64))
+    rep = np.flatnonzero(np.diff(order) <= 0)
+    if rep.size:
+        raise InputError(
+            f"{p}: video timestamps repeat at frame {int(rep[0]) + 1}; vimsim needs strictly "
+            "increasing frame times"
+        )
+    # the player's clock: 0 at the container's start (the earliest stream)
+    t0 = container.start_time / 1e6 if container.start_time is not None else None
+    times = order * float(stream.time_base)
+    return n, times - (t0 if t0 is not None else times[0])
 
 
 def _frame_array(frame, fmt: PixelFormat) -> NDArray[np.uint8]:
@@ -323,6 +406,8 @@ class VideoWriter:
         whose audio (range) is carried into the file
     threads : x264 encoder threads (None: x264's default, about 1.5 per core); a task that
         declares its CPUs (``vimsim study``) passes them
+    times_s : None (frame ``i`` at ``i / fps``), or each frame's time in seconds (a
+        variable-rate source's timestamps: the output keeps its timing, from its first frame)
 
     Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
     """
@@ -337,6 +422,7 @@ class VideoWriter:
         preset: str = "veryfast",
         audio=None,
         threads: int | None = None,
+        times_s=None,
     ):
         import av
 
@@ -362,6 +448,11 @@ class VideoWriter:
             "preset": preset,
             **({} if threads is None else {"threads": str(int(threads))}),
         }
+        self._times = None
+        if times_s is not None:  # timestamps in 1/90000 s, from the first frame
+            t = np.asarray(times_s, float)
+            self._stream.codec_context.time_base = Fraction(1, 90000)
+            self._times = np.round((t - t[0]) * 90000).astype(np.int64)
         self._closed = False
         self.n_audio_packets = 0
         if audio is not None:
@@ -380,9 +471,16 @@ class VideoWriter:
                 f"frame must be ({self.size[1]}, {self.size[0]}, 3) uint8; got {frame.shape} {frame.dtype}"
             )
         vf = av.VideoFrame.from_ndarray(np.ascontiguousarray(frame), format="rgb24")
+        vf.pts = self.frame_pts()
         for pkt in self._stream.encode(vf):
             self._container.mux(pkt)
         self.n_written += 1
+
+    def frame_pts(self) -> int | None:
+        """The pts of the next frame (None: the encoder counts frames at ``fps``)."""
+        if self._times is None:
+            return None
+        return int(self._times[min(self.n_written, len(self._times) - 1)])
 
     def close(self, ok: bool = True) -> None:
         """Flush and close; rename into place if ``ok``, else delete the partial file."""

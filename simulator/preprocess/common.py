@@ -6,6 +6,8 @@ import math
 import os
 from pathlib import Path
 
+import numpy as np
+
 from simulator.core.errors import InputError
 
 __all__ = ["PreprocessInterrupted"]
@@ -38,8 +40,13 @@ def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[in
     fps = info.fps
     if not (start_s >= 0 and math.isfinite(start_s)):
         raise InputError(f"{src}: --start must be seconds >= 0; got {start_s}")
-    s = round(start_s * fps)
-    e = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
+    if getattr(info, "frame_times", None) is not None:  # variable rate: by timestamps
+        t = info.frame_times
+        s = int(np.searchsorted(t, start_s - 0.5 / fps))
+        e = info.n_frames if end_s is None else int(np.searchsorted(t, end_s - 0.5 / fps))
+    else:
+        s = round(start_s * fps)
+        e = info.n_frames if end_s is None else min(info.n_frames, round(end_s * fps))
     if end_s is not None and not (end_s > start_s):
         raise InputError(f"{src}: --end ({end_s} s) must be after --start ({start_s} s)")
     if s >= info.n_frames:
@@ -52,6 +59,22 @@ def frame_range(info, start_s: float, end_s: float | None, src: str) -> tuple[in
             f"(video: {info.n_frames} frames at {fps:g} fps)"
         )
     return s, e
+
+
+def flow_rate_scale(info, start_frame: int, n_rows: int):
+    """Per grid row, the factor turning deg/s computed with ``fps`` into deg/s over the
+    true interval between the row's two frames (a variable-rate stream; row 0 repeats
+    row 1), or None for a constant rate."""
+    if info.frame_times is None:
+        return None
+    t = info.times_s(np.arange(max(0, start_frame - 1), start_frame + n_rows))
+    dt = np.diff(t)
+    if start_frame == 0:
+        dt = np.concatenate([dt[:1], dt])
+    dt = dt[-n_rows:].copy()
+    if n_rows > 1:
+        dt[0] = dt[1]  # row 0 repeats row 1
+    return 1.0 / (info.fps * np.maximum(dt, 1e-6))
 
 
 def common_meta(
@@ -68,16 +91,22 @@ def common_meta(
     compares it with a video) of ``source`` (a :class:`simulator.media.source.Source`)."""
     info = source.info
     fps = info.fps
+    vfr = {}
+    if info.frame_times is not None:  # the stream's timestamps of the grid's rows
+        t = info.times_s(np.arange(start_frame, start_frame + n_rows))
+        vfr = {"frame_times_s": [round(float(v), 6) for v in t]}
     return {
+        **vfr,
         "fps": fps,
         "n_frames": n_rows,
         "flow": flow,
         "layout": source.layout,
         "eye": source.eye,
         "projection": source.projection,
+        "source": source.settings(),
         "start_frame": start_frame,
         "end_frame": start_frame + n_rows,
-        "start_s": start_frame / fps,
+        "start_s": float(info.times_s([start_frame])[0]),
         "eye_size": list(source.eye_size),
         "units": units,
         "frame0": "repeats frame 1",

@@ -60,6 +60,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.media.coverage import coverage_masks, coverage_meta
 from simulator.media.gridfile import content_hash, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
@@ -67,6 +68,7 @@ from simulator.preprocess.common import (
     PreprocessInterrupted,
     check_output_dir,
     common_meta,
+    flow_rate_scale,
     frame_range,
 )
 from simulator.sphere.geometry import perspective_rays
@@ -457,8 +459,16 @@ def preprocess_video(
     )
     meta["reduce_stride"] = stride
     meta["window_interp"] = _INTERP
+    dps_all, px_all = np.stack(dps_rows), np.stack(px_rows)
+    scale = flow_rate_scale(info, start_f, n_rows)
+    if scale is not None:  # variable frame rate: deg/s over each row's true interval
+        dps_all = dps_all * scale[:, None, None].astype(np.float32)
+    cov = coverage_meta(source.covered, grid, None)
+    if cov is not None:  # windows outside the projection: no flow measured
+        meta["coverage"] = cov
+        dps_all, px_all = (a * coverage_masks(meta)[0] for a in (dps_all, px_all))
     if n_rows != total:
         warnings.warn(f"{src}: expected {total} frames, decoded {n_rows}", stacklevel=2)
-    save_grid(out, np.stack(dps_rows), np.stack(px_rows), grid, meta)
+    save_grid(out, dps_all, px_all, grid, meta)
     ckpt.unlink(missing_ok=True)
     return out

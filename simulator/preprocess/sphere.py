@@ -30,10 +30,11 @@ from scipy import sparse
 from simulator.core.errors import InputError
 from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.media.coverage import COVERED_SHARE, cell_coverage, coverage_masks, coverage_meta
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
-from simulator.preprocess.common import check_output_dir, common_meta, frame_range
+from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -326,16 +327,23 @@ def field_from_frames(
     return _fields(est, (est.tiles(f) for f in frames), 256, progress, "")
 
 
-def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None):
+def _fields(
+    est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, mask=None,
+    scale=None,
+):  # fmt: skip
     """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
     repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
-    ``source`` prefixes the error for fewer than 2 frames."""
+    ``source`` prefixes the error for fewer than 2 frames; ``mask``: the covered cells
+    (others 0: no flow measured outside the projection); ``scale``: per row, the factor of
+    a variable frame rate's true interval (:func:`simulator.preprocess.common.flow_rate_scale`)."""
     out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
         if prev is not None:
-            out.append(est.field(prev, t))
+            f = est.field(prev, t)
+            f = f if mask is None else f * mask
+            out.append(f if scale is None else f * np.float32(scale[min(n, len(scale) - 1)]))
         prev = t
         n += 1
         if progress is not None:
@@ -371,7 +379,12 @@ def field_from_video(
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
-        return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink), info
+        mask = None if source.covered is None else cell_coverage(source.covered, config.cell_deg)
+        mask = None if mask is None else (mask >= COVERED_SHARE).astype(np.float32)
+        scale = flow_rate_scale(info, int(start), last - int(start))
+        return _fields(
+            est, tiles, last - int(start), progress, f"{path}: ", sink, mask, scale
+        ), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file
@@ -448,6 +461,9 @@ def preprocess_sphere(
         parts = [window_pof(c, cells.cell_deg, grid, fps) for c in spool.chunks()]
         dps = np.concatenate([d for d, _ in parts])
         px = np.concatenate([x for _, x in parts])
+        cov = coverage_meta(source.covered, grid, config.cell_deg)
+        if cov is not None:  # windows outside the projection: no flow measured
+            dps, px = (a * coverage_masks({"coverage": cov})[0] for a in (dps, px))
         T = spool.n_rows
         if T != end_f - start_f:
             warnings.warn(f"{src}: expected {end_f - start_f} frames, decoded {T}", stacklevel=2)
@@ -465,6 +481,7 @@ def preprocess_sphere(
                     "field_dps": "deg/s of visual angle",
                 },
             ),
+            **({} if cov is None else {"coverage": cov}),
             "field": field_meta(
                 replace(config, stride=config.stride or default_stride), field_dtype
             ),

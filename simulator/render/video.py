@@ -68,6 +68,7 @@ def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
             f"frame must be ({h * 3 // 2}, {w}) uint8 yuv420p; got {frame.shape} {frame.dtype}"
         )
     vf = av.VideoFrame.from_ndarray(frame, format="yuv420p")
+    vf.pts = writer.frame_pts()
     for pkt in writer._stream.encode(vf):
         writer._container.mux(pkt)
     writer.n_written += 1
@@ -188,6 +189,11 @@ def render_video(
     eyes = (wanted[0],) if same else tuple(wanted)
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
+    # a variable-rate source: the outputs keep its timing
+    info = source.info
+    out_times = (
+        info.times_s(np.arange(start_frame, start_frame + total)) if info.variable_rate else None
+    )
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
     t_start = time.perf_counter()
     serial = threads is not None and int(threads) <= 1
@@ -195,7 +201,8 @@ def render_video(
         with contextlib.ExitStack() as stack:
             writers, workers = _workers(stack, paths[: len(eyes)], fps, (w, h), serial,
                                         on_frame, crf=crf, preset=preset, audio=audio,
-                                        threads=threads)  # fmt: skip
+                                        threads=threads,
+                                        times_s=out_times)  # fmt: skip
             loop = _FrameLoop(renderer, rots, op, cell_opacity, eyes, stereo, workers,
                               on_frame is not None, review_eye, timings)  # fmt: skip
             try:

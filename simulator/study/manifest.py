@@ -17,7 +17,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS
+from simulator.core.choices import MITIGATIONS, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
@@ -35,7 +35,7 @@ _TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", 
 _STUDY_KEYS = ("name", "cache")
 _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
-    "window_size", "flow", "cell",
+    "window_size", "flow", "cell", "projection", "lens_fov",
 )  # fmt: skip
 _GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
@@ -68,6 +68,8 @@ class VideoSpec:
     window_size: int = 256
     flow: str = "dis"
     cell_deg: float = 4.0
+    projection: str = "equirect"
+    lens_fov_deg: float | None = None
 
     def options(self) -> dict:
         """The preprocessing options (what the grid cache key is made of, besides the video)."""
@@ -81,7 +83,9 @@ class VideoSpec:
             "window_size": self.window_size,
             "flow": self.flow,
             "cell_deg": self.cell_deg if self.method == "sphere" else None,
-        }
+            **({} if self.projection == "equirect" else
+               {"projection": self.projection, "lens_fov_deg": self.lens_fov_deg}),
+        }  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -175,6 +179,8 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
                 window_size=e.number("window_size", 256, lo=16, hi=2048, integer=True),
                 flow=e.get("flow", (str,), "dis"),
                 cell_deg=cell,
+                projection=e.get("projection", (str,), "equirect", choices=PROJECTIONS),
+                lens_fov_deg=e.number("lens_fov", None, lo=180.0, lo_open=True, hi=360.0),
             )
         )
     return tuple(out)

@@ -51,7 +51,13 @@ WEIGHT_CACHE_BYTES = 192 << 20
 
 def _source(video: dict) -> Source:
     """The manifest video's checked :class:`simulator.media.source.Source`."""
-    return Source.open(video["path"], layout=video["layout"], eye=video["eye"])
+    return Source.open(
+        video["path"],
+        layout=video["layout"],
+        eye=video["eye"],
+        projection=video.get("projection"),
+        lens_fov_deg=video.get("lens_fov_deg"),
+    )
 
 
 def _error_line(e: BaseException) -> str:
@@ -248,7 +254,7 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
         s = render_viewing(
-            Source.open(video["path"], layout=video["layout"]),
+            dataclasses.replace(_source(video), eye="left"),
             hp,
             outdir,
             grid=grid,

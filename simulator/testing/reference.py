@@ -40,6 +40,7 @@ __all__ = [
     "ffmpeg_exe",
     "psnr",
     "tile_displacement",
+    "v360_convert",
     "v360_filter",
     "v360_time_ms",
     "v360_view",
@@ -108,6 +109,26 @@ def v360_view(
     if r.returncode != 0:
         raise RuntimeError(f"ffmpeg v360 failed: {r.stderr.decode(errors='replace').strip()}")
     w, h = size
+    out = np.frombuffer(r.stdout, np.uint8)
+    if out.size != w * h * 3:
+        raise RuntimeError(f"ffmpeg v360 returned {out.size} bytes; expected {w * h * 3}")
+    return out.reshape(h, w, 3)
+
+
+def v360_convert(img: np.ndarray, output: str, size: tuple[int, int], options: str = "") -> np.ndarray:
+    """ffmpeg v360's conversion of an ``(H, W, 3)`` uint8 RGB equirect frame to projection
+    ``output`` (v360's name: ``eac``, ``c3x2``, ``c6x1``, ``dfisheye``, ``hequirect``, ...)
+    of ``size = (width, height)``; ``options``: extra ``:key=value`` v360 options (e.g.
+    ``":h_fov=190:v_fov=190"`` for a dual fisheye's lens). Bicubic (v360's Lagrange)."""
+    img = np.ascontiguousarray(img)
+    H, W = img.shape[:2]
+    w, h = size
+    vf = f"format=gbrp,v360=e:{output}:w={w}:h={h}:interp=cubic{options}"
+    cmd = [ffmpeg_exe(), "-v", "error", "-hide_banner", "-f", "rawvideo", "-pix_fmt", "rgb24",
+           "-s", f"{W}x{H}", "-i", "-", "-vf", vf, "-f", "rawvideo", "-pix_fmt", "rgb24", "-"]  # fmt: skip
+    r = subprocess.run(cmd, input=img.tobytes(), capture_output=True, check=False)
+    if r.returncode != 0:
+        raise RuntimeError(f"ffmpeg v360 failed: {r.stderr.decode(errors='replace').strip()}")
     out = np.frombuffer(r.stdout, np.uint8)
     if out.size != w * h * 3:
         raise RuntimeError(f"ffmpeg v360 returned {out.size} bytes; expected {w * h * 3}")

@@ -109,6 +109,8 @@ def decode_frames(path, indices) -> dict[int, NDArray[np.uint8]]:
 
     want = sorted({int(i) for i in indices})
     info = probe(path)
+    if info.variable_rate:  # frame numbers are not pts x fps: decode in order
+        return _decode_sequential(iter_frames(path), want)
     out: dict[int, NDArray[np.uint8]] = {}
     with av.open(str(path)) as c:
         s = c.streams.video[0]
@@ -211,9 +213,16 @@ def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) ->
     """Render the eye views at ``times`` into ``out`` as PNGs (written by two threads while
     the next view renders); the rows of ``frames.json``. A failure removes this run's PNGs."""
     info, stereo = plan.info, source.stereo
-    idx = [frame_index(t, info.fps) for t in times]
-    decoded = decode_frames(source.path, idx)
-    decoded_right = decode_frames(source.right, idx) if source.right is not None else None
+    if info.variable_rate:  # the frame on screen by the stream's timestamps
+        idx = [max(0, int(info.frame_at(t))) for t in times]
+    else:
+        idx = [frame_index(t, info.fps) for t in times]
+    if source.still:  # an image made a clip: every frame is the image
+        decoded = dict.fromkeys(idx, source.read_stored("left"))
+        decoded_right = dict.fromkeys(idx, source.read_stored("right")) if source.right else None
+    else:
+        decoded = decode_frames(source.path, idx)
+        decoded_right = decode_frames(source.right, idx) if source.right is not None else None
     renderer = EyeRenderer(ctx, config)
     rows = []
     bar = Counter(progress, len(times))
@@ -283,6 +292,7 @@ def _index(source, plan, view: ViewSpec, headpath, rows: list[dict], ctx) -> dic
         "layout": source.layout,
         "right": source.right,
         "projection": source.projection,
+        "source": source.settings(),
         "hold": view.hold,
         "renderer": {
             "eye_size": [w, h],
@@ -353,7 +363,8 @@ def render_frames(
         view=view,
     )
     info = plan.info
-    times = moments(info.n_frames, info.fps, at=at, every=every, source=str(video))
+    rate = info.n_frames / info.duration_s  # = fps unless the rate varies
+    times = moments(info.n_frames, rate, at=at, every=every, source=str(video))
     stereo = source.stereo
     parallax = config.grf is not None and config.grf.distance_m is not None
     eyes = ("left", "right") if stereo or parallax else ("both",)

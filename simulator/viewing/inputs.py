@@ -17,13 +17,18 @@ def frame_range(
     end_s: float | None = None,
     *,
     video: str = "",
+    times=None,
 ) -> tuple[int, int]:
     """Video frames ``f0 <= i < f1`` whose times ``i / fps`` lie in ``[start_s, end_s)``.
 
     None = the video's start / end. InputError (naming ``video``) for a range outside the
     video (``start_s`` < 0 or at/after the last frame, ``end_s`` beyond the video's
     duration ``n_frames / fps``), ``end_s <= start_s``, or a range holding no frame.
+    ``times``: each frame's presentation time (a variable-rate stream,
+    :attr:`simulator.media.video.MediaInfo.frame_times`) instead of ``i / fps``.
     """
+    if times is not None:
+        return _frame_range_times(np.asarray(times, float), fps, start_s, end_s, video)
     dur = n_frames / fps
     src = f"{video}: " if video else ""
     s = 0.0 if start_s is None else float(start_s)
@@ -41,6 +46,28 @@ def frame_range(
     f1 = min(n_frames, int(np.ceil(e * fps - eps)))
     if f1 <= f0:
         raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame at {fps:g} fps")
+    return f0, f1
+
+
+def _frame_range_times(times, fps: float, start_s, end_s, video: str) -> tuple[int, int]:
+    """:func:`frame_range` of frames at ``times`` (seconds, increasing)."""
+    src = f"{video}: " if video else ""
+    dt = np.diff(times)
+    dur = float(times[-1] + (np.median(dt) if dt.size else 1.0 / fps))
+    s = float(times[0]) if start_s is None else float(start_s)
+    e = dur if end_s is None else float(end_s)
+    if not (np.isfinite(s) and np.isfinite(e)):
+        raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if e <= s:
+        raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
+    if s < 0 or s >= dur:
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
+    if e > dur + 1e-6:
+        raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
+    f0 = int(np.searchsorted(times, s - 1e-6, side="left"))
+    f1 = int(np.searchsorted(times, e - 1e-6, side="left"))
+    if f1 <= f0:
+        raise InputError(f"{src}--start {s:g} s to --end {e:g} s holds no frame")
     return f0, f1
 
 

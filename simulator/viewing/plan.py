@@ -48,6 +48,8 @@ class ViewingPlan:
         stereo source, else ``left``
     epof_frustum : the frustum the EPOF was computed over (that eye's; the right eye's
         mirrors the left eye's left and right half-angles)
+    coverage : ndarray, shape (N,), covered share of the viewport per frame (a grid of a
+        projection not covering the sphere), else None
     """
 
     info: MediaInfo
@@ -64,6 +66,7 @@ class ViewingPlan:
     source: Source | None = None
     epof_eye: str = "left"
     epof_frustum: Frustum | None = None
+    coverage: np.ndarray | None = None
 
     @property
     def right(self) -> str | None:
@@ -108,11 +111,12 @@ def _check_needs_grid(view: ViewSpec, grid) -> None:
 
 
 def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged):
-    """``(epof_dps, opacity, thresholds_dps, method)`` of the plan's ``frames`` (NaN, None,
-    NaN, None without a grid): the EPOF over ``frustum`` and the opacity of ``view.rule``."""
+    """``(epof_dps, opacity, thresholds_dps, method, coverage)`` of the plan's ``frames``
+    (NaN, None, NaN, None, None without a grid): the EPOF over ``frustum``, the opacity of
+    ``view.rule`` and the covered share of the view (None for a full-sphere source)."""
     nf = len(frames)
     if grid is None:
-        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None
+        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None, None
     rule, f0, f1 = view.rule, int(frames[0]), int(frames[-1]) + 1
     # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
     # and easing have their state at the range's start (cost ~ the range).
@@ -135,6 +139,7 @@ def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps
         res.opacity[rows].astype(float),
         tuple(float(v) for v in res.thresholds_dps),
         res.meta["method"],
+        None if res.coverage is None else res.coverage[rows].astype(float),
     )
 
 
@@ -179,11 +184,13 @@ def plan_viewing(
             f"{video}: a still image; render needs a video (vimsim viewport renders images)"
         )
     hp = headpath if isinstance(headpath, HeadPath) else load_headpath(headpath)
-    f0, f1 = frame_range(info.n_frames, info.fps, start_s, end_s, video=str(video))
+    f0, f1 = frame_range(
+        info.n_frames, info.fps, start_s, end_s, video=str(video), times=info.frame_times
+    )
     ranged = (f0, f1) != (0, info.n_frames)
     nf = f1 - f0
     frames = np.arange(f0, f1)
-    times = frames / info.fps
+    times = info.times_s(frames)  # the stream's timestamps (player's clock), else i / fps
     hp.check_covers(float(times[-1]), hold=hold, video=str(video), start_s=float(times[0]))
 
     if grid is not None and not isinstance(grid, GridFile):
@@ -200,7 +207,7 @@ def plan_viewing(
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
-    epof_dps, op_auto, thresholds, epof_method = _epof_rows(
+    epof_dps, op_auto, thresholds, epof_method, coverage = _epof_rows(
         grid, hp, view, epof_frustum, frames, info.fps, ranged
     )
     if not drawn:
@@ -227,4 +234,5 @@ def plan_viewing(
         source,
         epof_eye,
         epof_frustum,
+        coverage,
     )

@@ -123,6 +123,8 @@ def viewing_summary(job, result, *, settings: dict, run: dict) -> dict:
         "layout": source.layout,
         "right": source.right,
         "projection": source.projection,
+        "source": source.settings(),
+        "coverage_mean": None if plan.coverage is None else _mean(plan.coverage),
         "eyes": job.eyes,
         "audio": audio_summary(job.audio, job.audio_requested),
         "fps": info.fps,

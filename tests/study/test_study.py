@@ -244,6 +244,10 @@ BAD = {
     "video file": ('[[videos]]\nid = "clip"\npath = "none.mp4"\n[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n',
                    "[[videos]] #1 ('clip'): "),
     "toml": ("[[videos]\n", "not valid TOML"),
+    "projection": (('[[videos]]\nid = "clip"\npath = "clip.mp4"\nprojection = "mercator"\n'
+                   '[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n'), "projection = 'mercator': expected one of"),
+    "lens fov": (('[[videos]]\nid = "clip"\npath = "clip.mp4"\nprojection = "dfisheye"\nlens_fov = 120\n'
+                 '[[viewings]]\nvideo = "clip"\ntrace = "P01.csv"\n'), "lens_fov = 120: expected a number in (180.0, 360.0]"),
 }  # fmt: skip
 
 

@@ -1,0 +1,67 @@
+"""Coverage: a VR180 (hequirect) source measures no flow behind the viewer; EPOF averages the covered part and reports its share."""
+
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+
+from simulator.cli import main
+from simulator.epof.viewing import compute_epof, read_epof_csv
+from simulator.media.coverage import MIN_COVERAGE, coverage_masks
+from simulator.media.gridfile import load_grid
+from simulator.testing.reference import ffmpeg_exe
+from simulator.traces.path import HeadPath
+
+
+@pytest.fixture(scope="module")
+def vr180(tmp_path_factory):
+    d = tmp_path_factory.mktemp("vr180")
+    assert main(["synth", str(d / "r.mp4"), "--scene", "rotate", "--seconds", "1",
+                 "--fps", "10", "--size", "128x64"]) == 0  # fmt: skip
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i", str(d / "r.mp4"), "-vf",
+                    "v360=e:hequirect:w=64:h=64", "-c:v", "libx264", "-crf", "10", str(d / "h.mp4")],
+                   check=True)  # fmt: skip
+    return d
+
+
+@pytest.mark.parametrize("method", ["sphere", "paper"])
+def test_vr180_back_half_not_measured_and_epof_over_covered_part(vr180, method):
+    g = vr180 / f"{method}.npz"
+    args = ["preprocess", str(vr180 / "h.mp4"), "-o", str(g), "--method", method,
+            "--projection", "hequirect", "--no-progress", "--window-size", "32"]  # fmt: skip
+    assert main(args + (["--cell", "10"] if method == "sphere" else [])) == 0
+    grid = load_grid(g)
+    wins, cells = coverage_masks(grid.meta)
+    assert 0.45 < grid.meta["coverage"]["sphere_share"] < 0.55
+    assert not wins.all() and wins.any()
+    assert np.all(np.asarray(grid.pof_dps)[:, ~wins] == 0)  # nothing measured behind
+    if method == "sphere":
+        f = np.asarray(grid.field_dps[:])
+        assert np.all(f[:, ~cells] == 0) and f[:, cells].mean() > 1
+    t = np.array([0.0, 1.0])
+    front = HeadPath.from_angles_deg(t, np.zeros(2), np.zeros(2), np.zeros(2))
+    back = HeadPath.from_angles_deg(t, np.full(2, 180.0), np.zeros(2), np.zeros(2))
+    side = HeadPath.from_angles_deg(t, np.full(2, 80.0), np.zeros(2), np.zeros(2))
+    rf, rb, rs = (compute_epof(grid, hp, hold=True) for hp in (front, back, side))
+    assert np.all(rf.coverage > 0.95) and np.all(rb.coverage < 0.05)
+    assert np.all(rb.epof_dps == 0)  # nothing seen: no flow
+    assert np.all((rs.coverage > MIN_COVERAGE) & (rs.coverage < 0.9))
+    # the covered part's mean, not diluted by the black half
+    assert np.median(rs.epof_dps[1:]) > 0.7 * np.median(rf.epof_dps[1:])
+
+
+def test_epof_csv_has_the_coverage_column(vr180, tmp_path):
+    g = vr180 / "sphere.npz"
+    if not g.exists():
+        assert main(["preprocess", str(vr180 / "h.mp4"), "-o", str(g), "--method", "sphere",
+                     "--projection", "hequirect", "--no-progress", "--cell", "10"]) == 0  # fmt: skip
+    assert (
+        main(["headpath", "synth", "sweep", "-o", str(tmp_path / "p.csv"), "--seconds", "2"]) == 0
+    )
+    assert main(["epof", str(g), str(tmp_path / "p.csv"), "-o", str(tmp_path / "e.csv")]) == 0
+    text = (tmp_path / "e.csv").read_text()
+    header = next(ln for ln in text.splitlines() if not ln.startswith("#"))
+    assert header.endswith(",coverage") and "coverage_rule" not in header
+    assert len(read_epof_csv(tmp_path / "e.csv").frame) == 10
