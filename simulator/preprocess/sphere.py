@@ -29,7 +29,8 @@ from scipy import sparse
 
 from simulator.core.errors import InputError
 from simulator.core.progress import Counter, Progress
-from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.flow.base import FlowBackend, make_backend, native_stride
+from simulator.flow.rays import RayAngles
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.video import iter_frames, prefetch, probe
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
@@ -56,7 +57,7 @@ __all__ = [
 _CUBE = ((0.0, 0.0), (90.0, 0.0), (180.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (0.0, -90.0))
 
 
-#: A flow function or backend (:class:`simulator.flow.backends.FlowBackend`): ``flow(prev, cur)`` with
+#: A flow function or backend (:class:`simulator.flow.base.FlowBackend`): ``flow(prev, cur)`` with
 #: ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)`` float32 pixel flow ``(dx, dy)`` from prev
 #: to cur (x right, y down).
 FlowFn = Callable[[NDArray[np.uint8], NDArray[np.uint8]], NDArray[np.float32]]
@@ -203,10 +204,7 @@ def _backend(flow, tile_size: int) -> tuple[FlowFn, int, dict]:
     square tiles of ``tile_size`` pixels."""
 
     be = make_backend(flow, size=(tile_size, tile_size)) if isinstance(flow, str) else flow
-    if isinstance(be, DISFlow):
-        stride = 2 if be.preset in ("ultrafast", "fast") else 1
-    else:
-        stride = 1
+    stride = native_stride(be)
     desc = (
         be.describe()
         if isinstance(be, FlowBackend)
@@ -226,7 +224,7 @@ class FieldEstimator:
     flow : str or FlowBackend or FlowFn
         Pixel flow between two stacks of tiles: a ``--flow`` text (``"dis"`` = OpenCV DIS
         ultrafast, ``"dis:fast"``, ``"farneback"``, ``"torch:MODEL.pt"``), a
-        :class:`simulator.flow.backends.FlowBackend`, or any function of that signature.
+        :class:`simulator.flow.base.FlowBackend`, or any function of that signature.
 
     Use :meth:`tiles` on each decoded gray frame, then :meth:`field` on consecutive tile
     stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.
