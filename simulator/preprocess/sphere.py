@@ -34,6 +34,7 @@ from simulator.flow.rays import RayAngles
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.video import iter_frames, prefetch, probe
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
+from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -160,6 +161,10 @@ class _TileGeometry:
         self.splat = _splat_matrix(idx, w, cells, sub_world)
         self.n_tiles = len(_CUBE)
         self.size = s
+        self.midpoint = MidpointSplat(
+            R, s, t, self.rays.sel, self.rays.u0, self.rays.v0, w, cells, self.splat,
+            self.rays._cx, self.rays._cy,
+        )  # fmt: skip
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
         f = np.ascontiguousarray(frame)
@@ -266,13 +271,22 @@ class FieldEstimator:
 
     def field(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> NDArray[np.float32]:
         """Angular-speed field ``(n_lat, n_lon)`` float32 in deg/s of the flow prev -> cur."""
-        fl = self._flow(prev_tiles, tiles)
-        ang, _ = self._geo.rays.into_scratch(np.asarray(fl, np.float32))
-        f = self._geo.splat @ ang.reshape(-1)
-        return (
-            (f * np.float32(math.degrees(1.0) * self.fps))
-            .astype(np.float32)
-            .reshape(self.cells.shape)
+        return self.parts(prev_tiles, tiles).field
+
+    def parts(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> FrameParts:
+        """The field of the flow prev -> cur, its translational part (the residual once
+        the fitted camera rotation is removed, :mod:`simulator.preprocess.ego`) and the
+        camera's angular velocity with its confidence."""
+        fl = np.asarray(self._flow(prev_tiles, tiles), np.float32)
+        ang, _ = self._geo.rays.into_scratch(fl)
+        f, tr, fit = self._geo.midpoint(fl, ang)
+        k = math.degrees(1.0) * self.fps
+        shape = self.cells.shape
+        return FrameParts(
+            (f * k).astype(np.float32).reshape(shape),
+            (tr * k).astype(np.float32).reshape(shape),
+            (-fit.w * k).astype(np.float32),
+            float(fit.confidence),
         )
 
 
@@ -323,16 +337,20 @@ def field_from_frames(
     return _fields(est, (est.tiles(f) for f in frames), 256, progress, "")
 
 
-def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None):
+def _fields(est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, ego=None):
     """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
-    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
-    ``source`` prefixes the error for fewer than 2 frames."""
+    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames (or
+    ``sink``); the rotation and translational field into ``ego`` (:class:`EgoRows`) if
+    given. ``source`` prefixes the error for fewer than 2 frames."""
     out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
         if prev is not None:
-            out.append(est.field(prev, t))
+            p = est.parts(prev, t)
+            out.append(p.field)
+            if ego is not None:
+                ego.append(p)
         prev = t
         n += 1
         if progress is not None:
@@ -353,6 +371,7 @@ def field_from_video(
     flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
     sink: FieldSpool | None = None,
+    ego: EgoRows | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
@@ -369,7 +388,7 @@ def field_from_video(
     tiles = prefetch((est.tiles(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
-        return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink), info
+        return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink, ego), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
         frames.close()  # closes the video file
@@ -436,11 +455,12 @@ def preprocess_sphere(
     cells = CellGrid(config.cell_deg)
     # the field streams to an unnamed temporary file: memory flat in the video's length
     spool = FieldSpool(cells.shape, out.parent if str(out.parent) else ".")
+    ego = EgoRows(FieldSpool(cells.shape, out.parent if str(out.parent) else "."))
     try:
         try:
             field_from_video(
                 video, config, layout=layout, eye=eye, start=start_f, end=end_f,
-                flow=backend, progress=tick, sink=spool,
+                flow=backend, progress=tick, sink=spool, ego=ego,
             )  # fmt: skip
         finally:
             bar.close()
@@ -473,7 +493,12 @@ def preprocess_sphere(
                 replace(config, stride=config.stride or default_stride), field_dtype
             ),
         }
-        save_grid(out, dps, px, grid, meta, field_dps=(spool, field_dtype))
+        meta["ego"] = EGO_META
+        save_grid(
+            out, dps, px, grid, meta, field_dps=(spool, field_dtype),
+            field_trans_dps=(ego.trans, field_dtype), extras=ego.arrays(),
+        )  # fmt: skip
     finally:
         spool.close()
+        ego.trans.close()
     return out
