@@ -128,14 +128,16 @@ def render(name, traj, room, size) -> Path:
 
 
 def preprocess(vid: Path, tag: str, pythonpath: str) -> tuple[Path, float]:
-    g = OUT / f"{vid.stem}.{tag}.npz"
+    g = (OUT / f"{vid.stem}.{tag}.npz").resolve()
+    vid = Path(vid).resolve()
     env = dict(os.environ, PYTHONPATH=pythonpath)
     cmd = [sys.executable, "-m", "simulator", "preprocess", str(vid), "-o", str(g)]
     cmd += ["--method", "sphere", "--no-progress", "--threads", "2"]
     if g.exists():
         g.unlink()
     t0 = time.perf_counter()
-    r = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True)
+    # cwd = the tree to run: ``python -m`` puts the working directory first on sys.path
+    r = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True, cwd=pythonpath)
     dt = time.perf_counter() - t0
     if r.returncode:
         raise SystemExit(f"{tag} preprocess of {vid} failed: {r.stderr.strip()[-400:]}")

@@ -22,6 +22,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
+from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, viewport_parts
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
 from simulator.mitigation.grf import OpacityRule
@@ -57,6 +58,9 @@ class EpofResult:
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
     opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV).
+    ``epof_rot_dps``, ``epof_trans_dps``: the EPOF's rotational and translational parts
+    (:mod:`simulator.epof.parts`; sphere-mode grids with the per-frame camera rotation),
+    else None; with ``--flow-weights rot=A,trans=B``, ``epof_dps = A rot + B trans``.
     """
 
     frame: NDArray[np.int64]
@@ -68,6 +72,8 @@ class EpofResult:
     opacity: NDArray[np.float64]
     thresholds_dps: tuple[float, float] = (math.nan, math.nan)
     meta: dict = field(default_factory=dict, compare=False)
+    epof_rot_dps: NDArray[np.float64] | None = None
+    epof_trans_dps: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frame)
@@ -90,6 +96,7 @@ def compute_epof(
     method: str = "auto",
     frustum: Frustum | None = None,
     frames: tuple[int, int] | None = None,
+    flow_weights: tuple[float, float] | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -115,6 +122,11 @@ def compute_epof(
     time range; the cost is proportional to it). The head path must cover those times;
     opacity percentiles of source ``grid`` still come from the whole grid, those of
     source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
+
+    Sphere-mode EPOF of a grid with the per-frame camera rotation also gives its
+    rotational and translational parts (:mod:`simulator.epof.parts`). ``flow_weights =
+    (A, B)`` (``--flow-weights rot=A,trans=B``): the EPOF is ``A rot + B trans`` (it
+    drives the opacity); InputError for a grid without the parts (re-run preprocess).
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -147,7 +159,24 @@ def compute_epof(
         start_s=float(t[0]),
     )
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    if sphere:
+    parts = None
+    if flow_weights is not None:
+        require_parts(grid)
+    if flow_weights is not None or (sphere and has_parts(grid)):
+        if not sphere:
+            raise InputError(
+                "--flow-weights needs sphere-mode EPOF (the grid's field split into rotation "
+                "and translation): drop --method paper / --top-k"
+            )
+        h, v = viewport_fov(grid, hfov_deg, vfov_deg)
+        fr = frustum or Frustum.symmetric(h, v)
+        parts = viewport_parts(
+            grid, yaw, pitch, roll, frustum=fr, rows=rows if frames_sel is not None else None
+        )
+    if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
+        a, b = flow_weights
+        e = a * parts[0] + b * parts[1]
+    elif sphere:
         field, cells = require_field(grid)
         if frames_sel is not None:
             field = take_rows(field, rows)  # lazy: nothing read yet
@@ -171,8 +200,12 @@ def compute_epof(
         "rule": rule,
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
+        "flow_weights": None if flow_weights is None else list(flow_weights),
     }
-    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
+    return EpofResult(
+        frames, t, yaw, pitch, roll, e, op, thr, meta,
+        *(parts if parts is not None else (None, None)),
+    )  # fmt: skip
 
 
 def epof_settings(result: EpofResult) -> dict:
@@ -188,6 +221,7 @@ def epof_settings(result: EpofResult) -> dict:
         "top_k": m.get("top_k"),
         "opacity_rule": None if rule is None else rule.describe(),
         "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
+        **({"flow_weights": m["flow_weights"]} if m.get("flow_weights") else {}),
     }
 
 
@@ -219,7 +253,7 @@ def write_epof_csv(
     The settings that produced it come first as ``# key: JSON value`` comment lines
     (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
     :func:`read_epof_csv` (and ``pandas.read_csv(path, comment="#")``) skip those lines."""
-    extra = extra or {}
+    extra = {**_parts_columns(result), **(extra or {})}
     buf = io.StringIO()
     if settings is None and result.meta:
         settings = epof_settings(result)
@@ -234,12 +268,23 @@ def write_epof_csv(
         Path(tmp).write_text(buf.getvalue())
 
 
+#: The EPOF's parts, written after the EPOF columns when known.
+PART_COLUMNS: tuple[str, ...] = ("epof_rot_dps", "epof_trans_dps")
+
+
+def _parts_columns(result: EpofResult) -> dict:
+    if result.epof_rot_dps is None or result.epof_trans_dps is None:
+        return {}
+    return dict(zip(PART_COLUMNS, (result.epof_rot_dps, result.epof_trans_dps)))
+
+
 def read_epof_csv(path: str | os.PathLike) -> EpofResult:
     """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed).
 
     ``#`` lines are comments; those of the form ``# key: JSON`` (the settings
     :func:`write_epof_csv` records) come back in ``meta["settings"]``. Extra columns after
-    the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored."""
+    the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored, but for the
+    parts ``epof_rot_dps``, ``epof_trans_dps`` when present."""
     p = check_input_file(path, "EPOF")
     lines, settings = [], {}
     for ln in p.read_text(encoding="utf-8", errors="replace").splitlines():
@@ -268,8 +313,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         raise InputError(f"{p}: non-numeric value in an EPOF row") from None
     if data.ndim != 2 or data.shape[1] != len(cols):
         raise InputError(f"{p}: every row needs {len(cols)} fields")
+    parts = {c: data[:, cols.index(c)] for c in PART_COLUMNS if c in cols}
     data = data[:, : len(EPOF_COLUMNS)]
-    if not np.all(np.isfinite(data)):
+    if not np.all(np.isfinite(data)) or not all(np.all(np.isfinite(v)) for v in parts.values()):
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
     arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}
     arrs["frame"] = arrs["frame"].astype(np.int64)
@@ -279,7 +325,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         thr = thr if thr and len(thr) == 2 else (math.nan, math.nan)
     except (TypeError, ValueError):
         thr = (math.nan, math.nan)
-    return EpofResult(**arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {})
+    return EpofResult(
+        **arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {}, **parts
+    )
 
 
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
