@@ -112,3 +112,29 @@ def test_grid_records_the_rotation_per_frame(tmp_path):
     assert np.all(np.abs(om[1:, 1] + 60.0) < 3.0)  # axis +y, camera turns at -60 deg/s (H.264)
     assert g.field_trans_dps is not None and g.field_trans_dps.shape == g.field_dps.shape
     assert "ego" in g.meta
+
+
+def test_ego_command_video_and_grid(tmp_path, capsys):
+    """vimsim ego on a video and on its sphere-mode grid give the same CSV; the yaw rate of
+    the rotate scene turning the camera about -y at 60 deg/s is -60 (turning left)."""
+    from simulator.cli import main
+    from simulator.media.video import VideoWriter
+
+    frames = _pano_frames(4, 60.0, (0, 1, 0))
+    vid = tmp_path / "rot.mp4"
+    with VideoWriter(vid, 30.0, (512, 256)) as vw:
+        for fr in frames:
+            vw.write(np.repeat(fr[..., None], 3, axis=2))
+    assert main(["ego", str(vid), "-o", str(tmp_path / "e.csv"), "--no-progress"]) == 0
+    lines = (tmp_path / "e.csv").read_text().splitlines()
+    assert lines[0].startswith("frame,time_s,omega_x_dps,omega_y_dps,omega_z_dps,yaw_rate_dps")
+    rows = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+    assert rows.shape == (4, 10)
+    assert np.all(np.abs(rows[1:, 5] + 60.0) < 3.0) and np.all(np.abs(rows[1:, 6:8]) < 1.5)
+    g = preprocess_sphere(vid, tmp_path / "g.npz", grid=grid_preset("default"))
+    assert main(["ego", str(g), "-o", str(tmp_path / "g.csv")]) == 0
+    assert (tmp_path / "g.csv").read_text().splitlines()[0] == lines[0]
+    capsys.readouterr()
+    assert main(["ego", str(tmp_path / "nope.mp4"), "-o", str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "nope.mp4" in err and "\n" not in err and not (tmp_path / "x.csv").exists()
