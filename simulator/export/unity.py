@@ -13,6 +13,11 @@ offset  bytes  content
 16 + H  ...    ``data``: ``prod(shape)`` float16 or float32 values, C order; nothing after
 ======  =====  ==============================================================
 
+A sphere-mode grid with the per-frame camera rotation (issue 27) also gives
+``vimsim_epof_rot.bin`` (:data:`ROT_FILE`): the same format and header, its ``data`` the
+field's rotational part (:mod:`simulator.epof.parts`), so the same runtime loading it
+computes ``epof_rot_dps``; ``epof_trans_dps`` = EPOF - that.
+
 ``data`` is ``(T, P, Y)`` window POFs in deg/s (paper mode, the grid file's ``pof_dps``) or
 ``(T, n_lat, n_lon)`` cells in deg/s (sphere mode, the grid file's ``field_dps``); row ``t``
 is video frame ``start_frame + t``. The header says which, and holds everything the runtime
@@ -42,6 +47,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file, check_output_dir
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import ViewportOverlaps, viewport_fov
+from simulator.epof.parts import has_parts, rotation_share
 from simulator.media.gridfile import GridFile, content_hash, load_grid, require_field
 from simulator.mitigation.grf import OpacityRule
 
@@ -64,6 +70,8 @@ VERSION = 2
 MAGIC = b"VIMSIMEP"
 #: The data file inside an export folder.
 DATA_FILE = "vimsim_epof.bin"
+#: The rotational part of a sphere-mode field, same format (written when the grid has it).
+ROT_FILE = "vimsim_epof_rot.bin"
 #: The C# runtime (core, no UnityEngine) and the optional MonoBehaviour, copied beside it.
 CS_FILES: tuple[str, ...] = ("VimsimEpof.cs", "VimsimEpofBehaviour.cs")
 DTYPES: tuple[str, ...] = ("auto", "float16", "float32")
@@ -118,7 +126,7 @@ def _is_ours(path: Path) -> bool:
             head = f.read(len(_CS_MARK))
     except OSError:
         return False
-    return head.startswith(MAGIC) if path.name == DATA_FILE else head == _CS_MARK
+    return head.startswith(MAGIC) if path.name in (DATA_FILE, ROT_FILE) else head == _CS_MARK
 
 
 def _cs_source(name: str) -> bytes:
@@ -278,6 +286,10 @@ def export_unity(
         raise InputError(f"{out}: output folder is the input grid file; choose another -o")
     out = check_output_dir(out)
     targets = [out / DATA_FILE, *(out / n for n in CS_FILES)]
+    contents = [blob, *(_cs_source(n) for n in CS_FILES)]
+    if sphere and has_parts(g):
+        targets.append(out / ROT_FILE)
+        contents.append(_rot_blob(g, header, data.dtype))
     for t in targets:
         if grid_path is not None and t.resolve() == grid_path:
             raise InputError(f"{t}: output would replace the input grid file; choose another -o")
@@ -287,7 +299,6 @@ def export_unity(
             raise InputError(
                 f"{t}: exists and was not written by vimsim export; move it or choose another -o"
             )
-    contents = [blob, *(_cs_source(n) for n in CS_FILES)]
     with contextlib.ExitStack() as stack:  # every file complete before any is renamed
         for t, c in zip(targets, contents):
             tmp = stack.enter_context(atomic_output(t))
@@ -303,6 +314,18 @@ def export_unity(
         max_rel_error=max_rel,
         header=header,
     )
+
+
+def _rot_blob(g: GridFile, header: dict, dtype) -> bytes:
+    """:data:`ROT_FILE`: the export of the field's rotational part (same header)."""
+    field, cells = require_field(g)
+    f = np.asarray(field, np.float32)
+    om = np.asarray(g.extras["ego_omega_dps"], np.float64)
+    rot = f * rotation_share(f, np.asarray(g.field_trans_dps, np.float32), om, cells)
+    h = json.loads(json.dumps(header))
+    h["part"] = "rot: the field's rotational part (simulator.epof.parts); EPOF of it = epof_rot_dps"
+    h["data"]["bytes"] = int(rot.size * np.dtype(dtype).itemsize)
+    return _pack(h, np.ascontiguousarray(rot.astype(dtype)))
 
 
 def _pack(header: dict, data: NDArray) -> bytes:
