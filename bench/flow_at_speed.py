@@ -39,9 +39,9 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -52,7 +52,6 @@ sys.path.insert(0, str(REPO))
 
 from simulator.epof.exact import viewport_epof
 from simulator.media.gridfile import load_grid
-from simulator.sphere.geometry import head_angles_deg
 from simulator.synth.camera_path import CameraTrajectory
 from simulator.synth.trajectory import synthesize_trajectory
 
@@ -127,21 +126,23 @@ def render(name, traj, room, size) -> Path:
     return vid
 
 
-def preprocess(vid: Path, tag: str, pythonpath: str) -> tuple[Path, float]:
-    g = (OUT / f"{vid.stem}.{tag}.npz").resolve()
+def preprocess(vid: Path, tag: str, pythonpath: str, method: str = "sphere") -> tuple[Path, float]:
+    """Run ``python -m simulator preprocess`` of the tree ``pythonpath``; returns the grid
+    and the child's CPU seconds (user + system: wall time on a shared machine swings)."""
+    g = (OUT / f"{vid.stem}.{tag}.{method}.npz").resolve()
     vid = Path(vid).resolve()
     env = dict(os.environ, PYTHONPATH=pythonpath)
     cmd = [sys.executable, "-m", "simulator", "preprocess", str(vid), "-o", str(g)]
-    cmd += ["--method", "sphere", "--no-progress", "--threads", "2"]
+    cmd += ["--method", method, "--no-progress", "--threads", "2"]
     if g.exists():
         g.unlink()
-    t0 = time.perf_counter()
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     # cwd = the tree to run: ``python -m`` puts the working directory first on sys.path
     r = subprocess.run(cmd, check=False, env=env, capture_output=True, text=True, cwd=pythonpath)
-    dt = time.perf_counter() - t0
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
     if r.returncode:
         raise SystemExit(f"{tag} preprocess of {vid} failed: {r.stderr.strip()[-400:]}")
-    return g, dt
+    return g, (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
 
 
 def truth_arrays(vid: Path) -> dict:
@@ -161,6 +162,9 @@ def ratios(est, tru):
 
 
 def summary(r, tru) -> dict:
+    """median / p10 of est / truth per frame, and over the frames > 60 deg/s."""
+    if r.size == 0:
+        return {}
     fast = tru > 60.0
     s = {"median": float(np.median(r)), "p10": float(np.percentile(r, 10)), "n": int(r.size)}
     if fast.sum() >= 3:
@@ -171,15 +175,95 @@ def summary(r, tru) -> dict:
 
 
 def omega_error(g, tru) -> dict:
+    """|estimate - truth| of the camera's angular velocity: median deg/s, and median
+    relative to |truth| over the frames turning faster than 5 deg/s."""
     est = np.asarray(g.extras["ego_omega_dps"], float)[1:]
     ref = np.asarray(tru["meta"]["trajectory"]["omega_cam_dps"], float)[1:]
     err = np.linalg.norm(est - ref, axis=1)
     mag = np.linalg.norm(ref, axis=1)
     moving = mag > 5.0
-    out = {"abs_median_dps": float(np.median(err))}
-    if moving.any():
+    out = {"abs_median_dps": float(np.median(err)), "truth_median_dps": float(np.median(mag))}
+    if moving.sum() >= 3:
         out["rel_median"] = float(np.median(err[moving] / mag[moving]))
     return out
+
+
+def trans_part(grid, tru, cell) -> dict:
+    """Median of the forward viewport's epof_trans_dps / the truth's translational part,
+    the truth split by the same rule (simulator.epof.parts: s * s_t / (s_r + s_t))."""
+    from simulator.epof.parts import viewport_parts
+
+    T = grid.n_frames
+    z = np.zeros(T)
+    rot, trans = viewport_parts(grid, z, z, z, hfov_deg=107.0, vfov_deg=107.0)
+    s, sr, st = (np.asarray(tru[k], np.float64) for k in ("speed_dps", "speed_rot_dps", "speed_trans_dps"))
+    tot = sr + st
+    t_part = s * np.where(tot > 0, st / np.where(tot > 0, tot, 1.0), 0.5)
+    tt = forward(t_part, cell)
+    tr = forward(s - t_part, cell)
+    out = {}
+    ok = tt > 1.0
+    if ok.sum() >= 3:
+        out["trans_ratio_median"] = float(np.median(trans[ok] / tt[ok]))
+    ok = tr > 1.0
+    if ok.sum() >= 3:
+        out["rot_ratio_median"] = float(np.median(rot[ok] / tr[ok]))
+    return out
+
+
+def _smooth(x, k=5):
+    ker = np.ones(k) / k
+    return np.column_stack([np.convolve(x[:, i], ker, mode="same") for i in range(x.shape[1])])
+
+
+def real_clip(max_frames: int | None) -> dict:
+    """Rotation estimate on the real clip vs an independent OpenCV feature-track fit."""
+    from bench._ego_reference import feature_rotation_dps
+
+    if not REAL.is_file():
+        return {"skipped": f"{REAL} not found"}
+    g, _ = preprocess(REAL, "after", str(REPO))
+    est = np.asarray(load_grid(g).extras["ego_omega_dps"], float)
+    ref, ok = feature_rotation_dps(REAL, max_frames=max_frames)
+    n = min(len(est), len(ref))
+    est, ref, ok = est[1:n], ref[1:n], ok[1:n]
+    d = np.linalg.norm(est - ref, axis=1)[ok]
+    ds = np.linalg.norm(_smooth(est) - _smooth(ref), axis=1)[2:-2][ok[2:-2]]
+    return {
+        "frames": int(d.size),
+        "median_diff_dps": float(np.median(d)),
+        "median_diff_5frame_mean_dps": float(np.median(ds)),
+        "median_ref_dps": float(np.median(np.linalg.norm(ref[ok], axis=1))),
+        "median_est_dps": float(np.median(np.linalg.norm(est[ok], axis=1))),
+    }
+
+
+def _fmt(x):
+    return round(x, 4) if isinstance(x, float) else x
+
+
+def measure_clip(name, traj, room, kind, size, today) -> tuple[dict, dict]:
+    vid = render(name, traj, room, size)
+    tru = truth_arrays(vid)
+    cell = float(tru["meta"]["config"]["truth_cell_deg"])
+    ft = forward(tru["speed_dps"], cell)
+    row, cost = {"kind": kind}, {}
+    for tag, pp in (("today", today), ("after", str(REPO))):
+        g, cpu = preprocess(vid, tag, pp)
+        cost[tag] = cpu
+        grid = load_grid(g)
+        fe = forward(grid.field_dps, float(grid.meta["field"]["cell_deg"]))
+        row[tag] = summary(*ratios(fe, ft))
+        if tag == "after":
+            row["after"]["omega"] = omega_error(grid, tru)
+            row["after"].update(trans_part(grid, tru, cell))
+    if kind == "trans":  # paper mode (unchanged by issue 27): its forward window's POF
+        g, _ = preprocess(vid, "after", str(REPO), method="paper")
+        pg = load_grid(g)
+        p0 = int(np.argmin(np.abs(pg.pitch_deg)))
+        y0 = int(np.argmin(np.abs(pg.yaw_deg)))
+        row["paper"] = summary(*ratios(pg.pof_dps[:, p0, y0].astype(float), ft))
+    return row, cost
 
 
 def main() -> int:
@@ -189,6 +273,7 @@ def main() -> int:
     ap.add_argument("--today", default="/work/old")
     ap.add_argument("--only", default="")
     ap.add_argument("--no-real", action="store_true")
+    ap.add_argument("--real-frames", type=int, default=0, help="0: the whole real clip")
     a = ap.parse_args()
     size = tuple(int(v) for v in a.size.split("x"))
     OUT.mkdir(parents=True, exist_ok=True)
@@ -197,73 +282,21 @@ def main() -> int:
     for name, (traj, room, kind) in clips(a.seconds).items():
         if sel and name not in sel:
             continue
-        vid = render(name, traj, room, size)
-        tru = truth_arrays(vid)
-        cell = float(tru["meta"]["config"]["truth_cell_deg"])
-        ft = forward(tru["speed_dps"], cell)
-        row = {"kind": kind}
-        for tag, pp in (("today", a.today), ("after", str(REPO))):
-            g, dt = preprocess(vid, tag, pp)
-            cost[tag] += dt
-            grid = load_grid(g)
-            fe = forward(grid.field_dps, float(grid.meta["field"]["cell_deg"]))
-            r, tr = ratios(fe, ft)
-            row[tag] = summary(r, tr)
-            if tag == "after" and kind != "rotation":
-                row["after"]["omega"] = omega_error(grid, tru)
-            if tag == "after":
-                row["after"]["omega"] = omega_error(grid, tru)
-                row["after"].update(trans_part(grid, tru, cell))
+        row, c = measure_clip(name, traj, room, kind, size, a.today)
+        for k in cost:
+            cost[k] += c[k]
         rows[name] = row
-        print(name, json.dumps(row), flush=True)
+        print(name, json.dumps(row, default=_fmt), flush=True)
     if cost["today"] > 0:
-        print(f"cost: preprocess after / today = {cost['after'] / cost['today']:.3f} "
-              f"({cost['after']:.1f} s / {cost['today']:.1f} s)")
+        print(
+            f"cost: sphere-mode preprocess CPU after / today = {cost['after'] / cost['today']:.3f} "
+            f"({cost['after']:.1f} s / {cost['today']:.1f} s over {len(rows)} clips)"
+        )
     if not a.no_real:
-        print("real:", json.dumps(real_clip()))
+        print("real:", json.dumps(real_clip(a.real_frames or None), default=_fmt))
+    (OUT / "results.json").write_text(json.dumps({"clips": rows, "cost_cpu_s": cost}, indent=1))
     return 0
 
 
-def trans_part(grid, tru, cell) -> dict:
-    """Median of epof_trans_dps / truth's translational part (forward viewport)."""
-    from simulator.epof.parts import viewport_parts
-
-    if "speed_trans_dps" not in tru:
-        return {}
-    rot, trans = viewport_parts(grid, np.zeros(grid.n_frames), np.zeros(grid.n_frames),
-                                np.zeros(grid.n_frames), hfov_deg=107.0, vfov_deg=107.0)
-    tt = forward(tru["speed_trans_dps"], cell)
-    tr = forward(tru["speed_rot_dps"], cell)
-    ok = tt > 1.0
-    out = {}
-    if ok.sum() >= 3:
-        out["trans_ratio_median"] = float(np.median(trans[ok] / tt[ok]))
-    ok = tr > 1.0
-    if ok.sum() >= 3:
-        out["rot_ratio_median"] = float(np.median(rot[ok] / tr[ok]))
-    return out
-
-
-def real_clip() -> dict:
-    """Rotation estimate on the real clip vs an independent OpenCV feature-track fit."""
-    from bench._ego_reference import feature_rotation_dps
-
-    if not REAL.is_file():
-        return {"skipped": f"{REAL} not found"}
-    g, _ = preprocess(REAL, "after", str(REPO))
-    est = np.asarray(load_grid(g).extras["ego_omega_dps"], float)
-    ref, ok = feature_rotation_dps(REAL)
-    n = min(len(est), len(ref))
-    d = np.linalg.norm(est[1:n] - ref[1:n], axis=1)[ok[1:n]]
-    mag = np.linalg.norm(ref[1:n], axis=1)[ok[1:n]]
-    return {
-        "frames": int(d.size),
-        "median_diff_dps": float(np.median(d)),
-        "median_ref_dps": float(np.median(mag)),
-        "median_est_dps": float(np.median(np.linalg.norm(est[1:n], axis=1)[ok[1:n]])),
-    }
-
-
 if __name__ == "__main__":
-    _ = head_angles_deg
     raise SystemExit(main())

@@ -290,8 +290,7 @@ class MidpointSplat:
             [np.bincount(self._bin, weights=vsum[:, k], minlength=nb) for k in range(3)], -1
         )
         fit = fit_rotation(bv / np.where(bw > 0, bw, 1.0)[:, None], self._bin_dir, bw)
-        res = self._residual(fit.w, fx, fy)
-        return field, self._cell_mean(idx, res, den), fit
+        return field, self._cell_mean(idx, self._residual(fit.w, fx, fy), den), fit
 
     def _cell_vectors(self, idx, fx, fy, ang):
         """``(C, 3)`` weighted sums of the rotation vectors of every other evaluated pixel
