@@ -123,10 +123,9 @@ def compute_epof(
     opacity percentiles of source ``grid`` still come from the whole grid, those of
     source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
 
-    Sphere-mode EPOF of a grid with the per-frame camera rotation also gives its
-    rotational and translational parts (:mod:`simulator.epof.parts`). ``flow_weights =
-    (A, B)`` (``--flow-weights rot=A,trans=B``): the EPOF is ``A rot + B trans`` (it
-    drives the opacity); InputError for a grid without the parts (re-run preprocess).
+    Sphere-mode EPOF of a grid with the per-frame camera rotation also gives its parts
+    (:mod:`simulator.epof.parts`); ``flow_weights = (A, B)``: the EPOF (and opacity) is
+    ``A rot + B trans``, InputError for a grid without the parts (re-run preprocess).
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -143,15 +142,7 @@ def compute_epof(
             "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
             "field over the viewport: drop --top-k or use --method paper"
         )
-    frames, t = _frames(grid)
-    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
-    if frames_sel is not None:
-        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
-        if not keep.any():
-            raise InputError(
-                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
-            )
-        frames, t, rows = frames[keep], t[keep], rows[keep]
+    frames, t, rows = _select_frames(grid, frames_sel)
     hp.check_covers(
         float(t[-1]),
         hold=hold,
@@ -159,20 +150,10 @@ def compute_epof(
         start_s=float(t[0]),
     )
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    parts = None
-    if flow_weights is not None:
-        require_parts(grid)
-    if flow_weights is not None or (sphere and has_parts(grid)):
-        if not sphere:
-            raise InputError(
-                "--flow-weights needs sphere-mode EPOF (the grid's field split into rotation "
-                "and translation): drop --method paper / --top-k"
-            )
-        h, v = viewport_fov(grid, hfov_deg, vfov_deg)
-        fr = frustum or Frustum.symmetric(h, v)
-        parts = viewport_parts(
-            grid, yaw, pitch, roll, frustum=fr, rows=rows if frames_sel is not None else None
-        )
+    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
+    view = frustum or Frustum.symmetric(h, v)
+    sel_rows = rows if frames_sel is not None else None
+    parts = _parts(grid, (yaw, pitch, roll), view, sel_rows, sphere, flow_weights)
     if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
         a, b = flow_weights
         e = a * parts[0] + b * parts[1]
@@ -180,16 +161,13 @@ def compute_epof(
         field, cells = require_field(grid)
         if frames_sel is not None:
             field = take_rows(field, rows)  # lazy: nothing read yet
-        h, v = viewport_fov(grid, hfov_deg, vfov_deg)
-        fr = frustum or Frustum.symmetric(h, v)
-        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=view)
     else:
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
-    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     meta = {
         "hfov_deg": h,
         "vfov_deg": v,
@@ -206,6 +184,36 @@ def compute_epof(
         frames, t, yaw, pitch, roll, e, op, thr, meta,
         *(parts if parts is not None else (None, None)),
     )  # fmt: skip
+
+
+def _select_frames(grid: GridFile, frames_sel):
+    """``(video frames, times, grid rows)`` of the grid, only those of video frames
+    ``f0 <= i < f1`` when ``frames_sel = (f0, f1)``."""
+    frames, t = _frames(grid)
+    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
+    if frames_sel is not None:
+        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
+        if not keep.any():
+            raise InputError(
+                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
+            )
+        frames, t, rows = frames[keep], t[keep], rows[keep]
+    return frames, t, rows
+
+
+def _parts(grid, angles, view: Frustum, rows, sphere: bool, flow_weights):
+    """``(rot, trans)`` EPOF parts when the grid has them and sphere-mode EPOF is used (or
+    ``flow_weights`` asks for them: InputError when they cannot be had), else None."""
+    if flow_weights is not None:
+        require_parts(grid)
+        if not sphere:
+            raise InputError(
+                "--flow-weights needs sphere-mode EPOF (the grid's field split into rotation "
+                "and translation): drop --method paper / --top-k"
+            )
+    if not (sphere and has_parts(grid)):
+        return None
+    return viewport_parts(grid, *angles, frustum=view, rows=rows)
 
 
 def epof_settings(result: EpofResult) -> dict:
