@@ -31,7 +31,7 @@ Measured, each against the analytic truth (same cell grid, same viewport integra
 (``python -m simulator preprocess --method sphere``), timed the same way.
 
     .venv/bin/python bench/flow_at_speed.py [--seconds 2] [--size 512x256] [--today /work/old]
-        [--only NAME,...] [--no-real]
+        [--only NAME,...] [--no-real] [--after-flow dis:ultrafast+refine5]
 """
 
 from __future__ import annotations
@@ -126,6 +126,9 @@ def render(name, traj, room, size) -> Path:
     return vid
 
 
+AFTER_FLOW: list[str] = []  # extra preprocess options of "after" (--after-flow)
+
+
 def preprocess(vid: Path, tag: str, pythonpath: str, method: str = "sphere") -> tuple[Path, float]:
     """Run ``python -m simulator preprocess`` of the tree ``pythonpath``; returns the grid
     and the child's CPU seconds (user + system: wall time on a shared machine swings)."""
@@ -134,6 +137,8 @@ def preprocess(vid: Path, tag: str, pythonpath: str, method: str = "sphere") -> 
     env = dict(os.environ, PYTHONPATH=pythonpath)
     cmd = [sys.executable, "-m", "simulator", "preprocess", str(vid), "-o", str(g)]
     cmd += ["--method", method, "--no-progress", "--threads", "2"]
+    if tag == "after":
+        cmd += AFTER_FLOW
     if g.exists():
         g.unlink()
     c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -274,7 +279,10 @@ def main() -> int:
     ap.add_argument("--only", default="")
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--real-frames", type=int, default=0, help="0: the whole real clip")
+    ap.add_argument("--after-flow", default="", help="--flow of 'after' (default: its default)")
     a = ap.parse_args()
+    if a.after_flow:
+        AFTER_FLOW[:] = ["--flow", a.after_flow]
     size = tuple(int(v) for v in a.size.split("x"))
     OUT.mkdir(parents=True, exist_ok=True)
     sel = {s for s in a.only.split(",") if s}

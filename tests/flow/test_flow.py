@@ -245,3 +245,18 @@ def test_registry_drives_the_cli_and_make_backend(monkeypatch):
         @base.register
         class Orphan(base.FlowBackend):
             name = "orphan"
+
+
+def test_dis_refinement_spelling():
+    """dis:PRESET+refineN sets N variational-refinement iterations (recorded in meta);
+    anything else after + is refused with the spelling."""
+    be = make_backend("dis:ultrafast+refine5")
+    assert be.describe()["refine"] == 5 and be.native_stride == 2
+    assert "refine" not in make_backend("dis").describe()  # the default's meta is unchanged
+    a = _texture(64, 64, seed=2)
+    b = _shift(a, 1.3, -0.7)
+    f = be(a[None], b[None])[0][16:48, 16:48].reshape(-1, 2)
+    assert np.allclose(np.median(f, axis=0), [1.3, -0.7], atol=0.2)
+    for bad in ("dis:ultrafast+foo", "dis:ultrafast+refine", "dis:fast+refine101"):
+        with pytest.raises(InputError, match="refine"):
+            make_backend(bad)
