@@ -22,8 +22,9 @@ Measured, each against the analytic truth (same cell grid, same viewport integra
 3. translational EPOF part (``epof_trans_dps``, forward viewport) vs the truth's
    (viewport mean of ``speed_trans_dps``): median ratio;
 4. the real hand-held clip (shared data, threejs/pano.mp4): rotation estimate vs an
-   independent one (ORB feature tracks on 6 cube faces, RANSAC-free robust rotation fit
-   with OpenCV + Kabsch): median difference, deg/s;
+   independent one (Shi-Tomasi + Lucas-Kanade tracks on 6 cube faces, OpenCV's essential
+   matrix and recoverPose per face, ``bench/_ego_reference.py``): median difference,
+   deg/s, frame by frame and on 5-frame means;
 5. cost: sphere-mode preprocess seconds, after / today, same clips, same run.
 
 "today" = the code before issue 27 (``--today /work/old``: run through its CLI with
