@@ -24,7 +24,7 @@ import numpy as np
 from PIL import Image
 from scipy.spatial.transform import Rotation
 
-from simulator.flow.backends import DISFlow
+from simulator.flow.dis import DISFlow
 from simulator.media.gridfile import load_grid
 from simulator.media.video import VideoWriter
 from simulator.preprocess import preprocess_video

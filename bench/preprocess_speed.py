@@ -34,7 +34,7 @@ import numpy as np
 from PIL import Image
 from preprocess_accuracy import OUT, PANO, make_rotation_video
 
-from simulator.flow.backends import make_backend
+from simulator.flow.base import make_backend
 from simulator.media.gridfile import content_hash
 from simulator.media.video import iter_frames, probe
 from simulator.preprocess import WindowFlowReducer, reduce_stride

@@ -142,7 +142,7 @@ def sparse_texture(path: Path) -> Path:
 def window_flows(vid: Path, grid, *, end=None):
     """Per frame pair: ``(angles (N, h, w) rad, world rays (N, h, w, 3))`` of DIS ultrafast
     on the paper's windows (what paper mode averages), as a generator."""
-    from simulator.flow.backends import DISFlow
+    from simulator.flow.dis import DISFlow
     from simulator.sphere.windows import WindowExtractor
 
     ext = None

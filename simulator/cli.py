@@ -25,6 +25,7 @@ __all__ = ["build_parser", "main"]
 COMMANDS: dict[str, str] = {
     "viewport": "viewport",
     "preprocess": "preprocess",
+    "ego": "ego",
     "headpath": "headpath",
     "epof": "epof",
     "render": "render",

@@ -23,7 +23,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "overlap-weighted mean of the flow of the windows the viewport overlaps (overlap = "
         "fraction of the viewport's solid angle inside the window), and the GRF opacity "
         "(0 at the 10th, 1 at the 90th percentile of the whole video's flow). Writes "
-        "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity.",
+        "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity, and for a sphere-mode grid "
+        "with the per-frame camera rotation the EPOF's rotational and translational parts "
+        "epof_rot_dps,epof_trans_dps (they add up to epof_dps; docs/epof.md).",
     )
     p.add_argument("grid", metavar="GRID.npz", help="grid file from vimsim preprocess")
     p.add_argument(
@@ -53,6 +55,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--hold-last",
         action="store_true",
         help="hold the first/last pose where the head path does not cover the video",
+    )
+    p.add_argument(
+        "--flow-weights",
+        default=None,
+        metavar="rot=A,trans=B",
+        help="weighted EPOF = A x rotational part + B x translational part; it drives the "
+        "opacity and is written as epof_dps (default rot=1,trans=1: the EPOF itself). Needs a "
+        "sphere-mode grid with the per-frame camera rotation",
     )
     add_opacity_arguments(p)
     add_reader_options(p)
@@ -88,6 +98,9 @@ def run(args: argparse.Namespace) -> int:
         if out:
             _check_output_file(out)
     frustum = frustum_from_args(args, (None, None))  # None: the grid's window FOV
+    from simulator.epof.parts import parse_flow_weights
+
+    weights = None if args.flow_weights is None else parse_flow_weights(args.flow_weights)
     with warnings_to_stderr("vimsim epof"):
         rule = rule_from_args(args)
         grid = load_grid(args.grid)
@@ -100,6 +113,7 @@ def run(args: argparse.Namespace) -> int:
         rule=rule,
         hold=args.hold_last,
         method=args.method,
+        flow_weights=weights,
     )
     if args.method == "auto" and args.top_k is not None and grid.field_dps is not None:
         print(

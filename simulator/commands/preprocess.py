@@ -8,6 +8,7 @@ import sys
 from simulator.commands._source import add_source_arguments, source_from_args
 from simulator.commands._types import add_fov_arguments, fov_from_args, positive_float, seconds
 from simulator.core.choices import EYES, GRID_PRESET_NAMES, LAYOUTS, PREPROCESS_METHODS
+from simulator.flow.registry import flow_help
 
 __all__ = ["register", "run"]
 
@@ -60,9 +61,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--flow",
         default="dis",
         metavar="METHOD",
-        help="flow backend: dis (OpenCV DIS ultrafast, default), dis:fast, dis:medium, "
-        "farneback, or torch:MODEL.pt (TorchScript (N,3,H,W) x2 -> (N,2,H,W) pixel flow; "
-        "the model file runs as code: trusted files only)",
+        help=flow_help(),
     )
     p.add_argument(
         "--layout",

@@ -14,7 +14,6 @@ __all__ = [
     "DIS_PRESETS",
     "EPOF_METHODS",
     "EYES",
-    "FLOW_CHOICES",
     "FLOW_STATS",
     "GRID_PRESET_NAMES",
     "HEADPATH_FORMATS",
@@ -70,12 +69,9 @@ PREPROCESS_METHODS: tuple[str, ...] = ("paper", "sphere")
 #: EPOF methods: ``auto`` = exact (sphere) when the grid holds a field, else paper.
 EPOF_METHODS: tuple[str, ...] = ("auto", "paper", "sphere")
 
-#: OpenCV DIS presets (:class:`simulator.flow.backends.DISFlow`).
+#: OpenCV DIS presets (:class:`simulator.flow.dis.DISFlow`).
 DISPreset = Literal["ultrafast", "fast", "medium"]
 DIS_PRESETS: tuple[str, ...] = get_args(DISPreset)
-
-#: Flow backends as ``--flow`` spells them.
-FLOW_CHOICES = "dis, dis:ultrafast, dis:fast, dis:medium, farneback, torch:MODEL.pt"
 
 #: What is drawn over the video, each kind with its one-line help (``--mitigation``, the
 #: study's ``mitigation``); what each draws and lets through is its entry in

@@ -22,6 +22,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
+from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, viewport_parts
 from simulator.media.coverage import coverage_masks, fade
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
@@ -60,6 +61,9 @@ class EpofResult:
     opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV). ``coverage``: the
     covered share of each frame's viewport (a projection not covering the sphere, e.g.
     VR180; :mod:`simulator.media.coverage`), else None; written as the ``coverage`` column.
+    ``epof_rot_dps``, ``epof_trans_dps``: the EPOF's rotational and translational parts
+    (:mod:`simulator.epof.parts`; sphere-mode grids with the per-frame camera rotation),
+    else None; with ``--flow-weights rot=A,trans=B``, ``epof_dps = A rot + B trans``.
     """
 
     frame: NDArray[np.int64]
@@ -72,6 +76,8 @@ class EpofResult:
     thresholds_dps: tuple[float, float] = (math.nan, math.nan)
     meta: dict = field(default_factory=dict, compare=False)
     coverage: NDArray[np.float64] | None = None
+    epof_rot_dps: NDArray[np.float64] | None = None
+    epof_trans_dps: NDArray[np.float64] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frame)
@@ -94,6 +100,7 @@ def compute_epof(
     method: str = "auto",
     frustum: Frustum | None = None,
     frames: tuple[int, int] | None = None,
+    flow_weights: tuple[float, float] | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -119,6 +126,10 @@ def compute_epof(
     time range; the cost is proportional to it). The head path must cover those times;
     opacity percentiles of source ``grid`` still come from the whole grid, those of
     source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
+
+    Sphere-mode EPOF of a grid with the per-frame camera rotation also gives its parts
+    (:mod:`simulator.epof.parts`); ``flow_weights = (A, B)``: the EPOF (and opacity) is
+    ``A rot + B trans``, InputError for a grid without the parts (re-run preprocess).
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -135,15 +146,7 @@ def compute_epof(
             "--top-k applies to paper-mode EPOF (window overlaps); sphere mode integrates the "
             "field over the viewport: drop --top-k or use --method paper"
         )
-    frames, t = _frames(grid)
-    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
-    if frames_sel is not None:
-        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
-        if not keep.any():
-            raise InputError(
-                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
-            )
-        frames, t, rows = frames[keep], t[keep], rows[keep]
+    frames, t, rows = _select_frames(grid, frames_sel)
     hp.check_covers(
         float(t[-1]),
         hold=hold,
@@ -151,21 +154,29 @@ def compute_epof(
         start_s=float(t[0]),
     )
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    if sphere:
+    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
+    view = frustum or Frustum.symmetric(h, v)
+    sel_rows = rows if frames_sel is not None else None
+    parts = _parts(grid, (yaw, pitch, roll), view, sel_rows, sphere, flow_weights)
+    if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
+        a, b = flow_weights
+        e = a * parts[0] + b * parts[1]
+    elif sphere:
         field, cells = require_field(grid)
         if frames_sel is not None:
             field = take_rows(field, rows)  # lazy: nothing read yet
-        h, v = viewport_fov(grid, hfov_deg, vfov_deg)
-        fr = frustum or Frustum.symmetric(h, v)
-        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=fr)
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=view)
     else:
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
-    e, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
+    e_cov, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
+    if cov is not None and parts is not None:  # the parts scaled as their sum was
+        k = np.where(e > 0, e_cov / np.maximum(e, 1e-12), 0.0)
+        parts = (parts[0] * k, parts[1] * k)
+    e = e_cov
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
-    h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     meta = {
         "hfov_deg": h,
         "vfov_deg": v,
@@ -176,10 +187,14 @@ def compute_epof(
         "rule": rule,
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
+        "flow_weights": None if flow_weights is None else list(flow_weights),
     }
     if cov is not None:
         meta["coverage_rule"] = grid.meta["coverage"]["rule"]
-    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta, cov)
+    return EpofResult(
+        frames, t, yaw, pitch, roll, e, op, thr, meta, cov,
+        *(parts if parts is not None else (None, None)),
+    )  # fmt: skip
 
 
 def _covered_epof(grid, e, sphere: bool, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum):
@@ -204,6 +219,36 @@ def _covered_epof(grid, e, sphere: bool, yaw, pitch, roll, hfov_deg, vfov_deg, t
     return covered_mean * fade(share), share
 
 
+def _select_frames(grid: GridFile, frames_sel):
+    """``(video frames, times, grid rows)`` of the grid, only those of video frames
+    ``f0 <= i < f1`` when ``frames_sel = (f0, f1)``."""
+    frames, t = _frames(grid)
+    rows = np.arange(grid.n_frames)  # grid rows, not video frame numbers
+    if frames_sel is not None:
+        keep = (frames >= frames_sel[0]) & (frames < frames_sel[1])
+        if not keep.any():
+            raise InputError(
+                f"{grid.path or 'grid'}: no grid frame in video frames {frames_sel[0]}..{frames_sel[1]}"
+            )
+        frames, t, rows = frames[keep], t[keep], rows[keep]
+    return frames, t, rows
+
+
+def _parts(grid, angles, view: Frustum, rows, sphere: bool, flow_weights):
+    """``(rot, trans)`` EPOF parts when the grid has them and sphere-mode EPOF is used (or
+    ``flow_weights`` asks for them: InputError when they cannot be had), else None."""
+    if flow_weights is not None:
+        require_parts(grid)
+        if not sphere:
+            raise InputError(
+                "--flow-weights needs sphere-mode EPOF (the grid's field split into rotation "
+                "and translation): drop --method paper / --top-k"
+            )
+    if not (sphere and has_parts(grid)):
+        return None
+    return viewport_parts(grid, *angles, frustum=view, rows=rows)
+
+
 def epof_settings(result: EpofResult) -> dict:
     """The settings of a computed EPOF (:func:`compute_epof`'s ``meta``) as recorded in
     the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds."""
@@ -217,6 +262,7 @@ def epof_settings(result: EpofResult) -> dict:
         "top_k": m.get("top_k"),
         "opacity_rule": None if rule is None else rule.describe(),
         "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
+        **({"flow_weights": m["flow_weights"]} if m.get("flow_weights") else {}),
     }
 
 
@@ -248,7 +294,7 @@ def write_epof_csv(
     The settings that produced it come first as ``# key: JSON value`` comment lines
     (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
     :func:`read_epof_csv` (and ``pandas.read_csv(path, comment="#")``) skip those lines."""
-    extra = dict(extra or {})
+    extra = {**_parts_columns(result), **(extra or {})}
     if result.coverage is not None and "coverage" not in extra:
         extra["coverage"] = result.coverage
     buf = io.StringIO()
@@ -265,12 +311,23 @@ def write_epof_csv(
         Path(tmp).write_text(buf.getvalue())
 
 
+#: The EPOF's parts, written after the EPOF columns when known.
+PART_COLUMNS: tuple[str, ...] = ("epof_rot_dps", "epof_trans_dps")
+
+
+def _parts_columns(result: EpofResult) -> dict:
+    if result.epof_rot_dps is None or result.epof_trans_dps is None:
+        return {}
+    return dict(zip(PART_COLUMNS, (result.epof_rot_dps, result.epof_trans_dps)))
+
+
 def read_epof_csv(path: str | os.PathLike) -> EpofResult:
     """Read an EPOF CSV written by :func:`write_epof_csv` (InputError if malformed).
 
     ``#`` lines are comments; those of the form ``# key: JSON`` (the settings
     :func:`write_epof_csv` records) come back in ``meta["settings"]``. Extra columns after
-    the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored."""
+    the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored, but for the
+    parts ``epof_rot_dps``, ``epof_trans_dps`` when present."""
     p = check_input_file(path, "EPOF")
     lines, settings = [], {}
     for ln in p.read_text(encoding="utf-8", errors="replace").splitlines():
@@ -299,8 +356,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         raise InputError(f"{p}: non-numeric value in an EPOF row") from None
     if data.ndim != 2 or data.shape[1] != len(cols):
         raise InputError(f"{p}: every row needs {len(cols)} fields")
+    parts = {c: data[:, cols.index(c)] for c in PART_COLUMNS if c in cols}
     data = data[:, : len(EPOF_COLUMNS)]
-    if not np.all(np.isfinite(data)):
+    if not np.all(np.isfinite(data)) or not all(np.all(np.isfinite(v)) for v in parts.values()):
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
     arrs = {c: data[:, i] for i, c in enumerate(EPOF_COLUMNS)}
     arrs["frame"] = arrs["frame"].astype(np.int64)
@@ -310,7 +368,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         thr = thr if thr and len(thr) == 2 else (math.nan, math.nan)
     except (TypeError, ValueError):
         thr = (math.nan, math.nan)
-    return EpofResult(**arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {})
+    return EpofResult(
+        **arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {}, **parts
+    )
 
 
 def break_at_wraps(t, yaw_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:

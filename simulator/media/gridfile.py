@@ -19,7 +19,10 @@ A ``.npz`` (no pickles; loaded with ``allow_pickle=False``) holding
     ``sar``, ``content_hash``).
 
 Optional (sphere mode): ``field_dps`` float16/float32 (T, n_lat, n_lon), the per-frame
-angular-speed field on a lon/lat grid, described by ``meta["field"]``.
+angular-speed field on a lon/lat grid, described by ``meta["field"]``; and (sphere-mode
+grids made since issue 27, described by ``meta["ego"]``) ``field_trans_dps`` (the same
+field with the camera rotation removed), ``ego_omega_dps`` float32 (T, 3) (the camera's
+angular velocity, deg/s, world frame) and ``ego_confidence`` float32 (T,).
 """
 
 from __future__ import annotations
@@ -59,6 +62,9 @@ class GridFile:
     meta: dict
     path: str = ""
     field_dps: NDArray | LazyField | None = field(default=None, repr=False)  # lazy when loaded
+    field_trans_dps: NDArray | LazyField | None = field(default=None, repr=False)
+    #: small per-frame arrays: ``ego_omega_dps`` (T, 3), ``ego_confidence`` (T,)
+    extras: dict = field(default_factory=dict, repr=False)
 
     @property
     def grid(self) -> WindowGrid:
@@ -168,21 +174,23 @@ class FieldSpool:
         self._fh.close()
 
 
-def _write_npz(fh, arrays: dict, spool: FieldSpool, dtype: str) -> None:
-    """``np.savez_compressed``'s layout, with ``field_dps`` copied from ``spool``."""
+def _write_npz(fh, arrays: dict, spools: dict) -> None:
+    """``np.savez_compressed``'s layout, with each ``name: (spool, dtype)`` of ``spools``
+    copied from its :class:`FieldSpool` chunk by chunk."""
     with zipfile.ZipFile(fh, "w", zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
         for k, a in arrays.items():
             with zf.open(k + ".npy", "w", force_zip64=True) as f:
                 np.lib.format.write_array(f, np.asanyarray(a), allow_pickle=False)
-        header = {
-            "descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
-            "fortran_order": False,
-            "shape": (spool.n_rows, *spool.shape),
-        }
-        with zf.open("field_dps.npy", "w", force_zip64=True) as f:
-            np.lib.format.write_array_header_1_0(f, header)
-            for c in spool.chunks():
-                f.write(c.astype(dtype).tobytes())
+        for name, (spool, dtype) in spools.items():
+            header = {
+                "descr": np.lib.format.dtype_to_descr(np.dtype(dtype)),
+                "fortran_order": False,
+                "shape": (spool.n_rows, *spool.shape),
+            }
+            with zf.open(name + ".npy", "w", force_zip64=True) as f:
+                np.lib.format.write_array_header_1_0(f, header)
+                for c in spool.chunks():
+                    f.write(c.astype(dtype).tobytes())
 
 
 def save_grid(
@@ -193,11 +201,15 @@ def save_grid(
     meta: dict,
     *,
     field_dps: NDArray | None = None,
+    field_trans_dps: NDArray | None = None,
+    extras: dict | None = None,
 ) -> None:
     """Write a grid file atomically (temporary name, renamed when complete).
 
     ``meta`` is completed with ``format``, ``version`` and ``grid``; it must already
     hold ``fps``, ``n_frames``, ``flow``, ``layout``, ``eye`` and ``video``.
+    ``field_dps`` and ``field_trans_dps``: an array or ``(FieldSpool, dtype)``;
+    ``extras``: more small arrays by name (``ego_omega_dps``, ``ego_confidence``).
     """
     pof_dps = np.asarray(pof_dps, np.float32)
     pof_px = np.asarray(pof_px, np.float32)
@@ -217,15 +229,19 @@ def save_grid(
         "yaw_deg": np.asarray(grid.yaw_deg, np.float64),
         "pitch_deg": np.asarray(grid.pitch_deg, np.float64),
         "meta": np.array(json.dumps(m, sort_keys=True)),
+        **{k: np.asarray(v) for k, v in (extras or {}).items()},
     }
-    if isinstance(field_dps, tuple) and isinstance(field_dps[0], FieldSpool):
-        with atomic_output(path) as tmp, open(tmp, "wb") as fh:
-            _write_npz(fh, arrays, *field_dps)
-        return
-    if field_dps is not None:
-        arrays["field_dps"] = np.asarray(field_dps)
+    spools = {}
+    for name, f in (("field_dps", field_dps), ("field_trans_dps", field_trans_dps)):
+        if isinstance(f, tuple) and isinstance(f[0], FieldSpool):
+            spools[name] = f
+        elif f is not None:
+            arrays[name] = np.asarray(f)
     with atomic_output(path) as tmp, open(tmp, "wb") as fh:
-        np.savez_compressed(fh, **arrays)
+        if spools:
+            _write_npz(fh, arrays, spools)
+        else:
+            np.savez_compressed(fh, **arrays)
 
 
 def _check_headers(p: Path, need: set[str]) -> None:
@@ -314,9 +330,10 @@ def load_grid(path: str | os.PathLike) -> GridFile:
                     f"{p}: not a vimsim grid file; arrays {sorted(need - names)} missing"
                 )
             # The field stays in the file: read lazily, chunk by chunk (memory flat in T).
-            arrs = {k: z[k] for k in names if k != "field_dps"}
-        if "field_dps" in names:
-            arrs["field_dps"] = LazyField(p)
+            arrs = {k: z[k] for k in names if k not in _LAZY}
+        for k in _LAZY:
+            if k in names:
+                arrs[k] = LazyField(p, k + ".npy")
     except InputError:
         raise
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, MemoryError) as e:
@@ -379,6 +396,7 @@ def load_grid(path: str | os.PathLike) -> GridFile:
         finite, lo = arrs["field_dps"].scan()
         if not finite or lo < 0:
             raise InputError(f"{p}: field_dps must be (T, n_lat, n_lon), finite and >= 0")
+    extras = _check_ego(p, arrs, dps.shape[0])
     try:
         WindowGrid.from_dict(meta["grid"])
     except (TypeError, KeyError, ValueError, AttributeError, InputError) as e:
@@ -391,7 +409,38 @@ def load_grid(path: str | os.PathLike) -> GridFile:
         meta=meta,
         path=str(p),
         field_dps=arrs.get("field_dps"),
+        field_trans_dps=arrs.get("field_trans_dps"),
+        extras=extras,
     )
+
+
+#: Arrays read lazily (chunk by chunk) from a grid file.
+_LAZY = ("field_dps", "field_trans_dps")
+#: The per-frame camera-rotation arrays and their shapes after T.
+_EGO = {"ego_omega_dps": (3,), "ego_confidence": ()}
+
+
+def _check_ego(p: Path, arrs: dict, T: int) -> dict:
+    """The per-frame camera-rotation arrays of a grid (all or none), checked."""
+    have = [k for k in (*_EGO, "field_trans_dps") if k in arrs]
+    if not have:
+        return {}
+    if len(have) != len(_EGO) + 1 or "field_dps" not in arrs:
+        raise InputError(
+            f"{p}: grid has {have} but not all of ego_omega_dps, ego_confidence, "
+            "field_trans_dps and field_dps; corrupt grid file: re-run vimsim preprocess"
+        )
+    out = {}
+    for k, tail in _EGO.items():
+        a = arrs[k]
+        if a.dtype.kind != "f" or a.shape != (T, *tail) or not np.all(np.isfinite(a)):
+            raise InputError(f"{p}: {k} must be finite floats of shape {(T, *tail)}")
+        out[k] = a.astype(np.float32, copy=False)
+    ft, f = arrs["field_trans_dps"], arrs["field_dps"]
+    finite, lo = ft.scan()
+    if ft.shape != f.shape or not finite or lo < 0:
+        raise InputError(f"{p}: field_trans_dps must match field_dps, finite and >= 0")
+    return out
 
 
 def content_hash(

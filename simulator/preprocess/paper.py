@@ -2,7 +2,7 @@
 
 For every frame pair ``(t-1, t)`` every window of a :class:`~simulator.sphere.windows.WindowGrid`
 is extracted from both frames (gray, bilinear, :class:`~simulator.sphere.windows.WindowExtractor`),
-the dense flow inside the window is computed (:mod:`simulator.flow.backends`) and reduced to two
+the dense flow inside the window is computed (:mod:`simulator.flow`) and reduced to two
 scalars:
 
 ``pof_px``  (window pixels / frame)
@@ -18,7 +18,7 @@ scalars:
     ``u = (x / w * 2 - 1) tan(hfov / 2)``, ``v = (1 - y / h * 2) tan(vfov / 2)`` on the
     plane ``z = 1``; flow targets outside the window still have a ray. The angle between
     a window's own rays does not depend on the window's orientation, so one set of
-    per-pixel constants serves every window (:class:`simulator.flow.backends.RayAngles`, shared
+    per-pixel constants serves every window (:class:`simulator.flow.rays.RayAngles`, shared
     with sphere mode).
 
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
@@ -59,7 +59,8 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
-from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.flow.base import FlowBackend, make_backend, native_stride
+from simulator.flow.rays import RayAngles
 from simulator.media.coverage import coverage_masks, coverage_meta
 from simulator.media.gridfile import content_hash, save_grid
 from simulator.media.source import as_source
@@ -96,7 +97,7 @@ class WindowFlowReducer:
     hfov_deg, vfov_deg : float, degrees, the windows' exact FOVs
     stride : int >= 1, keyword-only
         Read the flow on every ``stride``-th pixel only (rows and columns ``stride // 2,
-        stride // 2 + stride, ...``, :class:`simulator.flow.backends.RayAngles`): both sums run
+        stride // 2 + stride, ...``, :class:`simulator.flow.rays.RayAngles`): both sums run
         over those pixels (solid-angle weights renormalised over them). For backends that
         compute flow at a lower resolution and upsample it (DIS ultrafast and fast work at
         1/4 resolution, :func:`reduce_stride`), stride 2 reads the same field 4x faster.
@@ -104,7 +105,7 @@ class WindowFlowReducer:
     Call with ``flow`` ``(N, h, w, 2)`` float32 (window px / frame) and ``fps``; returns
     ``(dps, px)``, each ``(N,)`` float64: deg/s and px/frame.
 
-    The per-pixel angles are :class:`simulator.flow.backends.RayAngles` (the formula sphere mode
+    The per-pixel angles are :class:`simulator.flow.rays.RayAngles` (the formula sphere mode
     uses too). Sums are float64 pairwise sums, independent of memory alignment and
     threads: results are bit-reproducible.
     """
@@ -155,12 +156,11 @@ class WindowFlowReducer:
 
 
 def reduce_stride(backend: FlowBackend) -> int:
-    """The stride at which paper mode reads a backend's flow: 2 for DIS ``ultrafast`` and
-    ``fast`` (finest scale 2: flow computed at 1/4 resolution, then upsampled bilinearly;
-    the same rule as sphere mode), 1 for every other backend."""
-    if isinstance(backend, DISFlow) and backend.preset in ("ultrafast", "fast"):
-        return 2
-    return 1
+    """The stride at which paper mode reads a backend's flow: its declared
+    :attr:`~simulator.flow.base.FlowBackend.native_stride` (2 for DIS ``ultrafast`` and
+    ``fast``: finest scale 2, flow computed at 1/4 resolution then upsampled bilinearly;
+    the same rule as sphere mode), 1 for a plain function."""
+    return native_stride(backend)
 
 
 def checkpoint_path(output: str | os.PathLike) -> Path:

@@ -29,12 +29,14 @@ from scipy import sparse
 
 from simulator.core.errors import InputError
 from simulator.core.progress import Counter, Progress
-from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
+from simulator.flow.base import FlowBackend, make_backend, native_stride
+from simulator.flow.rays import RayAngles
 from simulator.media.coverage import COVERED_SHARE, cell_coverage, coverage_masks, coverage_meta
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
+from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -58,7 +60,7 @@ __all__ = [
 _CUBE = ((0.0, 0.0), (90.0, 0.0), (180.0, 0.0), (-90.0, 0.0), (0.0, 90.0), (0.0, -90.0))
 
 
-#: A flow function or backend (:class:`simulator.flow.backends.FlowBackend`): ``flow(prev, cur)`` with
+#: A flow function or backend (:class:`simulator.flow.base.FlowBackend`): ``flow(prev, cur)`` with
 #: ``(N, h, w)`` uint8 tiles returns ``(N, h, w, 2)`` float32 pixel flow ``(dx, dy)`` from prev
 #: to cur (x right, y down).
 FlowFn = Callable[[NDArray[np.uint8], NDArray[np.uint8]], NDArray[np.float32]]
@@ -161,6 +163,10 @@ class _TileGeometry:
         self.splat = _splat_matrix(idx, w, cells, sub_world)
         self.n_tiles = len(_CUBE)
         self.size = s
+        self.midpoint = MidpointSplat(
+            R, s, t, self.rays.sel, self.rays.u0, self.rays.v0, w, cells, self.splat,
+            self.rays._cx, self.rays._cy,
+        )  # fmt: skip
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
         f = np.ascontiguousarray(frame)
@@ -205,10 +211,7 @@ def _backend(flow, tile_size: int) -> tuple[FlowFn, int, dict]:
     square tiles of ``tile_size`` pixels."""
 
     be = make_backend(flow, size=(tile_size, tile_size)) if isinstance(flow, str) else flow
-    if isinstance(be, DISFlow):
-        stride = 2 if be.preset in ("ultrafast", "fast") else 1
-    else:
-        stride = 1
+    stride = native_stride(be)
     desc = (
         be.describe()
         if isinstance(be, FlowBackend)
@@ -228,7 +231,7 @@ class FieldEstimator:
     flow : str or FlowBackend or FlowFn
         Pixel flow between two stacks of tiles: a ``--flow`` text (``"dis"`` = OpenCV DIS
         ultrafast, ``"dis:fast"``, ``"farneback"``, ``"torch:MODEL.pt"``), a
-        :class:`simulator.flow.backends.FlowBackend`, or any function of that signature.
+        :class:`simulator.flow.base.FlowBackend`, or any function of that signature.
 
     Use :meth:`tiles` on each decoded gray frame, then :meth:`field` on consecutive tile
     stacks; :func:`field_from_frames` and :func:`field_from_video` do the loop.
@@ -270,13 +273,22 @@ class FieldEstimator:
 
     def field(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> NDArray[np.float32]:
         """Angular-speed field ``(n_lat, n_lon)`` float32 in deg/s of the flow prev -> cur."""
-        fl = self._flow(prev_tiles, tiles)
-        ang, _ = self._geo.rays.into_scratch(np.asarray(fl, np.float32))
-        f = self._geo.splat @ ang.reshape(-1)
-        return (
-            (f * np.float32(math.degrees(1.0) * self.fps))
-            .astype(np.float32)
-            .reshape(self.cells.shape)
+        return self.parts(prev_tiles, tiles).field
+
+    def parts(self, prev_tiles: NDArray[np.uint8], tiles: NDArray[np.uint8]) -> FrameParts:
+        """The field of the flow prev -> cur, its translational part (the residual once
+        the fitted camera rotation is removed, :mod:`simulator.preprocess.ego`) and the
+        camera's angular velocity with its confidence."""
+        fl = np.asarray(self._flow(prev_tiles, tiles), np.float32)
+        ang, _ = self._geo.rays.into_scratch(fl)
+        f, tr, fit = self._geo.midpoint(fl, ang)
+        k = math.degrees(1.0) * self.fps
+        shape = self.cells.shape
+        return FrameParts(
+            (f * k).astype(np.float32).reshape(shape),
+            (tr * k).astype(np.float32).reshape(shape),
+            (-fit.w * k).astype(np.float32),
+            float(fit.confidence),
         )
 
 
@@ -328,22 +340,26 @@ def field_from_frames(
 
 
 def _fields(
-    est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, mask=None,
-    scale=None,
+    est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, ego=None,
+    mask=None, scale=None,
 ):  # fmt: skip
     """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
-    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames.
-    ``source`` prefixes the error for fewer than 2 frames; ``mask``: the covered cells
-    (others 0: no flow measured outside the projection); ``scale``: per row, the factor of
-    a variable frame rate's true interval (:func:`simulator.preprocess.common.flow_rate_scale`)."""
+    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames (or
+    ``sink``); the rotation and translational field into ``ego`` (:class:`EgoRows`) if
+    given. ``source`` prefixes the error for fewer than 2 frames; ``mask``: the covered
+    cells (others 0: no flow measured outside the projection); ``scale``: per row, the
+    factor of a variable frame rate's true interval
+    (:func:`simulator.preprocess.common.flow_rate_scale`)."""
     out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
         if prev is not None:
-            f = est.field(prev, t)
-            f = f if mask is None else f * mask
-            out.append(f if scale is None else f * np.float32(scale[min(n, len(scale) - 1)]))
+            k = None if scale is None else scale[min(n, len(scale) - 1)]
+            p = _adjust(est.parts(prev, t), mask, k)
+            out.append(p.field)
+            if ego is not None:
+                ego.append(p)
         prev = t
         n += 1
         if progress is not None:
@@ -351,6 +367,16 @@ def _fields(
     if (out.n if sink is None else out.n_rows) < 2:
         raise InputError(f"{source}sphere mode needs at least 2 frames; got {n}")
     return out.result() if sink is None else out
+
+
+def _adjust(p: FrameParts, mask, scale) -> FrameParts:
+    """``p`` with no flow outside the covered cells (``mask``) and its speeds scaled by a
+    variable frame rate's true interval (``scale``; the camera's angular velocity too)."""
+    if mask is None and scale is None:
+        return p
+    k = np.float32(1.0 if scale is None else scale)
+    m = np.float32(1.0) if mask is None else mask
+    return replace(p, field=p.field * m * k, trans=p.trans * m * k, omega_dps=p.omega_dps * k)
 
 
 def field_from_video(
@@ -362,6 +388,7 @@ def field_from_video(
     flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
     sink: FieldSpool | None = None,
+    ego: EgoRows | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
@@ -383,7 +410,7 @@ def field_from_video(
         mask = None if mask is None else (mask >= COVERED_SHARE).astype(np.float32)
         scale = flow_rate_scale(info, int(start), last - int(start))
         return _fields(
-            est, tiles, last - int(start), progress, f"{path}: ", sink, mask, scale
+            est, tiles, last - int(start), progress, f"{path}: ", sink, ego, mask, scale
         ), info
     finally:
         tiles.close()  # stops the decoding thread now, not when garbage-collected
@@ -448,11 +475,12 @@ def preprocess_sphere(
     cells = CellGrid(config.cell_deg)
     # the field streams to an unnamed temporary file: memory flat in the video's length
     spool = FieldSpool(cells.shape, out.parent if str(out.parent) else ".")
+    ego = EgoRows(FieldSpool(cells.shape, out.parent if str(out.parent) else "."))
     try:
         try:
             field_from_video(
                 source, config, start=start_f, end=end_f,
-                flow=backend, progress=tick, sink=spool,
+                flow=backend, progress=tick, sink=spool, ego=ego,
             )  # fmt: skip
         finally:
             bar.close()
@@ -486,7 +514,12 @@ def preprocess_sphere(
                 replace(config, stride=config.stride or default_stride), field_dtype
             ),
         }
-        save_grid(out, dps, px, grid, meta, field_dps=(spool, field_dtype))
+        meta["ego"] = EGO_META
+        save_grid(
+            out, dps, px, grid, meta, field_dps=(spool, field_dtype),
+            field_trans_dps=(ego.trans, field_dtype), extras=ego.arrays(),
+        )  # fmt: skip
     finally:
         spool.close()
+        ego.trans.close()
     return out

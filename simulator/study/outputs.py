@@ -55,12 +55,34 @@ def _cell(v) -> str:
     return str(v)
 
 
+#: The means of the EPOF's parts (:mod:`simulator.epof.parts`), after the given columns;
+#: empty for a viewing whose grid has no per-frame camera rotation.
+PART_MEAN_COLUMNS = ("epof_rot_mean_dps", "epof_trans_mean_dps")
+
+
+def _part_means(epof_csv: Path) -> dict:
+    """Means of ``epof_rot_dps`` / ``epof_trans_dps`` of a viewing's EPOF CSV, if any."""
+    try:
+        r = read_epof_csv(epof_csv)
+    except (InputError, OSError):
+        return {}
+    if r.epof_rot_dps is None or r.epof_trans_dps is None:
+        return {}
+    means = (float(np.mean(r.epof_rot_dps)), float(np.mean(r.epof_trans_dps)))
+    return dict(zip(PART_MEAN_COLUMNS, means))
+
+
 def write_viewings_csv(path, rows: list[dict], columns) -> None:
-    """One row per viewing, in manifest order; floats as the EPOF CSV writes them."""
+    """One row per viewing, in manifest order; floats as the EPOF CSV writes them; then
+    the means of the EPOF's rotational and translational parts, read from the viewing's
+    ``epof/<viewing>.csv`` beside ``path``."""
+    columns = (*columns, *PART_MEAN_COLUMNS)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
     for r in rows:
+        if r.get("viewing") and r.get("status") == "ok":
+            r = {**r, **_part_means(Path(path).parent / "epof" / f"{r['viewing']}.csv")}
         w.writerow([_cell(r.get(c, "")) for c in columns])
     with atomic_output(path) as tmp:
         Path(tmp).write_text(buf.getvalue())

@@ -94,8 +94,10 @@ class _MipTexture:
     """A periodic texture with a mip pyramid packed into one atlas, for trilinear lookups.
 
     The image is mirror-tiled 2 x 2 (so it repeats without seams), halved with box
-    filtering down to 8 pixels, and each level is padded by wrapping so that bilinear
-    taps at a tile edge read the other side. Two ``cv2.remap`` calls per frame.
+    filtering down to 8 pixels, followed by one constant level of the mean colour (a
+    footprint of more than one coarsest texel fades to the average: no aliasing at any
+    distance), and each level is padded by wrapping so that bilinear taps at a tile edge
+    read the other side. Two ``cv2.remap`` calls per frame.
     """
 
     _P = 2  # wrap padding, pixels
@@ -113,6 +115,11 @@ class _MipTexture:
                     prev, (prev.shape[1] // 2, prev.shape[0] // 2), interpolation=cv2.INTER_AREA
                 )
             )
+        # Past the coarsest level, fade to the mean colour: one more level, constant (the
+        # limit of box filtering a periodic texture), so that walls whose pixel footprint
+        # covers many texture periods show their average instead of moire at any distance.
+        mean = levels[-1].reshape(-1, 3).mean(axis=0)
+        levels.append(np.broadcast_to(mean, levels[-1].shape).astype(np.float32))
         p = self._P
         padded = [np.pad(lv, ((p, p), (p, p), (0, 0)), mode="wrap") for lv in levels]
         width = padded[0].shape[1]

@@ -7,7 +7,11 @@ import numpy as np
 import pytest
 
 from simulator.core.errors import InputError
-from simulator.flow.backends import DISFlow, FarnebackFlow, RayAngles, TorchFlow, make_backend
+from simulator.flow.base import make_backend
+from simulator.flow.dis import DISFlow
+from simulator.flow.farneback import FarnebackFlow
+from simulator.flow.rays import RayAngles
+from simulator.flow.torchscript import TorchFlow
 from simulator.sphere.geometry import perspective_rays
 
 
@@ -185,3 +189,75 @@ def test_ray_angles_stride_and_bad_input():
         r1(np.zeros((64, 32, 2), np.float32))
     with pytest.raises(InputError, match="hfov must be degrees"):
         RayAngles((8, 8), 180.0)
+
+
+def test_registry_drives_the_cli_and_make_backend(monkeypatch):
+    """--flow's help lists every registry entry; a new backend is one registered class
+    and one entry; the stride rule goes through the declaration, not the type."""
+    import subprocess
+    import sys
+
+    import simulator.flow.registry as reg
+    from simulator.cli import build_parser
+    from simulator.flow import base
+    from simulator.preprocess import reduce_stride
+
+    p = build_parser()
+    sub = next(a for a in p._actions if a.dest == "command").choices["preprocess"]
+    help_text = next(a for a in sub._actions if a.dest == "flow").help
+    for e in reg.BACKENDS:
+        assert all(s.split(":")[0] in help_text for s in e.spellings), e.name
+    assert reg.FLOW_CHOICES.startswith("dis, dis:ultrafast")
+    # the registry itself is light: no numpy, no OpenCV
+    code = "import sys, simulator.flow.registry; print('numpy' in sys.modules or 'cv2' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+    entry = reg.FlowEntry("shift", "nonexistent", ("shift:PX",), "shift:PX (test)")
+    monkeypatch.setattr(reg, "BACKENDS", (*reg.BACKENDS, entry))
+    monkeypatch.setattr(base, "_CLASSES", dict(base._CLASSES))
+
+    @base.register
+    class Shift(base.FlowBackend):
+        name = "shift"
+
+        def __init__(self, px):
+            self.px, self.params = float(px), {"px": float(px)}
+
+        @property
+        def native_stride(self):
+            return 3
+
+        @classmethod
+        def from_spec(cls, arg, size):
+            return cls(arg or 1)
+
+        def _pair(self, a, b):
+            return np.full((*a.shape, 2), self.px, np.float32)
+
+    be = make_backend("shift:2.5")
+    assert isinstance(be, Shift) and be.describe() == {"method": "shift", "px": 2.5}
+    assert be(np.zeros((2, 4, 4), np.uint8), np.zeros((2, 4, 4), np.uint8))[1, 0, 0, 0] == 2.5
+    assert reduce_stride(be) == 3
+    with pytest.raises(InputError, match="unknown flow backend 'nope'"):
+        make_backend("nope")
+    with pytest.raises(ValueError, match="no entry"):
+
+        @base.register
+        class Orphan(base.FlowBackend):
+            name = "orphan"
+
+
+def test_dis_refinement_spelling():
+    """dis:PRESET+refineN sets N variational-refinement iterations (recorded in meta);
+    anything else after + is refused with the spelling."""
+    be = make_backend("dis:ultrafast+refine5")
+    assert be.describe()["refine"] == 5 and be.native_stride == 2
+    assert "refine" not in make_backend("dis").describe()  # the default's meta is unchanged
+    a = _texture(64, 64, seed=2)
+    b = _shift(a, 1.3, -0.7)
+    f = be(a[None], b[None])[0][16:48, 16:48].reshape(-1, 2)
+    assert np.allclose(np.median(f, axis=0), [1.3, -0.7], atol=0.2)
+    for bad in ("dis:ultrafast+foo", "dis:ultrafast+refine", "dis:fast+refine101"):
+        with pytest.raises(InputError, match="refine"):
+            make_backend(bad)

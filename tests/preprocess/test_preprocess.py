@@ -566,7 +566,8 @@ def test_reducer_stride_reads_upsampled_flow_unchanged():
     coarse field upsampled as DIS does)."""
     import cv2
 
-    from simulator.flow.backends import DISFlow, FarnebackFlow
+    from simulator.flow.dis import DISFlow
+    from simulator.flow.farneback import FarnebackFlow
     from simulator.preprocess import reduce_stride
 
     w = h = 64
@@ -596,7 +597,7 @@ def test_fused_pipeline_equals_batch_path(tmp_path, videos, ref_long):
     )
     for name in ("pof_dps", "pof_px"):
         assert np.array_equal(getattr(plain, name), getattr(ref_long, name)), name
-    from simulator.flow.backends import make_backend
+    from simulator.flow.base import make_backend
     from simulator.media.video import iter_frames
     from simulator.preprocess import WindowFlowReducer, reduce_stride
     from simulator.sphere.windows import WindowExtractor

@@ -294,7 +294,7 @@ def test_preprocess_sphere_frame_range_is_paper_modes(tmp_path):
 
 def test_preprocess_sphere_builds_the_flow_backend_once(tmp_path, monkeypatch):
     """A torch:MODEL.pt is loaded and validated once, not once per use."""
-    import simulator.flow.backends as F
+    import simulator.flow.base as F
     import simulator.preprocess.sphere as PS
 
     vid = _rot_video(tmp_path / "rot.mp4")

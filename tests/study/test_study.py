@@ -13,6 +13,7 @@ import pytest
 
 from simulator.cli import main
 from simulator.study import VIEWING_COLUMNS
+from simulator.study.outputs import PART_MEAN_COLUMNS
 from simulator.traces.path import save_headpath_csv, synth
 
 
@@ -113,7 +114,7 @@ def test_study_outputs(ran, base, capsys):
     rc, out, _ = ran
     assert rc == 3  # the short trace fails; everything else completes
     rows = _rows(out / "viewings.csv")
-    assert list(rows[0]) == list(VIEWING_COLUMNS)
+    assert list(rows[0]) == [*VIEWING_COLUMNS, *PART_MEAN_COLUMNS]
     ids = [r["viewing"] for r in rows]
     assert ids == ["clip-P01-GR", "clip-P02-GR", "clip-P03-NR", "clip-P04-NR",
                    "clip-multi_user1-NR", "clip-multi_user2-NR", "clip-multi_user3-NR",

@@ -305,3 +305,20 @@ def test_preprocess_matches_truth_on_small_clip(tmp_path, scene, bound):
     # The windows' truths differ by up to 2x (rotate) and more (forward): the estimate
     # must follow that pattern, not just its mean.
     assert np.corrcoef(est.ravel(), truth.ravel())[0, 1] > 0.8
+
+
+def test_mip_texture_fades_to_the_mean_past_its_coarsest_level():
+    """Footprints beyond the pyramid give the texture's mean colour (no moire at any
+    distance); one level finer than the mean level, the coarsest real level is unchanged."""
+    from simulator.synth.textures import _MipTexture
+
+    rng = np.random.default_rng(0)
+    img = rng.integers(0, 256, (64, 128, 3), dtype=np.uint8)
+    mip = _MipTexture(img)
+    u = rng.uniform(0, 1000, (8, 8)).astype(np.float32)
+    v = rng.uniform(0, 1000, (8, 8)).astype(np.float32)
+    far = mip.sample(u, v, np.full((8, 8), 40.0, np.float32))
+    mean = img.reshape(-1, 3).mean(axis=0)
+    assert np.allclose(far, mean, atol=0.5)
+    coarse = mip.sample(u, v, np.full((8, 8), mip.n_levels - 2.0, np.float32))
+    assert coarse.std(axis=(0, 1)).max() > 1.0  # the coarsest real level still has detail

@@ -20,6 +20,7 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_output_dir
 from simulator.epof.overlaps import viewport_fov
+from simulator.epof.parts import has_parts, rotation_share
 from simulator.export.unity.assets import (
     ASSET_FILES,
     CS_FILES,
@@ -30,6 +31,7 @@ from simulator.export.unity.assets import (
 from simulator.export.unity.binary import (
     DATA_FILE,
     FORMAT,
+    ROT_FILE,
     FRAME_EPS,
     VERSION,
     covers,
@@ -48,6 +50,7 @@ __all__ = [
     "CS_FILES",
     "DATA_FILE",
     "DTYPES",
+    "ROT_FILE",
     "FORMAT",
     "FRAME_EPS",
     "MAX_GRAINS",
@@ -149,7 +152,19 @@ def _flow_data(g: GridFile, sphere: bool, dtype: str):
     return data, out_dtype, max_rel, cells
 
 
-def _targets(g: GridFile, out_dir) -> tuple[Path, list[Path]]:
+def _rot_blob(g: GridFile, header: dict, dtype, grains) -> bytes:
+    """:data:`ROT_FILE`: the export of the field's rotational part (same header, plus
+    ``part``): the same runtime loading it computes ``epof_rot_dps``."""
+    field, cells = require_field(g)
+    f = np.asarray(field, np.float32)
+    om = np.asarray(g.extras["ego_omega_dps"], np.float64)
+    rot = f * rotation_share(f, np.asarray(g.field_trans_dps, np.float32), om, cells)
+    h = {**header, "data": dict(header["data"])}
+    h["part"] = "rot: the field's rotational part (simulator.epof.parts); EPOF of it = epof_rot_dps"
+    return pack(h, np.ascontiguousarray(rot.astype(dtype)), grains)
+
+
+def _targets(g: GridFile, out_dir, rot: bool = False) -> tuple[Path, list[Path]]:
     """The output folder and every file to write, refused (InputError) before anything is
     written when one is the grid, a folder, or a file vimsim did not write."""
     out = Path(out_dir)
@@ -157,7 +172,7 @@ def _targets(g: GridFile, out_dir) -> tuple[Path, list[Path]]:
     if grid_path is not None and out.resolve() == grid_path:
         raise InputError(f"{out}: output folder is the input grid file; choose another -o")
     out = check_output_dir(out)
-    rels = [DATA_FILE, *ASSET_FILES, *meta_files()]
+    rels = [DATA_FILE, *ASSET_FILES, *meta_files(), *([ROT_FILE] if rot else [])]
     targets = [out / r for r in rels]
     for t in targets:
         if grid_path is not None and t.resolve() == grid_path:
@@ -182,9 +197,12 @@ def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation) 
     )  # fmt: skip
     grains = GrainField.from_config(grf).centers.astype(np.float32)
     blob = pack(header, data, grains)
-    out, targets = _targets(g, out_dir)
+    rot = sphere and has_parts(g)
+    out, targets = _targets(g, out_dir, rot)
     metas = meta_files()
     contents = [blob, *(asset_bytes(r) for r in ASSET_FILES), *metas.values()]
+    if rot:
+        contents.append(_rot_blob(g, header, data.dtype, grains))
     (out / "Editor").mkdir(exist_ok=True)
     size = Path(g.path).stat().st_size if g.path and Path(g.path).is_file() else 0
     return _Plan(out, tuple(zip(targets, contents)), header, data, max_rel, size, n_grains)

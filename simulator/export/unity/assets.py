@@ -93,7 +93,7 @@ def is_ours(path: Path) -> bool:
             head = f.read(4096)
     except OSError:
         return False
-    if path.name == DATA_FILE:
+    if path.name in (DATA_FILE, ROT_FILE):
         return head.startswith(MAGIC)
     if path.suffix == ".meta":  # ours: it holds the GUID vimsim gives that file
         return f"guid: {guid(path.name[:-5])}".encode() in head or any(

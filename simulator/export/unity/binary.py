@@ -35,6 +35,7 @@ from simulator.core.fileio import check_input_file
 
 __all__ = [
     "DATA_FILE",
+    "ROT_FILE",
     "FORMAT",
     "FRAME_EPS",
     "MAGIC",
@@ -56,6 +57,9 @@ VERSION = 3
 MAGIC = b"VIMSIMEP"
 #: The data file inside an export folder.
 DATA_FILE = "vimsim_epof.bin"
+#: The rotational part of a sphere-mode field, same format (written when the grid has it:
+#: a sphere-mode grid with the per-frame camera rotation, :mod:`simulator.epof.parts`).
+ROT_FILE = "vimsim_epof_rot.bin"
 #: Tolerance (frames) of the time-to-frame rule: frame times computed as f / fps map to f.
 FRAME_EPS = 1e-6
 _PREFIX = 16

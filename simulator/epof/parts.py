@@ -1,0 +1,155 @@
+"""The EPOF split into the camera's rotation and translation, and the weighted EPOF of ``--flow-weights``.
+
+How a speed is split. At every cell and frame a sphere-mode grid made since issue 27
+holds the measured speed ``s`` (``field_dps``), the speed with the fitted camera
+rotation removed ``s_t`` (``field_trans_dps``: the translation's parallax plus anything
+moving on its own) and the camera's angular velocity ``omega`` (``ego_omega_dps``),
+whose speed at the cell's direction ``d`` alone is ``s_r = |omega x d|``. The measured
+speed is shared between the two in proportion to the speed each would give alone::
+
+    rot part   = s * s_r / (s_r + s_t)        trans part = s * s_t / (s_r + s_t)
+
+(half each where both are 0). The parts add up to ``s`` exactly, so over any viewport
+``epof_rot_dps + epof_trans_dps = epof_dps`` (viewport means are linear), and a pure
+rotation (``s_t = 0``) is all rotation, a pure translation all translation. The
+weighted EPOF of ``--flow-weights rot=A,trans=B`` is ``A * epof_rot_dps + B *
+epof_trans_dps``; the default ``A = B = 1`` is the EPOF itself.
+
+The truth of ``vimsim synth`` is split the same way (``speed_rot_dps``,
+``speed_trans_dps``: each motion alone), so estimate and truth compare part by part.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.core.errors import InputError
+from simulator.epof.exact import viewport_epof
+from simulator.media.gridfile import require_field
+from simulator.media.lazyfield import field_chunks, take_rows
+from simulator.sphere.cells import CellGrid, Frustum
+from simulator.sphere.geometry import lonlat_to_dir
+
+__all__ = [
+    "DEFAULT_WEIGHTS",
+    "has_parts",
+    "parse_flow_weights",
+    "require_parts",
+    "rotation_share",
+    "viewport_parts",
+]
+
+#: ``--flow-weights`` default: the EPOF itself.
+DEFAULT_WEIGHTS: tuple[float, float] = (1.0, 1.0)
+
+#: How to make a grid with the parts; quoted by the error for a grid without them.
+MAKE_PARTS_HINT = "re-run vimsim preprocess VIDEO -o GRID.npz --method sphere"
+
+
+def parse_flow_weights(text: str) -> tuple[float, float]:
+    """``"rot=A,trans=B"`` (either part may be left out: weight 1) -> ``(A, B)``.
+
+    InputError (one line naming ``--flow-weights``) for an unknown part, a repeated one,
+    a weight that is not a finite number >= 0, or both weights 0."""
+    out = {"rot": 1.0, "trans": 1.0}
+    seen = set()
+    for item in str(text).split(","):
+        key, sep, val = item.strip().partition("=")
+        key = key.strip().lower()
+        if not sep or key not in out:
+            raise InputError(
+                f"--flow-weights: unknown part {item.strip()!r}; expected rot=A,trans=B "
+                "(weights >= 0, e.g. rot=1,trans=0.5)"
+            )
+        if key in seen:
+            raise InputError(f"--flow-weights: {key} given twice")
+        seen.add(key)
+        try:
+            v = float(val)
+        except ValueError:
+            v = math.nan
+        if not math.isfinite(v) or v < 0:
+            raise InputError(
+                f"--flow-weights: {key} must be a finite number >= 0; got {val.strip()!r}"
+            )
+        out[key] = v
+    if out["rot"] == 0 and out["trans"] == 0:
+        raise InputError("--flow-weights: rot and trans are both 0; give at least one weight > 0")
+    return out["rot"], out["trans"]
+
+
+def has_parts(grid) -> bool:
+    """True when a grid holds the per-frame camera rotation and translational field."""
+    return bool(getattr(grid, "extras", {})) and getattr(grid, "field_trans_dps", None) is not None
+
+
+def require_parts(grid) -> None:
+    """InputError (naming the grid and the fix) unless the grid has the parts."""
+    if not has_parts(grid):
+        src = getattr(grid, "path", "") or "grid"
+        raise InputError(
+            f"{src}: grid has no per-frame camera rotation (made before vimsim split the "
+            f"flow into rotation and translation, or in paper mode); {MAKE_PARTS_HINT}"
+        )
+
+
+def rotation_share(
+    field: NDArray, trans: NDArray, omega_dps: NDArray, cells: CellGrid
+) -> NDArray[np.float32]:
+    """The rotation's share ``s_r / (s_r + s_t)`` of each cell's speed, ``(T, n_lat,
+    n_lon)`` float32, for fields ``field``/``trans`` (T, n_lat, n_lon) and the camera's
+    angular velocity ``omega_dps`` (T, 3) (module docstring; ``field`` unused but for
+    its shape)."""
+    lon, lat = cells.centres_lonlat()
+    d = lonlat_to_dir(*np.meshgrid(lon, lat))  # (n_lat, n_lon, 3)
+    om = np.asarray(omega_dps, np.float64).reshape(-1, 3)
+    sr = np.linalg.norm(np.cross(om[:, None, None, :], d[None]), axis=-1)
+    st = np.asarray(trans, np.float64)
+    tot = sr + st
+    share = np.where(tot > 0, sr / np.where(tot > 0, tot, 1.0), 0.5)
+    return share.astype(np.float32).reshape(np.shape(field))
+
+
+def viewport_parts(
+    grid,
+    yaw_deg,
+    pitch_deg,
+    roll_deg=0.0,
+    *,
+    frustum: Frustum | None = None,
+    hfov_deg: float | None = None,
+    vfov_deg: float | None = None,
+    rows=None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """``(epof_rot_dps, epof_trans_dps)`` (T,) of a sphere-mode grid with the parts, for
+    the head orientation of each frame (degrees; ``rows``: only these grid rows).
+
+    Their sum is the exact EPOF :func:`simulator.epof.exact.viewport_epof` gives for the
+    same viewport. InputError (naming the fix: re-run preprocess) for a grid without the
+    per-frame rotation."""
+    require_parts(grid)
+    field, cells = require_field(grid)
+    trans = grid.field_trans_dps
+    omega = np.asarray(grid.extras["ego_omega_dps"], np.float64)
+    if rows is not None:
+        field, trans, omega = take_rows(field, rows), take_rows(trans, rows), omega[rows]
+    fr = frustum or Frustum.symmetric(
+        float(hfov_deg or grid.hfov_deg), float(vfov_deg or hfov_deg or grid.vfov_deg)
+    )
+    T = len(omega)
+    yaw, pitch, roll = (
+        np.broadcast_to(np.asarray(a, float), (T,)) for a in (yaw_deg, pitch_deg, roll_deg)
+    )
+    total = np.empty(T)
+    rot = np.empty(T)
+    for (i0, f), (_, ft) in zip(field_chunks(field), field_chunks(trans)):
+        i1 = i0 + len(f)
+        part = f * rotation_share(f, ft, omega[i0:i1], cells)
+        sl = slice(i0, i1)
+        kw = {"frustum": fr}
+        total[sl] = viewport_epof(f, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
+        rot[sl] = viewport_epof(part, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
+    return rot, total - rot

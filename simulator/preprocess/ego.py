@@ -1,0 +1,339 @@
+"""The camera's own rotation from a frame pair's flow on the sphere: a robust fit over every direction, and the flow with it removed.
+
+For a frame pair, sphere mode knows, at every evaluated tile pixel, the unit ray ``r0``
+of the content at frame t-1 and the ray ``r1`` it moved to at frame t (world frame = the
+equirect frame: +x right, +y up, +z forward). Its *rotation vector*
+``c = angle(r0, r1) * (r0 x r1) / |r0 x r1|`` (radians) is what a rotation of the content
+by ``w`` (a rotation vector, radians per frame) gives as ``P(r0) w``, ``P(r) = I - r r^T``
+(to first order; the fit is iterated with the exact residual below). A camera that also
+translates by ``t`` adds, at depth ``d``, ``(r0 x t) / d``: perpendicular to ``t``'s own
+great circles, so the component of ``c - P w`` along ``t_perp = P(r0) t`` is free of
+it whatever the depth: ``(c - w) . t_perp = 0`` (the continuous epipolar constraint).
+
+:func:`fit_rotation` solves for ``w`` and the translation direction ``t`` together by
+alternating least squares on those constraints, per lon/lat cell (the cell means of
+``c``), with Tukey's biweight against cells that move on their own (people, vehicles:
+independently moving content must not drag the estimate). The camera's angular
+velocity is the opposite of the content's: ``omega_cam = -w * fps``.
+
+The residual of a pixel (the flow with the rotation removed: parallax of the
+translation plus anything moving on its own) is the angle between ``R(w) r0`` and
+``r1``; its field is the *translational part* of the flow (:mod:`simulator.epof.parts`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+from numpy.typing import NDArray
+from scipy.spatial.transform import Rotation
+
+from simulator.sphere.cells import CellGrid
+from simulator.sphere.geometry import dir_to_lonlat, lonlat_to_dir
+
+__all__ = ["EGO_META", "EgoFit", "EgoRows", "FrameParts", "MidpointSplat", "fit_rotation"]
+
+#: ``meta["ego"]`` of a grid with the per-frame camera rotation (sphere mode).
+EGO_META = {
+    "ego_omega_dps": "camera angular velocity, deg/s, (T, 3) vector in the world (equirect) "
+    "frame at t-1: right-handed about +x right, +y up, +z forward; yaw rate = y, pitch rate "
+    "= -x, roll rate = -z",
+    "ego_confidence": "0..1: share of the sphere the fitted camera motion explains, times "
+    "how evenly it constrains the rotation",
+    "field_trans_dps": "deg/s: the speed with the fitted camera rotation removed (parallax "
+    "of the translation and independently moving content)",
+    "method": "robust fit over every cell (Tukey), rotation plus translation direction "
+    "(continuous epipolar constraint); simulator.preprocess.ego",
+}
+
+
+@dataclass(frozen=True)
+class FrameParts:
+    """One frame pair's results: ``field`` and ``trans`` (n_lat, n_lon) float32 deg/s (the
+    speed, and the speed with the camera rotation removed), ``omega_dps`` (3,) float32 the
+    camera's angular velocity (deg/s, world frame = the equirect frame at t-1, right-handed
+    about +x right, +y up, +z forward), ``confidence`` in [0, 1]
+    (:class:`simulator.preprocess.ego.EgoFit`)."""
+
+    field: NDArray[np.float32]
+    trans: NDArray[np.float32]
+    omega_dps: NDArray[np.float32]
+    confidence: float
+
+
+class EgoRows:
+    """The per-frame camera rotation and translational field of a run: ``trans`` (a
+    :class:`FieldSpool` or anything with ``append``), ``omega_dps`` (T, 3) and
+    ``confidence`` (T,) float32 (:meth:`arrays`; row 0 repeats row 1)."""
+
+    def __init__(self, trans):
+        self.trans = trans
+        self._omega: list = []
+        self._conf: list = []
+
+    def append(self, p: FrameParts) -> None:
+        self.trans.append(p.trans)
+        self._omega.append(p.omega_dps)
+        self._conf.append(p.confidence)
+
+    def arrays(self) -> dict[str, NDArray[np.float32]]:
+        """``{"ego_omega_dps": (T, 3), "ego_confidence": (T,)}`` float32, row 0 = row 1."""
+        om = np.asarray(self._omega[:1] + self._omega, np.float32).reshape(-1, 3)
+        cf = np.asarray(self._conf[:1] + self._conf, np.float32)
+        return {"ego_omega_dps": om, "ego_confidence": cf}
+
+
+#: Tukey biweight scale, in units of the robust (MAD) spread of the cell residuals.
+_TUKEY_C = 4.685
+#: Residual spread floor, radians per frame (0.05 deg: sub-pixel flow noise).
+_SIGMA_MIN = np.radians(0.05)
+_ITERATIONS = 5
+
+
+@dataclass(frozen=True)
+class EgoFit:
+    """One frame pair's fit.
+
+    w : (3,) content rotation vector, radians per frame, world frame
+    t : (3,) unit translation direction (sign arbitrary; zeros when not determined)
+    confidence : float in [0, 1]: the share of the sphere (cells, by solid angle) the
+        fitted camera motion explains (Tukey weight > 0), times how well those cells
+        constrain ``w`` (1 when they cover the sphere evenly enough: smallest over largest
+        eigenvalue of their normal matrix >= 1/2)
+    """
+
+    w: NDArray[np.float64]
+    t: NDArray[np.float64]
+    confidence: float
+
+
+def _solve_w(c, d, wt, t):
+    """``w`` minimising sum wt |P_t (c - P(d) w)|^2, with P_t the projection on t_perp
+    (all of the tangent plane when t is None)."""
+    if t is None:
+        # sum wt P(d)^T P(d) w = sum wt P(d) c; P(d) c = c (c is tangent)
+        A = np.eye(3) * wt.sum() - (d * wt[:, None]).T @ d
+        b = wt @ c
+    else:
+        tp = t[None, :] - (d @ t)[:, None] * d  # t_perp per cell
+        # (c - w) . tp = 0  ->  tp^T w = tp^T c
+        wtp = tp * wt[:, None]
+        A = wtp.T @ tp
+        b = wtp.T @ (tp * c).sum(axis=1)
+    return np.linalg.solve(A + np.eye(3) * (1e-9 * max(np.trace(A), 1e-30)), b), A
+
+
+def _solve_t(c, d, wt, w):
+    """Unit ``t`` minimising sum wt ((c - w) . P(d) t)^2: the smallest eigenvector."""
+    e = c - w[None, :]
+    a = e - (e * d).sum(axis=1, keepdims=True) * d  # P(d) e
+    M = (a * wt[:, None]).T @ a
+    vals, vecs = np.linalg.eigh(M)
+    return vecs[:, 0], vals
+
+
+def _residuals(c, d, w, t):
+    """Per-cell residual (radians per frame) of the model: the component of ``c - P w``
+    across the translation's great circles, or its whole length when ``t`` is None."""
+    e = c - (w[None, :] - (d @ w)[:, None] * d)
+    if t is None:
+        return np.linalg.norm(e, axis=1)
+    tp = t[None, :] - (d @ t)[:, None] * d
+    n = np.linalg.norm(tp, axis=1)
+    return np.abs((e * tp).sum(axis=1)) / np.maximum(n, 1e-9)
+
+
+def _tukey(r, base):
+    sig = max(1.4826 * float(np.median(r[base > 0])) if np.any(base > 0) else 0.0, _SIGMA_MIN)
+    x = r / (_TUKEY_C * sig)
+    return base * np.where(x < 1.0, (1.0 - x * x) ** 2, 0.0)
+
+
+def fit_rotation(
+    cell_vec: NDArray, cell_dir: NDArray, weight: NDArray, *, translation: bool = True
+) -> EgoFit:
+    """Robust rotation (and translation direction) of the content from per-cell rotation
+    vectors.
+
+    Parameters
+    ----------
+    cell_vec : (C, 3) mean rotation vector ``c`` of each cell's pixels, radians per frame
+    cell_dir : (C, 3) unit direction of each cell's centre
+    weight : (C,) base weight of each cell (its solid angle covered by pixels; 0 = none)
+    translation : also fit the translation direction (the epipolar constraint); False
+        fits a pure rotation (every cell's whole residual)
+    """
+    c = np.asarray(cell_vec, np.float64)
+    d = np.asarray(cell_dir, np.float64)
+    base = np.where(np.isfinite(c).all(axis=1), np.asarray(weight, np.float64), 0.0)
+    c = np.where(base[:, None] > 0, c, 0.0)
+    wt = base.copy()
+    w, _ = _solve_w(c, d, wt, None)
+    t = None
+    for it in range(_ITERATIONS):
+        if translation and it > 0:
+            t, vals = _solve_t(c, d, wt, w)
+            # a translation is only fitted when it explains clearly more than noise
+            if vals[0] > 0.5 * vals[1]:
+                t = None
+        wt = _tukey(_residuals(c, d, w, t), base)
+        w, _ = _solve_w(c, d, wt, t)
+    wt = _tukey(_residuals(c, d, w, t), base)
+    _, A = _solve_w(c, d, wt, None)
+    ev = np.linalg.eigvalsh(A)
+    span = float(ev[0] / ev[-1]) if ev[-1] > 0 else 0.0
+    share = float(base[wt > 0].sum() / base.sum()) if base.sum() > 0 else 0.0
+    conf = share * min(1.0, 2.0 * span)
+    return EgoFit(w=w, t=np.zeros(3) if t is None else t, confidence=float(np.clip(conf, 0, 1)))
+
+
+class MidpointSplat:
+    """Per-frame cell means of a frame pair's tile flow, each pixel counted in the cell of
+    its path's *midpoint*, plus the camera rotation and the residual (translational) field.
+
+    A pixel's angle is the motion of its content over the frame interval; the truth (and
+    any instantaneous speed) belongs to where the content is at the interval's middle.
+    Counting it in the cell of ``r0`` instead biases fields that vary along the motion
+    (5 % high down a corridor at 5 m/s): here it goes to the cell of the pixel position
+    plus half its flow (looked up in a per-tile table of cell indices, extended beyond
+    the tile by ``pad`` pixels). Cells no midpoint falls in (rare, polar) take the value
+    of the static splat (the cell of ``r0``).
+
+    Parameters
+    ----------
+    tile_rot : (n, 3, 3) tile -> world rotation matrices
+    size : tile side, pixels; ``tan_half`` : tan(tile FOV / 2)
+    sel : slice of the evaluated pixels (stride); ``u0, v0`` : their plane coordinates
+    weight : (n, s', s') base weight of each evaluated pixel (solid angle x blend)
+    cells : CellGrid; ``splat`` : the static (C, n px) splat matrix (fallback)
+    cx, cy : plane units per pixel of x and y (``RayAngles._cx``, ``_cy``)
+    """
+
+    def __init__(
+        self, tile_rot, size, tan_half, sel, u0, v0, weight, cells: CellGrid, splat, cx, cy, pad=48
+    ):
+        n, s = len(tile_rot), int(size)
+        self.pad, self.ext = int(pad), s + 2 * int(pad)
+        xs = (np.arange(-pad, s + pad) + 0.5) / s * 2.0 - 1.0
+        uu, vv = np.meshgrid(xs * tan_half, -xs * tan_half)
+        rays = np.stack([uu, vv, np.ones_like(uu)], -1)
+        rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+        world = np.einsum("nij,hwj->nhwi", tile_rot, rays).reshape(-1, 3)
+        lon, lat = dir_to_lonlat(world)
+        self.lut = cells.index(lon, lat).astype(np.int32).reshape(n, self.ext, self.ext)
+        g = np.arange(s)[sel].astype(np.float32) + np.float32(pad + 0.5)
+        self.gx, self.gy = np.meshgrid(g, g)
+        self.sel = sel
+        self.tile_rot = np.asarray(tile_rot, np.float64)
+        self.u0, self.v0 = u0, v0
+        self.weight = np.ascontiguousarray(weight, np.float64).reshape(-1)
+        self.splat = splat
+        self.cells = cells
+        self.cx, self.cy = np.float32(cx), np.float32(cy)
+        lo, la = cells.centres_lonlat()
+        self.cell_dir = lonlat_to_dir(*np.meshgrid(lo, la)).reshape(-1, 3)
+        self._tile = np.arange(n)[:, None, None]
+        self._tile_off = (self._tile * self.ext * self.ext).astype(np.int32)
+        self._row = np.arange(cells.n_cells) // cells.shape[1]
+        # bins of k x k cells (~12 deg) for the fit; direction = mean of their cell centres
+        k = max(1, round(12.0 / cells.cell_deg))
+        n_lon = cells.shape[1]
+        r, c = np.divmod(np.arange(cells.n_cells), n_lon)
+        self._bin = (r // k) * (-(-n_lon // k)) + c // k
+        sa = cells.solid_angles().reshape(-1)
+        bd = np.stack(
+            [np.bincount(self._bin, weights=sa * self.cell_dir[:, i]) for i in range(3)], -1
+        )
+        self._bin_dir = bd / np.linalg.norm(bd, axis=1, keepdims=True)
+
+    def _cell_mean(self, idx, values, den):
+        """Weighted cell means of per-pixel ``values``; cells without pixels this frame
+        take the static splat's value (their rows only)."""
+        v = values.reshape(-1)
+        num = np.bincount(idx, weights=self.weight * v, minlength=den.size)
+        out = num / np.where(den > 0, den, 1.0)
+        empty = den <= 0
+        if empty.any():  # tiny polar cells: the mean of their latitude row
+            rn = np.bincount(self._row, weights=num, minlength=self.cells.shape[0])
+            rd = np.bincount(self._row, weights=den, minlength=self.cells.shape[0])
+            if np.all(rd[self._row[empty]] > 0):
+                out[empty] = (rn / np.where(rd > 0, rd, 1.0))[self._row[empty]]
+            else:
+                e = np.flatnonzero(empty)
+                out[e] = self.splat[e] @ v
+        return out
+
+    def __call__(self, flow: NDArray, ang: NDArray):
+        """``(field, trans_field, EgoFit)``: cell means (radians per frame) of the angles
+        ``ang`` (n, s', s') and of the residual angles, and the rotation fit, for pixel
+        flow ``flow`` (n, s, s, 2) (x right, y down)."""
+        sub = flow[:, self.sel, self.sel, :]
+        fx, fy = np.ascontiguousarray(sub[..., 0]), np.ascontiguousarray(sub[..., 1])
+        hi = self.ext - 1
+        # midpoint pixel (rounded; gx, gy hold the pixel centres + pad + 0.5)
+        xi = np.clip((self.gx + np.float32(0.5) * fx).astype(np.int32), 0, hi)
+        yi = np.clip((self.gy + np.float32(0.5) * fy).astype(np.int32), 0, hi)
+        yi *= self.ext
+        yi += xi
+        yi += self._tile_off
+        idx = self.lut.take(yi).reshape(-1)
+        C = self.cells.n_cells
+        den = np.bincount(idx, weights=self.weight, minlength=C)
+        field = self._cell_mean(idx, ang, den)
+        # the fit runs on every other evaluated pixel, in coarser bins of cells (~12 deg)
+        vsum, dsum = self._cell_vectors(idx, fx, fy, ang)
+        nb = self._bin_dir.shape[0]
+        bw = np.bincount(self._bin, weights=dsum, minlength=nb)
+        bv = np.stack(
+            [np.bincount(self._bin, weights=vsum[:, k], minlength=nb) for k in range(3)], -1
+        )
+        fit = fit_rotation(bv / np.where(bw > 0, bw, 1.0)[:, None], self._bin_dir, bw)
+        return field, self._cell_mean(idx, self._residual(fit.w, fx, fy), den), fit
+
+    def _cell_vectors(self, idx, fx, fy, ang):
+        """``(C, 3)`` weighted sums of the rotation vectors of every other evaluated pixel
+        (each direction) per cell, world frame (summed per (tile, cell) in tile
+        coordinates, then rotated per tile), and ``(C,)`` their weights."""
+        n, C = len(self.tile_rot), self.cells.n_cells
+        h = slice(None, None, 2)
+        fx, fy, ang = fx[:, h, h], fy[:, h, h], ang[:, h, h]
+        du, dv = fx * self.cx, fy * self.cy
+        cz = self.u0[h, h] * dv - self.v0[h, h] * du
+        scale = ang / np.maximum(np.sqrt(du * du + dv * dv + cz * cz), np.float32(1e-12))
+        wsub = self.weight.reshape(fx.shape[0], *self.u0.shape)[:, h, h]
+        key = (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
+        ws = (wsub * scale).reshape(-1)
+        parts = [
+            np.bincount(key, weights=ws * comp.reshape(-1), minlength=n * C)
+            for comp in (-dv, du, cz)
+        ]
+        vt = np.stack(parts, -1).reshape(n, C, 3)  # tile coordinates
+        dsum = np.bincount(key, weights=wsub.reshape(-1), minlength=n * C)
+        vec = (vt @ self.tile_rot.transpose(0, 2, 1)).sum(axis=0)
+        return vec, dsum.reshape(n, C).sum(axis=0)
+
+    def _residual(self, w, fx, fy):
+        """Per evaluated pixel: the angle (radians) between ``R(w) r0`` and ``r1``, the
+        flow with the rotation removed, in tile coordinates (``r = (u, v, 1)``)."""
+        Rw = _rotvec_matrix(w)
+        Rt = (self.tile_rot.transpose(0, 2, 1) @ Rw @ self.tile_rot).astype(np.float32)
+        R = Rt[:, :, :, None, None]
+        u0, v0 = self.u0, self.v0
+        p0, p1, p2 = (R[:, i, 0] * u0 + R[:, i, 1] * v0 + R[:, i, 2] for i in range(3))
+        q0 = u0 + fx * self.cx
+        q1 = v0 + fy * self.cy
+        crx = p1 - p2 * q1
+        cry = p2 * q0 - p0
+        crz = p0 * q1 - p1 * q0
+        dot = p0 * q0 + p1 * q1 + p2
+        cols = dot.shape[-1]
+        m = cv2.magnitude(crx.reshape(-1, cols), cry.reshape(-1, cols))
+        m = cv2.magnitude(m, crz.reshape(-1, cols))
+        return cv2.phase(dot.reshape(-1, cols), m)
+
+
+def _rotvec_matrix(w: NDArray) -> NDArray[np.float64]:
+    """Rotation matrix of a rotation vector (Rodrigues)."""
+    return Rotation.from_rotvec(np.asarray(w, np.float64)).as_matrix()
