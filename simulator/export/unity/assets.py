@@ -6,7 +6,7 @@ import hashlib
 import importlib.resources
 from pathlib import Path
 
-from simulator.export.unity.binary import DATA_FILE, MAGIC
+from simulator.export.unity.binary import DATA_FILE, MAGIC, ROT_FILE
 
 __all__ = ["ASSET_FILES", "CS_FILES", "asset_bytes", "guid", "is_ours", "meta_files"]
 

@@ -35,10 +35,10 @@ from simulator.core.fileio import check_input_file
 
 __all__ = [
     "DATA_FILE",
-    "ROT_FILE",
     "FORMAT",
     "FRAME_EPS",
     "MAGIC",
+    "ROT_FILE",
     "VERSION",
     "check_mitigation_header",
     "covers",
