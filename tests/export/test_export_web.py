@@ -32,6 +32,16 @@ def grid_path(tmp_path_factory):
     return d / "grid.npz"
 
 
+@pytest.fixture(scope="module")
+def range_grid(grid_path):
+    """A sphere-mode grid of frames 3..7 of the 10-frame clip (the source is longer)."""
+    out = grid_path.parent / "range.npz"
+    assert main(["preprocess", str(grid_path.parent / "clip.mp4"), "-o", str(out), "--method",
+                 "sphere", "--window-size", "64", "--start", "0.3", "--end", "0.8",
+                 "--no-progress"]) == 0  # fmt: skip
+    return out
+
+
 def _poses(n: int, seed: int, T: int, fps: float) -> np.ndarray:
     """time, yaw, pitch, roll: random with roll, plus the seam, the poles, between frames."""
     rng = np.random.default_rng(seed)
@@ -175,15 +185,23 @@ def test_export_unknown_format(grid_path, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("method", ["auto", "paper"])
-def test_web_data_file_is_the_unity_export(grid_path, tmp_path, method):
+@pytest.mark.parametrize("which", ["whole", "range"])
+def test_web_data_file_is_the_unity_export(grid_path, range_grid, tmp_path, method, which):
     """vimsim_epof.bin of the web export (streamed from the grid for a float16 field) is
-    byte for byte the Unity export's."""
+    byte for byte the Unity export's (format 3: range, source length, grain layout), for a
+    grid of the whole clip and of a range of it."""
     from simulator.export.unity import export_unity
 
-    export_unity(grid_path, tmp_path / "u", method=method)
-    export_web(grid_path, tmp_path / "w", method=method)
+    grid = grid_path if which == "whole" else range_grid
+    export_unity(grid, tmp_path / "u", method=method)
+    res = export_web(grid, tmp_path / "w", method=method)
     a = (tmp_path / "u" / "vimsim_epof.bin").read_bytes()
     assert a == (tmp_path / "w" / "vimsim_epof.bin").read_bytes()
+    h, data = read_export(tmp_path / "w")
+    assert h == res.header and h["version"] == 3 and data.shape[0] == h["n_frames"]
+    start = 3 if which == "range" else 0
+    assert (h["range"]["start_frame"], h["range"]["end_frame"]) == (start, start + h["n_frames"])
+    assert h["source"]["n_frames"] == 10 and h["range"]["end_frame"] == (8 if start else 10)
 
 
 @pytest.mark.browser
@@ -271,3 +289,42 @@ def test_js_refuses_old_and_bad_files(browser, grid_path, tmp_path):
     assert "grf.inner_deg/outer_deg" in got["cutout.bin"], got
     assert got["vimsim_epof.bin"] == "ok"
     assert "version 1" in got["old"] and "export again" in got["old"], got
+
+
+_JS_RANGE = """
+const [times] = args;
+const m = await import('./vimsim.js');
+const rt = await m.loadExport('./');
+return {covers: times.map((t) => rt.covers(t)), epof: times.map((t) => rt.epof(t, 30, -10, 5)),
+        frames: times.map((t) => rt.frameAt(t)), range: rt.range, source: rt.source};
+"""
+
+
+@pytest.mark.browser
+def test_js_range_of_a_partial_export(browser, range_grid, tmp_path):
+    """An export of frames 3..7 of a 10-frame video: the JS runtime covers exactly those frames
+    (as Python's covers), gives the Python EPOF inside and NaN before and after (within the
+    source and beyond it), and knows the source's length."""
+    from simulator.report.serve import start_server
+
+    res = export_web(range_grid, tmp_path / "w")
+    h = res.header
+    fps = h["fps"]
+    times = np.array([0.0, 2.9, 3.0, 5.5, 7.999, 8.0, 9.5, 10.0, 1e6]) / fps
+    srv = start_server(tmp_path / "w")
+    try:
+        browser.get(srv.url + "example.html")
+        got = browser.run_async(_JS_RANGE, times.tolist())
+    finally:
+        srv.close()
+    inside = covers(h, times)
+    assert got["covers"] == inside.tolist() == [False, False, True, True, True] + [False] * 4
+    assert got["range"] == {"startFrame": 3, "endFrame": 8, "startS": 3 / fps, "endS": 8 / fps}
+    assert got["source"] == {"nFrames": 10, "durationS": 10 / fps, "known": True}
+    assert all(got["epof"][i] is None for i in np.flatnonzero(~inside))
+    grid = load_grid(range_grid)
+    poses = np.column_stack([times, np.full(9, 30.0), np.full(9, -10.0), np.full(9, 5.0)])[inside]
+    ref = _reference(grid, h, poses)
+    js = np.asarray([got["epof"][i] for i in np.flatnonzero(inside)])
+    assert np.allclose(js, ref, rtol=1e-5), (js, ref)
+    assert got["frames"][:3] == [3, 3, 3] and got["frames"][-1] == 7  # frameAt clamps
