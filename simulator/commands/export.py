@@ -46,9 +46,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--format",
         choices=_FORMATS,
         default="unity",
-        help="unity (default): vimsim_epof.bin + the C# runtime; web: the same data, the overlap "
-        "table and grain layout with an ES-module runtime (vimsim.js, vimsim_gl.js) and "
-        "example.html (docs/web.md)",
+        help="unity (default): vimsim_epof.bin + the C# runtime; web: the same vimsim_epof.bin "
+        "(and the overlap table in paper mode) with an ES-module runtime (vimsim.js, "
+        "vimsim_grains.js, vimsim_gl.js) and example.html (docs/web.md); the overlay options "
+        "apply to both",
     )
     p.add_argument(
         "--method",
@@ -127,9 +128,9 @@ def run(args: argparse.Namespace) -> int:
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = rule_from_args(args)
+    grf, mitigation = _overlay_from_args(args)  # the same overlay options for both formats
     if args.format == "web":
-        return _run_web(args, hfov, vfov, rule)
-    grf, mitigation = _overlay_from_args(args)
+        return _run_web(args, hfov, vfov, rule, grf, mitigation)
     res = export_unity(
         args.grid,
         args.output,
@@ -157,16 +158,18 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _run_web(args: argparse.Namespace, hfov, vfov, rule) -> int:
+def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation) -> int:
     from simulator.export.web import export_web
 
     res = export_web(args.grid, args.output, method=args.method, dtype=args.dtype,
-                     hfov_deg=hfov, vfov_deg=vfov, rule=rule)  # fmt: skip
+                     hfov_deg=hfov, vfov_deg=vfov, rule=rule, grf=grf,
+                     mitigation=mitigation)  # fmt: skip
     h = res.header
     print(
         f"wrote {res.out_dir}: {', '.join(f.name for f in res.files)} ({res.mode} mode; viewport "
         f"{h['viewport']['hfov_deg']:g} x {h['viewport']['vfov_deg']:g} deg; opacity 0 at "
-        f"{h['opacity']['low_dps']:.3g}, 1 at {h['opacity']['high_dps']:.3g} deg/s); open "
-        "example.html over http (docs/web.md)"
+        f"{h['opacity']['low_dps']:.3g}, 1 at {h['opacity']['high_dps']:.3g} deg/s; "
+        f"{h['grf']['n_grains']} grains, {h['mitigation']}); open example.html over http "
+        "(docs/web.md)"
     )
     return 0

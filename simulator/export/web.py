@@ -5,16 +5,18 @@
 ==========================  ==============================================================
 ``vimsim_web.json``         what the runtime loads first: file names, table shape and axes,
                             the grain parameters (``"format": "vimsim-web"``)
-``vimsim_epof.bin``         the Unity export's binary, unchanged (:mod:`simulator.export.unity`)
+``vimsim_epof.bin``         the Unity export's binary, byte for byte (format 3,
+                            :mod:`simulator.export.unity.binary`): the flow, the grain
+                            layout, the GRF and vignette settings, the source's length and
+                            the exported range
 ``vimsim_overlaps.bin``     paper mode only: ``VIMSIMOV`` + 8 zero bytes, then the overlap
                             table of :class:`simulator.epof.overlaps.ViewportOverlaps`
                             (float32 little-endian, shape in the JSON), the numbers ``vimsim
                             epof`` interpolates
-``vimsim_grains.bin``       ``VIMSIMGR`` + 8 zero bytes, then the grain centres of
-                            :class:`simulator.mitigation.grf.GrainField` (float64 x, y, z,
-                            world frame), the renderer's layout
-``vimsim.js``               the runtime (load, EPOF at any pose and time, opacity rule with
-                            easing, grain layout and coverage mask)
+``vimsim.js``               the runtime (load, EPOF at any pose and time, NaN outside the
+                            exported range, opacity rule with easing, the grain layout)
+``vimsim_grains.js``        the grain layout: read from the file, or drawn from the seed
+                            (numpy's PCG64 ported), and its coverage mask
 ``vimsim_gl.js``            the WebGL2 eye renderer and overlay shader (video on the sphere,
                             grains, cutout, vignette) as vimsim's renderer draws them
 ``example.html``            a minimal page: drag to look around, live EPOF and opacity
@@ -28,7 +30,6 @@ from __future__ import annotations
 import dataclasses
 import importlib.resources
 import json
-import math
 import os
 import shutil
 import tempfile
@@ -40,22 +41,26 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.epof.overlaps import viewport_overlaps
-from simulator.export.unity import DATA_FILE, _pack, export_unity
+from simulator.export.unity import DATA_FILE, VERSION, export_unity, read_grain_layout
+from simulator.export.unity.binary import grain_layout_bytes, pack_head
+from simulator.export.unity.header import set_data_shape
 from simulator.media.gridfile import GridFile, load_grid
 from simulator.media.lazyfield import field_chunks, take_rows
-from simulator.mitigation.grf import GrainField, GrfConfig, OpacityRule, grain_count
+from simulator.mitigation.grf import GrfConfig, OpacityRule
+from simulator.mitigation.kinds import Mitigation
 from simulator.sphere.windows import WindowGrid
 
-__all__ = ["JS_FILES", "WEB_FILES", "WebExport", "export_web", "grain_bytes", "js_source"]
+__all__ = ["JS_FILES", "MANIFEST_VERSION", "WEB_FILES", "WebExport", "export_web", "js_source"]
 
 MANIFEST = "vimsim_web.json"
+#: 2: the grain layout and the mitigation's settings are read from ``vimsim_epof.bin``
+#: (format 3); 1 had a ``vimsim_grains.bin`` beside a format-2 binary.
+MANIFEST_VERSION = 2
 OVERLAPS = "vimsim_overlaps.bin"
-GRAINS = "vimsim_grains.bin"
 #: The runtime files shipped in ``simulator/export/web/``.
-JS_FILES: tuple[str, ...] = ("vimsim.js", "vimsim_gl.js")
+JS_FILES: tuple[str, ...] = ("vimsim.js", "vimsim_grains.js", "vimsim_gl.js")
 EXAMPLE = "example.html"
-WEB_FILES: tuple[str, ...] = (MANIFEST, DATA_FILE, OVERLAPS, GRAINS, *JS_FILES, EXAMPLE)
-_PREFIX = 16
+WEB_FILES: tuple[str, ...] = (MANIFEST, DATA_FILE, OVERLAPS, *JS_FILES, EXAMPLE)
 
 
 @dataclass(frozen=True)
@@ -72,20 +77,6 @@ class WebExport:
 def js_source(name: str) -> bytes:
     """A file of the web runtime (``simulator/export/web/NAME``)."""
     return importlib.resources.files("simulator.export").joinpath("web", name).read_bytes()
-
-
-def grain_bytes(grf: GrfConfig) -> bytes:
-    """``vimsim_grains.bin``: ``VIMSIMGR`` + 8 zero bytes + the grain centres, float64 LE."""
-    c = np.ascontiguousarray(GrainField.from_config(grf).centers, "<f8")
-    return b"VIMSIMGR" + bytes(8) + c.tobytes()
-
-
-def grain_info(grf: GrfConfig) -> dict:
-    """The grain parameters the runtime reads (degrees; ``count`` = grain_count)."""
-    return {"file": GRAINS, "grain_deg": grf.grain_deg, "density": grf.density,
-            "inner_deg": grf.inner_deg, "outer_deg": grf.outer_deg, "seed": int(grf.seed),
-            "count": grain_count(grf), "layout": "float64 x, y, z unit centres, world frame, "
-            "after 16 bytes"}  # fmt: skip
 
 
 def overlap_bytes(grid: GridFile, hfov_deg: float, vfov_deg: float) -> tuple[bytes, dict]:
@@ -113,14 +104,16 @@ def _float16_field(g: GridFile) -> bool:
 
 
 def write_epof(g: GridFile, target: Path, **kw) -> dict:
-    """Write ``vimsim_epof.bin`` to ``target`` as :func:`export_unity` writes it; returns
-    its header. ``kw``: export_unity's options.
+    """Write ``vimsim_epof.bin`` to ``target`` as :func:`export_unity` writes it (format 3,
+    byte for byte); returns its header. ``kw``: export_unity's options.
 
     A float16 field exported as float16 (sphere mode, ``dtype`` auto or float16) is streamed
     from the grid file chunk by chunk (memory flat in the video's length): the header is
     made by :func:`export_unity` from the field's first two rows and given the whole field's
-    shape (the Unity path holds the whole field as float32, twice, to measure a rounding that
-    is zero here)."""
+    shape, source length and range (:func:`~simulator.export.unity.header.set_data_shape`);
+    the grain layout follows the data as in :func:`~simulator.export.unity.binary.pack`
+    (the Unity path holds the whole field as float32, twice, to measure a rounding that is
+    zero here)."""
     method = kw.get("method", "auto")
     sphere = method == "sphere" or (method == "auto" and g.field_dps is not None)
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as tmp:
@@ -130,18 +123,18 @@ def write_epof(g: GridFile, target: Path, **kw) -> dict:
             return res.header
         first = np.asarray(take_rows(g.field_dps, [0, min(1, g.n_frames - 1)]), np.float16)
         res = export_unity(dataclasses.replace(g, field_dps=first), tmp, **kw)
+        grains = read_grain_layout(tmp)
     header = res.header
     if header["mode"] != "sphere" or header["data"]["dtype"] != "float16":
         raise AssertionError("export: the float16 field's header is not a float16 sphere export")
-    shape = [int(x) for x in g.field_dps.shape]
-    header["n_frames"] = shape[0]
-    header["data"]["shape"] = shape
-    header["data"]["bytes"] = 2 * math.prod(shape)
+    set_data_shape(header, g, g.field_dps.shape)
+    head, pad = pack_head(header, int(header["data"]["bytes"]))
     with open(target, "wb") as f:
-        f.write(_pack(header, np.zeros(0, "<f2")))  # the prefix and header only
+        f.write(head)
         f.writelines(
             np.ascontiguousarray(block, "<f2").tobytes() for _, block in field_chunks(g.field_dps)
         )
+        f.write(pad + grain_layout_bytes(grains))
     return header
 
 
@@ -155,43 +148,38 @@ def export_web(
     vfov_deg: float | None = None,
     rule: OpacityRule | None = None,
     grf: GrfConfig | None = None,
+    mitigation: Mitigation | None = None,
     example: bool = True,
 ) -> WebExport:
     """Write the web runtime for a grid into ``out_dir`` (see the module docstring).
 
-    ``method``, ``dtype``, ``hfov_deg``, ``vfov_deg``, ``rule``: as
-    :func:`simulator.export.unity.export_unity` (the same ``vimsim_epof.bin``); ``grf``:
-    the grain parameters (default ``GrfConfig()``, the paper's); ``example``: write
-    ``example.html``. Files of these names that an earlier web export did not write are
-    refused (InputError, nothing written).
+    ``method``, ``dtype``, ``hfov_deg``, ``vfov_deg``, ``rule``, ``grf`` (the grains: default
+    ``GrfConfig()``, the paper's), ``mitigation`` (what the overlay draws and the vignette's
+    settings: default ``grf``): as :func:`simulator.export.unity.export_unity`, whose
+    ``vimsim_epof.bin`` this writes; ``example``: write ``example.html``. Files of these
+    names that an earlier web export did not write are refused (InputError, nothing written).
     """
     g = grid if isinstance(grid, GridFile) else load_grid(grid)
-    grf = GrfConfig() if grf is None else grf
-    names = [MANIFEST, DATA_FILE, GRAINS, *JS_FILES] + ([EXAMPLE] if example else [])
-    folder = OutputFolder(out_dir, names, "export --format web")
+    names = [MANIFEST, DATA_FILE, *JS_FILES] + ([EXAMPLE] if example else [])
     inputs = [g.path] if g.path else []
-    folder.check(inputs)
-    kw = {
-        "method": method,
-        "dtype": dtype,
-        "hfov_deg": hfov_deg,
-        "vfov_deg": vfov_deg,
-        "rule": rule,
-    }
+    OutputFolder(out_dir, names, "export --format web").check(inputs)
+    kw = {"method": method, "dtype": dtype, "hfov_deg": hfov_deg, "vfov_deg": vfov_deg,
+          "rule": rule, "grf": grf, "mitigation": mitigation}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as work:
         data_tmp = Path(work) / DATA_FILE  # bad options fail here, before anything is written
         header = write_epof(g, data_tmp, **kw)
-        contents: dict[str, bytes] = {GRAINS: grain_bytes(grf)}
-        manifest = {"format": "vimsim-web", "version": 1, "data": DATA_FILE,
-                    "mode": header["mode"], "grains": grain_info(grf)}  # fmt: skip
+        contents: dict[str, bytes] = {}
+        manifest = {"format": "vimsim-web", "version": MANIFEST_VERSION, "data": DATA_FILE,
+                    "data_version": VERSION, "mode": header["mode"],
+                    "grains": "in the data file: header grf, section grains"}  # fmt: skip
         if header["mode"] == "paper":
             vp = header["viewport"]
             contents[OVERLAPS], manifest["overlaps"] = overlap_bytes(
                 g, vp["hfov_deg"], vp["vfov_deg"]
             )
             names.insert(2, OVERLAPS)
-            folder = OutputFolder(out_dir, names, "export --format web")
-            folder.check(inputs)
+        folder = OutputFolder(out_dir, names, "export --format web")
+        folder.check(inputs)
         contents[MANIFEST] = (json_text(manifest) + "\n").encode()
         for n in JS_FILES:
             contents[n] = js_source(n)
@@ -218,4 +206,9 @@ def read_manifest(path: str | os.PathLike) -> dict:
         raise InputError(f"{p}: not a vimsim web export ({e.__class__.__name__})") from None
     if not isinstance(m, dict) or m.get("format") != "vimsim-web":
         raise InputError(f"{p}: not a vimsim web export")
+    if m.get("version") != MANIFEST_VERSION:
+        raise InputError(
+            f"{p}: web export version {m.get('version')} (this vimsim reads {MANIFEST_VERSION}); "
+            "export again with vimsim export --format web"
+        )
     return m

@@ -3,7 +3,7 @@
 The folder is self-contained (no request outside it; nothing from a network): ``index.html``
 (summary), ``viewings.html`` (table), ``video-<id>.html``, ``viewing-<id>.html`` (timeline and
 replay), ``analysis.html``; ``assets/`` (CSS, the pages' scripts, the web runtime
-``vimsim.js`` and ``vimsim_gl.js``), ``data/<video>/`` (:func:`simulator.export.web.export_web`
+``vimsim.js``, ``vimsim_grains.js`` and ``vimsim_gl.js``), ``data/<video>/`` (:func:`simulator.export.web.export_web`
 of the video's grid with the study's opacity rule and grains), ``media/`` (the study's plots
 and thumbnails, and ``<video>.mp4``, the browser copy: :func:`browser_copy`). It is built in a
 temporary folder beside it and swapped in when complete; a report folder holding a file that
@@ -28,7 +28,8 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
-from simulator.export.web import JS_FILES, export_web, js_source
+from simulator.export.unity import VERSION as DATA_VERSION
+from simulator.export.web import JS_FILES, MANIFEST_VERSION, export_web, js_source
 from simulator.media.video import VideoWriter, iter_frames, probe
 from simulator.mitigation.grf import GrfConfig
 from simulator.report import pages
@@ -203,7 +204,10 @@ def _video_data(
     grid = Path(vinfo.get("grid", ""))
     res = {"id": vid, "export": None, "copy": None, "plots": [], "moments": []}
     if grid.is_file():
-        key = json.dumps([_source_key(grid), epof, s["settings"].get("grf")], sort_keys=True)
+        # The export's formats are in the key: a report made before a format change is
+        # exported again, not copied.
+        key = json.dumps([_source_key(grid), epof, s["settings"].get("grf"), DATA_VERSION,
+                          MANIFEST_VERSION], sort_keys=True)  # fmt: skip
         prev = (copies.get(vid) or {}).get("export")
         if prev and prev.get("key") == key and (old / "data" / vid).is_dir():
             shutil.copytree(old / "data" / vid, tmp / "data" / vid, copy_function=os.link)

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from simulator.export.web import js_source
+from simulator.export.web import JS_FILES, js_source
 from simulator.mitigation.grf import GrainField, GrfConfig
 from simulator.report.serve import start_server
 
@@ -24,7 +24,7 @@ PANO = Path(__file__).resolve().parents[2] / "simulator" / "data" / "panorama.jp
 @pytest.fixture(scope="module")
 def site(tmp_path_factory):
     d = tmp_path_factory.mktemp("webgl")
-    for n in ("vimsim.js", "vimsim_gl.js", "example.html"):
+    for n in (*JS_FILES, "example.html"):
         (d / n).write_bytes(js_source(n))
     Image.open(PANO).convert("RGB").resize((512, 256), Image.LANCZOS).save(d / "pano.png")
     srv = start_server(d)

@@ -4,6 +4,7 @@ error, no request outside the folder), the replay against ``vimsim frames``, bad
 from __future__ import annotations
 
 import base64
+import csv
 import io
 import json
 import shutil
@@ -210,9 +211,13 @@ def test_report_without_grid_or_source(study, tmp_path):
     s["videos"]["clip"].update(grid=str(tmp_path / "gone.npz"), path=str(tmp_path / "gone.mp4"))
     s["failures"] = [{"viewing": "clip-P02-GR", "status": "bad trace"}]
     (moved / "study.json").write_text(json.dumps(s))
-    lines = (moved / "viewings.csv").read_text().splitlines()
-    lines[-1] = lines[-1].rsplit(",", 1)[0] + ",bad trace"
-    (moved / "viewings.csv").write_text("\n".join(lines) + "\n")
+    with open(moved / "viewings.csv", newline="") as f:  # status by name (warnings follow it)
+        rows = list(csv.DictReader(f))
+    rows[-1]["status"] = "bad trace"
+    with open(moved / "viewings.csv", "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
     assert main(["report", str(moved)]) == 0
     rep = moved / "report"
     assert not (rep / "data").exists() and not (rep / "media" / "clip.mp4").exists()

@@ -43,7 +43,9 @@ __all__ = [
     "check_mitigation_header",
     "covers",
     "frame_at",
+    "grain_layout_bytes",
     "pack",
+    "pack_head",
     "read_export",
     "read_grain_layout",
 ]
@@ -69,24 +71,36 @@ def _align(n: int) -> int:
     return (n + 15) // 16 * 16
 
 
-def pack(header: dict, data: NDArray, grains: NDArray) -> bytes:
-    """Prefix + JSON header (``data.offset`` and ``grains.offset`` filled in, padded to 16
-    bytes) + data + padding to 16 + grain layout (float32)."""
+def pack_head(header: dict, data_bytes: int) -> tuple[bytes, bytes]:
+    """``(prefix + JSON header, padding after the data)`` of a file whose data has
+    ``data_bytes`` bytes: ``data.offset`` and ``grains.offset`` are filled in (``header`` is
+    changed), the header padded to 16 bytes; the grain layout follows the padding. Lets a
+    writer stream the data (``head + data + pad + grains`` = :func:`pack`)."""
     header["data"]["offset"] = 0
     header["grains"]["offset"] = 0
     text = json.dumps(header, sort_keys=True, indent=1, allow_nan=False)
     size = len(text.encode()) + 64  # room for the offsets' digits
     offset = _PREFIX + _align(size)
-    g_off = _align(offset + data.nbytes)
+    g_off = _align(offset + data_bytes)
     header["data"]["offset"] = offset
     header["grains"]["offset"] = g_off
     raw = json.dumps(header, sort_keys=True, indent=1, allow_nan=False).encode()
     if len(raw) > offset - _PREFIX:  # cannot happen: 64 bytes of slack for two numbers
         raise AssertionError("export header grew past its reserved size")
     raw = raw + b" " * (offset - _PREFIX - len(raw))
-    pad = b"\0" * (g_off - offset - data.nbytes)
-    g = np.ascontiguousarray(grains, "<f4").tobytes()
-    return MAGIC + struct.pack("<II", VERSION, len(raw)) + raw + data.tobytes() + pad + g
+    return MAGIC + struct.pack("<II", VERSION, len(raw)) + raw, b"\0" * (g_off - offset - data_bytes)
+
+
+def grain_layout_bytes(grains: NDArray) -> bytes:
+    """The grain layout section: ``n x 3`` float32 little-endian, C order."""
+    return np.ascontiguousarray(grains, "<f4").tobytes()
+
+
+def pack(header: dict, data: NDArray, grains: NDArray) -> bytes:
+    """Prefix + JSON header (``data.offset`` and ``grains.offset`` filled in, padded to 16
+    bytes) + data + padding to 16 + grain layout (float32)."""
+    head, pad = pack_head(header, data.nbytes)
+    return head + data.tobytes() + pad + grain_layout_bytes(grains)
 
 
 def _bad(p: Path, field: str, problem: str) -> InputError:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import inspect
+import math
 import os
 from pathlib import Path
 
@@ -16,7 +17,7 @@ from simulator.media.gridfile import GridFile, content_hash
 from simulator.mitigation.grf import GrfConfig, OpacityRule
 from simulator.mitigation.kinds import Mitigation
 
-__all__ = ["GENERATOR", "build_header"]
+__all__ = ["GENERATOR", "build_header", "set_data_shape"]
 
 #: How the grain layout was drawn (the layout itself is stored: section ``grains``).
 GENERATOR = (
@@ -186,3 +187,16 @@ def build_header(g: GridFile, data: np.ndarray, *, sphere: bool, dtype: str, fov
         header["overlap_table"] = {k: float(x) for k, x in table.items()}
         header["overlap_table"]["rays"] = int(table["rays"])
     return header
+
+
+def set_data_shape(header: dict, g: GridFile, shape) -> None:
+    """Give a header of :func:`build_header` another data shape of the same dtype (rows =
+    frames from ``start_frame``): ``n_frames``, ``data.shape``, ``data.bytes``, ``source`` and
+    ``range``, as :func:`build_header` makes them for data of that shape. For a writer that
+    streams the data instead of holding it (the web export of a float16 field)."""
+    shape = [int(s) for s in shape]
+    itemsize = {"float16": 2, "float32": 4}[header["data"]["dtype"]]
+    header["n_frames"] = shape[0]
+    header["data"]["shape"] = shape
+    header["data"]["bytes"] = itemsize * math.prod(shape)
+    header.update(_range_sections(g, int(header["start_frame"]), shape[0]))

@@ -3,31 +3,38 @@
 //
 //   import { loadExport } from "./vimsim.js";
 //   const rt = await loadExport("./");                 // DIR/vimsim_web.json and its .bin files
-//   const epof = rt.epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s, as `vimsim epof`
+//   const epof = rt.epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s, as `vimsim epof`;
+//                                                     // NaN outside the exported range
 //   const op = rt.opacity(epof);                      // GRF opacity 0..1 (the linear rule)
 //   const ease = rt.createEasing();                   // once; then per video frame:
 //   const shown = ease.step(op);                      // the exported rule (default: comfort)
-//   const grains = rt.grains;                          // the renderer's grain layout
+//   const grains = rt.grains;                          // the grain layout stored in the file
+//   const mitigation = rt.mitigation;                  // what to draw (EyeRenderer's option)
 //
 // Conventions, exactly as vimsim: angles in degrees; yaw + turns right, pitch + looks up,
 // roll + tilts the head right ear down, applied yaw, then pitch, then roll (intrinsic);
 // world +x right, +y up, +z forward (the centre of the equirect frame). A time is seconds
-// from the video start; it shows frame floor(time * fps + 1e-6), clamped to the export.
+// from the video start; it shows frame floor(time * fps + 1e-6); the export covers the frames
+// range.start_frame .. range.end_frame - 1 of a source of source.n_frames frames: rt.covers(t)
+// tells, rt.epof(t, ...) is NaN outside (one console warning), as the C# runtime's Epof.
 // Paper mode reads the overlap table vimsim computed (vimsim_overlaps.bin: the table of
 // simulator.epof.overlaps.ViewportOverlaps) and interpolates it as vimsim does; sphere mode
 // integrates the field over the viewport as simulator.epof.exact.ViewportQuery (weights per
 // 0.5 deg bin of pitch, roll and yaw within a cell, cached).
 
 export const FORMAT = "vimsim-epof";
+/** The vimsim_epof.bin format read here (3: grain layout, GRF and vignette settings, source
+ * length and exported range in the file; older files are refused: export again). */
+export const VERSION = 3;
+/** The vimsim_web.json version read here. */
+export const MANIFEST_VERSION = 2;
 export const FRAME_EPS = 1e-6;
 const MAGIC = "VIMSIMEP";
 const D2R = Math.PI / 180;
 
-/** Round half to even (Python's round, numpy's rint). */
-export function roundEven(x) {
-  const r = Math.round(x);
-  return Math.abs(x % 1) === 0.5 && r % 2 !== 0 ? r - 1 : r;
-}
+import { GrainLayout, Pcg64, roundEven } from "./vimsim_grains.js";
+
+export { GrainLayout, Pcg64, roundEven };
 
 /** Python's a % b (the sign of the divisor). */
 export function pymod(a, b) {
@@ -86,24 +93,53 @@ function halfToFloat(h) {
 
 let HALF = null; // binary16 -> float32 for all 65536 bit patterns
 
-/** Parse vimsim_epof.bin: {header, values (Uint16Array of binary16 or Float32Array, C order,
- * views of the buffer: no copy)}. Throws Error naming the problem. */
+function headerError(name, field, problem) {
+  return new Error(`${name}: export header field ${field}: ${problem}; export again with vimsim export`);
+}
+
+/** The header checks of simulator.export.unity.binary (check_mitigation_header, range):
+ * throws Error naming the file and the field. */
+function checkHeader(h, name) {
+  const { grf, vignette: vig, grains: g, range: r, source } = h;
+  if (!grf || !vig || !g || !Array.isArray(g.shape)) throw headerError(name, "grf/vignette/grains", "missing or malformed");
+  if (!r || !source) throw headerError(name, "range/source", "missing");
+  if (!(grf.density > 0 && grf.density < 1)) throw headerError(name, "grf.density", `${grf.density} is not a blocked fraction in (0, 1)`);
+  if (!(grf.inner_deg >= 0 && grf.inner_deg < grf.outer_deg && grf.outer_deg <= 180))
+    throw headerError(name, "grf.inner_deg/outer_deg", `cutout radii ${grf.inner_deg}, ${grf.outer_deg} are not 0 <= inner < outer <= 180`);
+  if (!(grf.grain_deg > 0 && grf.grain_deg <= 30)) throw headerError(name, "grf.grain_deg", `${grf.grain_deg} is not degrees in (0, 30]`);
+  if (!(vig.aperture_min_deg > 0 && vig.aperture_min_deg < 180 && vig.feather_deg >= 0 && vig.feather_deg <= 180))
+    throw headerError(name, "vignette", `aperture ${vig.aperture_min_deg} / feather ${vig.feather_deg} deg out of range`);
+  if (g.shape.length !== 2 || g.shape[0] !== grf.n_grains || g.shape[1] !== 3 || g.dtype !== "float32")
+    throw headerError(name, "grains", `a layout of shape [${g.shape}] for grf.n_grains = ${grf.n_grains}`);
+  if (!(r.start_frame === h.start_frame && r.end_frame === h.start_frame + h.n_frames))
+    throw headerError(name, "range", `frames ${r.start_frame}..${r.end_frame} are not the data's ${h.start_frame} + ${h.n_frames}`);
+}
+
+/** Parse vimsim_epof.bin (format 3): {header, values (Uint16Array of binary16 or Float32Array,
+ * C order), grains (Float32Array, n_grains x 3)}, views of the buffer (no copy). Throws Error
+ * naming the file and the problem (an older format: export again). */
 export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
   const b = new Uint8Array(buffer);
   if (b.length < 16 || String.fromCharCode(...b.subarray(0, 8)) !== MAGIC)
     throw new Error(`${name}: not a vimsim export (no VIMSIMEP signature)`);
   const dv = new DataView(buffer);
   const version = dv.getUint32(8, true), hlen = dv.getUint32(12, true);
+  if (version < VERSION)
+    throw new Error(`${name}: export format version ${version}, made by an older vimsim (no grain layout, ` +
+      `range or source length); export again with vimsim export (version ${VERSION})`);
+  if (version !== VERSION) throw new Error(`${name}: export format version ${version}; this runtime reads version ${VERSION}`);
   if (16 + hlen > b.length) throw new Error(`${name}: truncated header`);
   const header = JSON.parse(new TextDecoder().decode(b.subarray(16, 16 + hlen)));
   if (header.format !== FORMAT || header.version !== version)
-    throw new Error(`${name}: export format ${header.format} version ${version} is not readable here`);
+    throw new Error(`${name}: export format ${header.format} version ${header.version} is not readable here`);
+  checkHeader(header, name);
   const d = header.data, n = d.shape.reduce((x, y) => x * y, 1), off = d.offset;
-  const size = d.dtype === "float16" ? 2 : 4;
-  if (off + n * size !== b.length) throw new Error(`${name}: truncated or padded data`);
-  // Little-endian typed arrays (every browser's platform); offset is a multiple of 16.
+  const size = d.dtype === "float16" ? 2 : 4, gOff = header.grains.offset, nG = header.grf.n_grains;
+  if (off + n * size > gOff || gOff % 16 !== 0) throw new Error(`${name}: truncated data or misplaced grain layout`);
+  if (gOff + 12 * nG !== b.length) throw new Error(`${name}: truncated or padded grain layout`);
+  // Little-endian typed arrays (every browser's platform); the offsets are multiples of 16.
   const values = d.dtype === "float16" ? new Uint16Array(buffer, off, n) : new Float32Array(buffer, off, n);
-  return { header, values };
+  return { header, values, grains: new Float32Array(buffer, gOff, 3 * nG) };
 }
 
 function halfTable() {
@@ -127,8 +163,10 @@ export class OpacityEasing {
   reset() { this.started = false; this.smooth = 0; this.value = 0; }
   /** Advance one video frame towards opacity x; returns the eased value. */
   step(x) { return this.update(x, 1 / this.fps); }
-  /** Advance dt seconds towards opacity x (render frames of any length). */
+  /** Advance dt seconds towards opacity x (render frames of any length). NaN (a time
+   * outside the export) returns NaN and restarts the easing at the next number. */
   update(x, dt) {
+    if (Number.isNaN(x)) { this.reset(); return NaN; }
     if (!this.started) { this.started = true; this.smooth = x; this.value = x; return x; }
     if (this.S > 0) this.smooth += (1 - Math.exp(-dt / this.S)) * (x - this.smooth);
     else this.smooth = x;
@@ -307,144 +345,12 @@ class SphereModel {
   }
 }
 
-// ------------------------------------------------------------------ grains
-
-const mul32 = (a, b) => Math.imul(a, b) >>> 0;
-
-/** numpy.random.SeedSequence(seed).generate_state(4, uint64) for an integer seed >= 0,
- * as BigInts (numpy/random/bit_generator.pyx: hashmix, mix, pool of 4 words). */
-function seedSequenceState(seed) {
-  const INIT_A = 0x43b0d7e5, MULT_A = 0x931e8875, INIT_B = 0x8b51f9dd, MULT_B = 0x58f38ded;
-  const MIX_L = 0xca01f9dd, MIX_R = 0x4973f715;
-  const entropy = [];
-  let x = BigInt(seed);
-  do { entropy.push(Number(x & 0xffffffffn)); x >>= 32n; } while (x > 0n);
-  let hc = INIT_A;
-  const hashmix = (v) => {
-    v = (v ^ hc) >>> 0; hc = mul32(hc, MULT_A); v = mul32(v, hc);
-    return (v ^ (v >>> 16)) >>> 0;
-  };
-  const mix = (a, b) => { const r = (mul32(MIX_L, a) - mul32(MIX_R, b)) >>> 0; return (r ^ (r >>> 16)) >>> 0; };
-  const pool = [0, 1, 2, 3].map((i) => hashmix(i < entropy.length ? entropy[i] : 0));
-  for (let s = 0; s < 4; s++) for (let d = 0; d < 4; d++) if (s !== d) pool[d] = mix(pool[d], hashmix(pool[s]));
-  for (let s = 4; s < entropy.length; s++) for (let d = 0; d < 4; d++) pool[d] = mix(pool[d], hashmix(entropy[s]));
-  let hb = INIT_B;
-  const words = [];
-  for (let i = 0; i < 8; i++) {
-    let v = (pool[i % 4] ^ hb) >>> 0; hb = mul32(hb, MULT_B); v = mul32(v, hb);
-    words.push((v ^ (v >>> 16)) >>> 0);
-  }
-  return [0, 1, 2, 3].map((k) => (BigInt(words[2 * k + 1]) << 32n) | BigInt(words[2 * k]));
-}
-
-/** numpy's PCG64 (XSL-RR 128/64) seeded as numpy.random.default_rng(seed) seeds it. */
-export class Pcg64 {
-  constructor(seed) {
-    const v = seedSequenceState(seed), M = (1n << 128n) - 1n;
-    this.mult = (2549297995355413924n << 64n) + 4865540595714422341n;
-    this.M = M;
-    this.inc = ((((v[2] << 64n) | v[3]) << 1n) | 1n) & M;
-    this.state = 0n;
-    this.step();
-    this.state = (this.state + ((v[0] << 64n) | v[1])) & M;
-    this.step();
-  }
-  step() { this.state = (this.state * this.mult + this.inc) & this.M; }
-  nextU64() {
-    this.step();
-    const s = this.state, x = ((s >> 64n) ^ s) & 0xffffffffffffffffn, rot = s >> 122n;
-    return ((x >> rot) | (x << ((64n - rot) & 63n))) & 0xffffffffffffffffn;
-  }
-  /** A double in [0, 1): (next64 >> 11) * 2^-53, as numpy's random(). */
-  nextDouble() { return Number(this.nextU64() >> 11n) * (1 / 9007199254740992); }
-  /** n draws of uniform(low, high): low + (high - low) * random(). */
-  uniform(low, high, n) {
-    const out = new Float64Array(n);
-    for (let i = 0; i < n; i++) out[i] = low + (high - low) * this.nextDouble();
-    return out;
-  }
-}
-
-/** The renderer's grain layout (simulator.mitigation.grf.GrainField): world unit centres
- * (Float64Array n*3, +x right, +y up, +z forward), the grain angular radius and the cutout. */
-export class GrainLayout {
-  constructor(config, centres) {
-    this.config = config; // grain_deg, density, inner_deg, outer_deg, seed, count
-    this.centres = centres;
-    this.count = centres.length / 3;
-    this.radiusRad = (config.grain_deg * D2R) / 2;
-  }
-  /** The layout from the seed, as simulator.mitigation.grf.GrainField.from_config: grain_count
-   * grains, z = uniform(-1, 1), lon = uniform(-pi, pi) from numpy.random.default_rng(seed),
-   * centre (sqrt(1 - z^2) sin lon, z, sqrt(1 - z^2) cos lon). config: grain_deg, density,
-   * inner_deg, outer_deg, seed. */
-  static fromSeed(config) {
-    const n = GrainLayout.grainCount(config.grain_deg, config.density);
-    const rng = new Pcg64(config.seed);
-    const z = rng.uniform(-1, 1, n), lon = rng.uniform(-Math.PI, Math.PI, n);
-    const c = new Float64Array(3 * n);
-    for (let i = 0; i < n; i++) {
-      const s = Math.sqrt(1 - z[i] * z[i]);
-      c[3 * i] = s * Math.sin(lon[i]); c[3 * i + 1] = z[i]; c[3 * i + 2] = s * Math.cos(lon[i]);
-    }
-    const g = new GrainLayout({ ...config, count: n }, c);
-    g.draws = { z, lon };
-    return g;
-  }
-  /** grf.grain_count: grains whose union blocks `density` of the sphere. */
-  static grainCount(grainDeg, density) {
-    const a = 2 * Math.PI * (1 - Math.cos((grainDeg * D2R) / 2)), p = a / (4 * Math.PI);
-    return Math.max(1, roundEven(Math.log1p(-density) / Math.log1p(-p)));
-  }
-  /** Cutout alpha at an eccentricity (degrees): 0 inside inner_deg, 1 beyond outer_deg. */
-  cutout(eccDeg) {
-    const { inner_deg: a, outer_deg: b } = this.config;
-    return Math.min(1, Math.max(0, (eccDeg - a) / (b - a)));
-  }
-  /** Coverage (0..1, the union of the discs) as a width x width/2 equirect, row 0 north,
-   * the image vimsim's shaders/grf_mask.frag renders: per texel centre p,
-   * cov_k = clamp((chord - |p - c_k|) / (pi / height) + 1/2, 0, 1), coverage 1 - prod(1 - cov_k). */
-  coverageMask(width) {
-    const W = width, H = width / 2, trans = new Float32Array(W * H).fill(1);
-    const fp = Math.PI / H, chord = 2 * Math.sin(this.radiusRad / 2);
-    const reach = this.radiusRad + fp;
-    const cosLat = new Float64Array(H), sinLat = new Float64Array(H);
-    for (let y = 0; y < H; y++) { const lat = Math.PI / 2 - ((y + 0.5) / H) * Math.PI; cosLat[y] = Math.cos(lat); sinLat[y] = Math.sin(lat); }
-    const cosLon = new Float64Array(W), sinLon = new Float64Array(W);
-    for (let x = 0; x < W; x++) { const lon = ((x + 0.5) / W) * 2 * Math.PI - Math.PI; cosLon[x] = Math.cos(lon); sinLon[x] = Math.sin(lon); }
-    const C = this.centres;
-    for (let g = 0; g < this.count; g++) {
-      const gx = C[3 * g], gy = C[3 * g + 1], gz = C[3 * g + 2];
-      const lat = Math.asin(Math.max(-1, Math.min(1, gy))), lon = Math.atan2(gx, gz);
-      const y0 = Math.max(0, Math.floor(((Math.PI / 2 - lat - reach) / Math.PI) * H));
-      const y1 = Math.min(H - 1, Math.ceil(((Math.PI / 2 - lat + reach) / Math.PI) * H));
-      const cl = Math.cos(lat), polar = Math.abs(lat) + reach >= Math.PI / 2 - 1e-9;
-      const dlon = polar ? Math.PI : Math.asin(Math.min(1, Math.sin(reach) / Math.max(cl, 1e-12)));
-      const xa = polar ? 0 : Math.floor(((lon - dlon + Math.PI) / (2 * Math.PI)) * W) - 1;
-      const xb = polar ? W - 1 : Math.ceil(((lon + dlon + Math.PI) / (2 * Math.PI)) * W) + 1;
-      for (let y = y0; y <= y1; y++) {
-        const row = y * W, cy = cosLat[y], py = sinLat[y] - gy;
-        for (let xx = xa; xx <= xb; xx++) {
-          const x = ((xx % W) + W) % W;
-          const dx = cy * sinLon[x] - gx, dz = cy * cosLon[x] - gz;
-          const cov = (chord - Math.sqrt(dx * dx + py * py + dz * dz)) / fp + 0.5;
-          if (cov <= 0) continue;
-          trans[row + x] *= 1 - Math.min(1, cov);
-        }
-      }
-    }
-    const out = new Uint8Array(W * H);
-    for (let i = 0; i < W * H; i++) out[i] = Math.round((1 - trans[i]) * 255);
-    return out;
-  }
-}
-
 // ----------------------------------------------------------------- runtime
 
 /** EPOF (deg/s) and GRF opacity of a viewport at a video time, from a vimsim export. */
 export class VimsimEpof {
-  constructor(manifest, epofBin, overlapsBin = null, grainsBin = null) {
-    const { header, values } = parseEpofBinary(epofBin);
+  constructor(manifest, epofBin, overlapsBin = null) {
+    const { header, values, grains } = parseEpofBinary(epofBin, manifest.data || "vimsim_epof.bin");
     this.manifest = manifest;
     this.header = header;
     this.values = values; // the file's data, undecoded: memory = the file's size
@@ -469,21 +375,54 @@ export class VimsimEpof {
     } else {
       this.model = new SphereModel(header);
     }
-    this.grains = null;
-    if (grainsBin && manifest.grains) this.grains = new GrainLayout(manifest.grains, new Float64Array(grainsBin, 16));
+    const r = header.range, src = header.source, v = header.vignette;
+    /** The exported frames (endFrame exclusive) and their times (s). */
+    this.range = { startFrame: r.start_frame, endFrame: r.end_frame, startS: r.start_s, endS: r.end_s };
+    /** The source video's length (known: from the grid's meta; else the grid's end). */
+    this.source = { nFrames: src.n_frames, durationS: src.duration_s, known: src.known };
+    /** The grain layout stored in the file (the renderer's, float32 centres). */
+    this.grains = GrainLayout.fromExport(header, grains);
+    /** What the overlay draws, as the export was made (EyeRenderer's `mitigation` option). */
+    this.mitigation = { kind: header.mitigation, apertureMinDeg: v.aperture_min_deg,
+      featherDeg: v.feather_deg, color: v.color.slice() };
+    this.outOfRange = false; // the last epof() time was outside the export
+    this.warned = false;
   }
   /** Video frame shown at a time (s from the video start), clamped to the exported frames. */
   frameAt(timeS) {
     const f = Math.floor(timeS * this.fps + FRAME_EPS), s = this.startFrame;
     return Math.min(Math.max(f, s), s + this.frameCount - 1);
   }
-  /** EPOF (deg/s) of the viewport (degrees) at a video time (s). */
+  /** Whether the export has the frame shown at a time (s): range.startFrame <=
+   * floor(t * fps + 1e-6) < range.endFrame; false for NaN or infinite (C#: Covers). */
+  covers(timeS) {
+    return Number.isFinite(timeS) && this.coversFrame(Math.floor(timeS * this.fps + FRAME_EPS));
+  }
+  /** Whether the export has a video frame (C#: CoversFrame). */
+  coversFrame(frame) {
+    return frame >= this.range.startFrame && frame < this.range.endFrame;
+  }
+  /** EPOF (deg/s) of the viewport (degrees) at a video time (s); NaN where the export does not
+   * cover the time (covers false; `outOfRange` set, one console warning per runtime). */
   epof(timeS, yawDeg, pitchDeg, rollDeg = 0) {
+    this.outOfRange = !this.covers(timeS);
+    if (this.outOfRange) {
+      if (!this.warned) {
+        this.warned = true;
+        console.warn(`vimsim: time ${timeS} s is outside the export (frames ${this.range.startFrame}..` +
+          `${this.range.endFrame - 1}, ${this.range.startS}..${this.range.endS} s of a ${this.source.durationS} s ` +
+          "video): EPOF and opacity are NaN there");
+      }
+      return NaN;
+    }
     return this.epofAtFrame(this.frameAt(timeS), yawDeg, pitchDeg, rollDeg);
   }
-  /** EPOF (deg/s) at a video frame number (startFrame .. startFrame + frameCount - 1). */
+  /** EPOF (deg/s) at a video frame number (range.startFrame .. range.endFrame - 1; RangeError
+   * outside, as the C# EpofAtFrame). */
   epofAtFrame(frame, yawDeg, pitchDeg, rollDeg = 0) {
-    const row = Math.min(Math.max(frame - this.startFrame, 0), this.frameCount - 1);
+    const row = frame - this.startFrame;
+    if (!(row >= 0 && row < this.frameCount && Number.isInteger(row)))
+      throw new RangeError(`frame ${frame} outside ${this.range.startFrame}..${this.range.endFrame - 1}`);
     if (![yawDeg, pitchDeg, rollDeg].every(Number.isFinite)) throw new Error("orientation must be finite degrees");
     return this.model.query(this.frameRow(row), 0, yawDeg, pitchDeg, rollDeg);
   }
@@ -497,8 +436,10 @@ export class VimsimEpof {
     }
     return this.rowBuf;
   }
-  /** GRF opacity 0..1 of an EPOF (deg/s): linear between the exported thresholds, clamped. */
+  /** Un-eased GRF opacity 0..1 of an EPOF (deg/s): linear between the exported thresholds,
+   * clamped; NaN for NaN (C#: RawOpacity). */
   opacity(epofDps) {
+    if (Number.isNaN(epofDps)) return NaN;
     const lo = this.lowDps, hi = this.highDps;
     if (hi > lo) return Math.min(1, Math.max(0, (epofDps - lo) / (hi - lo)));
     return epofDps > lo ? 1 : 0;
@@ -521,10 +462,13 @@ export async function loadExport(base = "./") {
   const url = base.endsWith(".json") ? base : base + "vimsim_web.json";
   const dir = url.slice(0, url.lastIndexOf("/") + 1);
   const manifest = await (await fetch(url)).json();
-  const [epof, ov, gr] = await Promise.all([
+  if (manifest.format !== "vimsim-web") throw new Error(`${url}: not a vimsim web export`);
+  if (manifest.version !== MANIFEST_VERSION)
+    throw new Error(`${url}: web export version ${manifest.version}, made by another vimsim (this runtime ` +
+      `reads ${MANIFEST_VERSION}: the grain layout in vimsim_epof.bin); export again with vimsim export --format web`);
+  const [epof, ov] = await Promise.all([
     fetchBuffer(dir + manifest.data),
     manifest.overlaps ? fetchBuffer(dir + manifest.overlaps.file) : null,
-    manifest.grains ? fetchBuffer(dir + manifest.grains.file) : null,
   ]);
-  return new VimsimEpof(manifest, epof, ov, gr);
+  return new VimsimEpof(manifest, epof, ov);
 }

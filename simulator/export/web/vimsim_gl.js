@@ -5,10 +5,11 @@
 //   const eye = new EyeRenderer(canvas.getContext("webgl2"), {
 //     width: 1280, height: 720, hfovDeg: 107, vfovDeg: 70,        // or frustum {left,right,down,up}
 //     grains: runtime.grains,                                     // GrainLayout or null
-//     mitigation: { kind: "grf", apertureMinDeg: 60, featherDeg: 10, color: [0, 0, 0] },
+//     mitigation: runtime.mitigation,   // as exported; or { kind: "grf", apertureMinDeg: 60,
+//                                       //   featherDeg: 10, color: [0, 0, 0] }
 //     video: true });                                             // false: the overlay alone
 //   eye.upload(videoElement);                                     // each new video frame
-//   eye.render(yawDeg, pitchDeg, rollDeg, opacity);
+//   eye.render(yawDeg, pitchDeg, rollDeg, opacity);                 // NaN: no mitigation drawn
 //
 // The fragment shader is vimsim's shaders/eye.frag in GLSL ES 3.00: the pixel's view ray from
 // the exact frustum, the head rotation, the equirect sampled with ffmpeg v360's 4-point
@@ -263,7 +264,7 @@ export class EyeRenderer {
     gl.useProgram(prog.p);
     const R = headRotation(yawDeg, pitchDeg, rollDeg);
     gl.uniformMatrix3fv(prog.head, false, [R[0], R[3], R[6], R[1], R[4], R[7], R[2], R[5], R[8]]);
-    const o = Math.min(Math.max(opacity, 0), 1);
+    const o = Number.isNaN(opacity) ? 0 : Math.min(Math.max(opacity, 0), 1); // NaN: outside the export
     if (this.grains) gl.uniform1f(prog.opacity, o);
     if (this.vignette) gl.uniform2f(prog.vignette, apertureRadius(this.mitigation, this.frustum, o), this.mitigation.featherDeg * D2R);
     if (this.video) {

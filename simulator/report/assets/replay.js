@@ -71,8 +71,9 @@ async function main() {
     $("t").textContent = t.toFixed(3);
     $("frame").textContent = String(rt.frameAt(t));
     $("pose").textContent = [state.yaw, state.pitch, state.roll].map((v) => v.toFixed(1)).join(" / ");
-    $("epof").textContent = state.epof.toFixed(2);
-    $("opacity").textContent = state.opacity.toFixed(3);
+    const outside = Number.isNaN(state.epof); // free look past the exported range: NaN
+    $("epof").textContent = outside ? "- (outside the export)" : state.epof.toFixed(2);
+    $("opacity").textContent = outside ? "-" : state.opacity.toFixed(3);
     T.setCursor(t, state.free ? { t, epof: state.epof } : null);
   }
 
