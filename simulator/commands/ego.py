@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from simulator.commands._source import add_source_arguments
 from simulator.commands._types import positive_float, seconds
 from simulator.core.choices import EYES, LAYOUTS
 from simulator.flow.registry import flow_help
@@ -27,7 +28,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "source", metavar="VIDEO", help="equirectangular video, or a sphere-mode GRID.npz"
     )
     p.add_argument("-o", "--output", required=True, metavar="EGO.csv", help="CSV to write")
-    p.add_argument("--layout", choices=LAYOUTS, default="mono", help="stereo layout (default mono)")
+    p.add_argument(
+        "--layout", choices=LAYOUTS, default=None, help="stereo layout (default: the file's, else mono)"
+    )
+    add_source_arguments(p)
     p.add_argument("--eye", choices=EYES, default="left", help="eye of a stereo video")
     p.add_argument("--start", type=seconds, default=0.0, metavar="S", help="first frame at S s")
     p.add_argument("--end", type=seconds, default=None, metavar="S", help="stop before S s")
@@ -45,9 +49,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Write the CSV; 0 when written, 2 on bad input (nothing written)."""
+    import zipfile
+
     import numpy as np
 
     from simulator.commands._progress import progress_bar, warnings_to_stderr
+    from simulator.commands._source import source_from_args
     from simulator.commands.epof import _check_output_file
     from simulator.preprocess.egocsv import camera_rotation, write_ego_csv
     from simulator.preprocess.sphere import SphereConfig
@@ -57,10 +64,11 @@ def run(args: argparse.Namespace) -> int:
         warnings_to_stderr("vimsim ego"),
         progress_bar("ego", enabled=not args.no_progress) as bar,
     ):
+        source = args.source
+        if not zipfile.is_zipfile(source):  # a video: its projection and layout checked once
+            source = source_from_args(args, source, layout=args.layout, eye=args.eye)
         table = camera_rotation(
-            args.source,
-            layout=args.layout,
-            eye=args.eye,
+            source,
             start_s=args.start,
             end_s=args.end,
             flow=args.flow,

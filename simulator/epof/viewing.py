@@ -157,24 +157,10 @@ def compute_epof(
     h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     view = frustum or Frustum.symmetric(h, v)
     sel_rows = rows if frames_sel is not None else None
-    parts = _parts(grid, (yaw, pitch, roll), view, sel_rows, sphere, flow_weights)
-    if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
-        a, b = flow_weights
-        e = a * parts[0] + b * parts[1]
-    elif sphere:
-        field, cells = require_field(grid)
-        if frames_sel is not None:
-            field = take_rows(field, rows)  # lazy: nothing read yet
-        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=view)
-    else:
-        e = epof_from_grid(
-            grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
-        )
-    e_cov, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
-    if cov is not None and parts is not None:  # the parts scaled as their sum was
-        k = np.where(e > 0, e_cov / np.maximum(e, 1e-12), 0.0)
-        parts = (parts[0] * k, parts[1] * k)
-    e = e_cov
+    e, cov, parts = _epof_values(
+        grid, (yaw, pitch, roll), view, rows, sel_rows, sphere, flow_weights,
+        (hfov_deg, vfov_deg, top_k, frustum),
+    )  # fmt: skip
     thr = rule.fit(grid, e)
     op = rule(e, thr, fps=grid.fps)
     meta = {
@@ -217,6 +203,33 @@ def _covered_epof(grid, e, sphere: bool, yaw, pitch, roll, hfov_deg, vfov_deg, t
         norm = share
     covered_mean = np.where(norm > 1e-9, e / np.maximum(norm, 1e-9), 0.0)
     return covered_mean * fade(share), share
+
+
+def _epof_values(grid, angles, view: Frustum, rows, sel_rows, sphere: bool, flow_weights, paper):
+    """``(EPOF per row, covered share or None, (rot, trans) parts or None)``: the weighted
+    parts, the field integrated over ``view`` (sphere) or the window overlaps (paper:
+    ``paper = (hfov_deg, vfov_deg, top_k, frustum)``), over the covered part of the view."""
+    yaw, pitch, roll = angles
+    hfov_deg, vfov_deg, top_k, frustum = paper
+    parts = _parts(grid, (yaw, pitch, roll), view, sel_rows, sphere, flow_weights)
+    if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
+        a, b = flow_weights
+        e = a * parts[0] + b * parts[1]
+    elif sphere:
+        field, cells = require_field(grid)
+        if sel_rows is not None:
+            field = take_rows(field, rows)  # lazy: nothing read yet
+        e = viewport_epof(field, cells.cell_deg, yaw, pitch, roll, frustum=view)
+    else:
+        e = epof_from_grid(
+            grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
+        )
+    e_cov, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
+    if cov is not None and parts is not None:  # the parts scaled as their sum was
+        k = np.where(e > 0, e_cov / np.maximum(e, 1e-12), 0.0)
+        parts = (parts[0] * k, parts[1] * k)
+    e = e_cov
+    return e, cov, parts
 
 
 def _select_frames(grid: GridFile, frames_sel):

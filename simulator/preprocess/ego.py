@@ -23,7 +23,7 @@ translation plus anything moving on its own) is the angle between ``R(w) r0`` an
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -33,7 +33,15 @@ from scipy.spatial.transform import Rotation
 from simulator.sphere.cells import CellGrid
 from simulator.sphere.geometry import dir_to_lonlat, lonlat_to_dir
 
-__all__ = ["EGO_META", "EgoFit", "EgoRows", "FrameParts", "MidpointSplat", "fit_rotation"]
+__all__ = [
+    "EGO_META",
+    "EgoFit",
+    "EgoRows",
+    "FrameParts",
+    "MidpointSplat",
+    "adjust_parts",
+    "fit_rotation",
+]
 
 #: ``meta["ego"]`` of a grid with the per-frame camera rotation (sphere mode).
 EGO_META = {
@@ -61,6 +69,16 @@ class FrameParts:
     trans: NDArray[np.float32]
     omega_dps: NDArray[np.float32]
     confidence: float
+
+
+def adjust_parts(p: FrameParts, mask, scale) -> FrameParts:
+    """``p`` without flow outside the covered cells (``mask``), speeds scaled by a variable
+    frame rate's true interval (``scale``: :func:`simulator.preprocess.common.flow_rate_scale`)."""
+    if mask is None and scale is None:
+        return p
+    k = np.float32(1.0 if scale is None else scale)
+    m = np.float32(1.0) if mask is None else mask
+    return replace(p, field=p.field * m * k, trans=p.trans * m * k, omega_dps=p.omega_dps * k)
 
 
 class EgoRows:

@@ -29,7 +29,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.core.progress import Counter, Progress
 from simulator.media.gridfile import load_grid
-from simulator.media.video import probe
+from simulator.media.source import Source
 from simulator.preprocess.common import frame_range
 from simulator.preprocess.ego import EgoRows
 from simulator.preprocess.sphere import SphereConfig, field_from_video
@@ -89,9 +89,9 @@ def _from_grid(p: Path) -> EgoTable:
 
 
 def camera_rotation(
-    source: str | os.PathLike,
+    source,
     *,
-    layout: str = "mono",
+    layout: str | None = None,
     eye: str = "left",
     start_s: float = 0.0,
     end_s: float | None = None,
@@ -101,20 +101,23 @@ def camera_rotation(
 ) -> EgoTable:
     """The camera's angular velocity per frame of a video (sphere mode's estimate,
     nothing else kept: memory flat in the video's length) or read from a sphere-mode
-    grid file (``.npz`` made by ``vimsim preprocess --method sphere``)."""
-    p = check_input_file(source, "video or grid")
-    if zipfile.is_zipfile(p):
-        return _from_grid(p)
-    info = probe(p)
+    grid file (``.npz`` made by ``vimsim preprocess --method sphere``). ``source``: a
+    :class:`simulator.media.source.Source` (any projection, its eye) or a path (opened with
+    ``layout`` and ``eye``; equirect unless the file's metadata says otherwise)."""
+    if not isinstance(source, Source):
+        p = check_input_file(source, "video or grid")
+        if zipfile.is_zipfile(p):
+            return _from_grid(p)
+        source = Source.open(p, layout=layout, eye=eye)
+    info, p = source.info, source.path
     if not info.is_video:
         raise InputError(f"{p}: is a still image; vimsim ego needs a video with at least 2 frames")
-    info.eye_size(layout)
     f0, f1 = frame_range(info, float(start_s), end_s, str(p))
     bar = Counter(progress, f1 - f0)
     ego = EgoRows(_Discard())
     try:
         field_from_video(
-            p, config, layout=layout, eye=eye, start=f0, end=f1, flow=flow,
+            source, config, start=f0, end=f1, flow=flow,
             progress=lambda n: bar.update(n - bar.done), sink=_Discard(), ego=ego,
         )  # fmt: skip
     finally:
@@ -123,7 +126,7 @@ def camera_rotation(
     frames = f0 + np.arange(len(arr["ego_confidence"]))
     return EgoTable(
         frames,
-        frames / info.fps,
+        info.times_s(frames),  # the stream's timestamps (player's clock)
         arr["ego_omega_dps"].astype(np.float64),
         arr["ego_confidence"].astype(np.float64),
         str(p),

@@ -1,17 +1,17 @@
 """Sphere-mode preprocessing: the optical flow of each frame as one angular-speed field on the sphere.
 
-The paper computes flow separately for 198-264 heavily overlapping windows per frame and
-needs a new preprocessing run for every headset FOV. Here the flow of a frame pair is
-computed once, on a few overlapping perspective *tiles* covering the sphere (a cube with
-faces a little wider than 90 deg), converted to angular speed per pixel and splatted into
-lon/lat cells (:class:`simulator.sphere.cells.CellGrid`). Any viewport or window grid is then a
-weighted sum over cells (:mod:`simulator.epof.exact`).
+The paper computes flow for 198-264 overlapping windows per frame and needs a new run for
+every headset FOV. Here the flow of a frame pair is computed once, on a few overlapping
+perspective *tiles* covering the sphere (a cube with faces a little wider than 90 deg),
+converted to angular speed per pixel and splatted into lon/lat cells
+(:class:`simulator.sphere.cells.CellGrid`); any viewport or window grid is a weighted sum
+over cells (:mod:`simulator.epof.exact`).
 
 Speeds are **deg/s of visual angle**: the angle between the ray of a pixel of frame t-1
 and the ray of its flow target in frame t, times fps. The field ``field_dps`` is float32,
-shape (T, n_lat, n_lon), laid out like an equirect frame (:mod:`simulator.sphere.cells`); a cell
-holds the solid-angle-weighted mean angular speed of the content inside it at frame t-1
-(the flow from t-1 to t); frame 0 repeats frame 1 (the grid file's rule).
+shape (T, n_lat, n_lon), laid out like an equirect frame (:mod:`simulator.sphere.cells`); a
+cell holds the solid-angle mean speed of its content at frame t-1 (flow t-1 -> t); frame 0
+repeats frame 1.
 """
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
-from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat
+from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -343,20 +343,17 @@ def _fields(
     est: FieldEstimator, tiles, expected: int, progress, source: str, sink=None, ego=None,
     mask=None, scale=None,
 ):  # fmt: skip
-    """The field of each consecutive pair of ``tiles`` (one frame's tiles per item), frame 0
-    repeating frame 1, into one :class:`_FieldRows` sized for ``expected`` frames (or
-    ``sink``); the rotation and translational field into ``ego`` (:class:`EgoRows`) if
-    given. ``source`` prefixes the error for fewer than 2 frames; ``mask``: the covered
-    cells (others 0: no flow measured outside the projection); ``scale``: per row, the
-    factor of a variable frame rate's true interval
-    (:func:`simulator.preprocess.common.flow_rate_scale`)."""
+    """The field of each consecutive pair of ``tiles`` (one frame's tiles per item; frame 0
+    repeats frame 1) into one :class:`_FieldRows` of ``expected`` frames (or ``sink``), the
+    rotation and translational field into ``ego`` (:class:`EgoRows`); ``source`` prefixes
+    the error for < 2 frames; ``mask``, ``scale``: see :func:`simulator.preprocess.ego.adjust_parts`."""
     out = _FieldRows(est.cells.shape, expected) if sink is None else sink
     prev = None
     n = 0
     for t in tiles:
         if prev is not None:
             k = None if scale is None else scale[min(n, len(scale) - 1)]
-            p = _adjust(est.parts(prev, t), mask, k)
+            p = adjust_parts(est.parts(prev, t), mask, k)
             out.append(p.field)
             if ego is not None:
                 ego.append(p)
@@ -368,15 +365,6 @@ def _fields(
         raise InputError(f"{source}sphere mode needs at least 2 frames; got {n}")
     return out.result() if sink is None else out
 
-
-def _adjust(p: FrameParts, mask, scale) -> FrameParts:
-    """``p`` with no flow outside the covered cells (``mask``) and its speeds scaled by a
-    variable frame rate's true interval (``scale``; the camera's angular velocity too)."""
-    if mask is None and scale is None:
-        return p
-    k = np.float32(1.0 if scale is None else scale)
-    m = np.float32(1.0) if mask is None else mask
-    return replace(p, field=p.field * m * k, trans=p.trans * m * k, omega_dps=p.omega_dps * k)
 
 
 def field_from_video(

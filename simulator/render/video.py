@@ -189,27 +189,19 @@ def render_video(
     eyes = (wanted[0],) if same else tuple(wanted)
     renderer = EyeRenderer(ctx, config)
     w, h = config.eye_size
-    # a variable-rate source: the outputs keep its timing
-    info = source.info
-    out_times = (
-        info.times_s(np.arange(start_frame, start_frame + total)) if info.variable_rate else None
-    )
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
     t_start = time.perf_counter()
     serial = threads is not None and int(threads) <= 1
     try:
         with contextlib.ExitStack() as stack:
             writers, workers = _workers(stack, paths[: len(eyes)], fps, (w, h), serial,
-                                        on_frame, crf=crf, preset=preset, audio=audio,
-                                        threads=threads,
-                                        times_s=out_times)  # fmt: skip
+                                        on_frame, crf=crf, preset=preset, audio=audio, threads=threads,
+                                        times_s=_out_times(source.info, start_frame, total))  # fmt: skip
             loop = _FrameLoop(renderer, rots, op, cell_opacity, eyes, stereo, workers,
                               on_frame is not None, review_eye, timings)  # fmt: skip
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
-                decoded = source.eye_frames(
-                    start=start_frame, end=start_frame + total, threads=threads
-                )
+                decoded = source.eye_frames(start=start_frame, end=start_frame + total, threads=threads)
                 frames = stack.enter_context(
                     contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
@@ -227,6 +219,14 @@ def render_video(
         renderer.release()
     timings["total"] = time.perf_counter() - t_start
     return VideoRenderResult(n, (w, h), fps, timings)
+
+
+def _out_times(info, start_frame: int, total: int):
+    """The frames' times in seconds for a variable-rate source (the outputs keep its
+    timing), else None (constant rate: ``i / fps``)."""
+    if not info.variable_rate:
+        return None
+    return info.times_s(np.arange(start_frame, start_frame + total))
 
 
 def _workers(stack, paths, fps, size, serial: bool, on_frame, **encode):

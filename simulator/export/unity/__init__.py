@@ -42,6 +42,7 @@ from simulator.export.unity.binary import (
 )
 from simulator.export.unity.header import build_header
 from simulator.media.gridfile import GridFile, load_grid, require_field
+from simulator.media.lazyfield import take_rows
 from simulator.mitigation.grf import GrainField, GrfConfig, OpacityRule, grain_count
 from simulator.mitigation.kinds import Mitigation
 
@@ -157,8 +158,10 @@ def _rot_blob(g: GridFile, header: dict, dtype, grains) -> bytes:
     ``part``): the same runtime loading it computes ``epof_rot_dps``."""
     field, cells = require_field(g)
     f = np.asarray(field, np.float32)
-    om = np.asarray(g.extras["ego_omega_dps"], np.float64)
-    rot = f * rotation_share(f, np.asarray(g.field_trans_dps, np.float32), om, cells)
+    n = len(f)  # the rows exported (a caller may pass a grid of its first rows)
+    om = np.asarray(g.extras["ego_omega_dps"][:n], np.float64)
+    trans = np.asarray(take_rows(g.field_trans_dps, np.arange(n)), np.float32)
+    rot = f * rotation_share(f, trans, om, cells)
     h = {**header, "data": dict(header["data"])}
     h["part"] = "rot: the field's rotational part (simulator.epof.parts); EPOF of it = epof_rot_dps"
     return pack(h, np.ascontiguousarray(rot.astype(dtype)), grains)
