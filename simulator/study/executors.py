@@ -289,9 +289,7 @@ class RayExecutor:
         with contextlib.chdir(_PACKAGE_ROOT), _safe_path_env():
             if address is None:  # a runtime for this machine only: keep it on loopback
                 # address="local": a new runtime even if another cluster's address is on record
-                ray.init(
-                    address="local", num_cpus=int(workers), _node_ip_address="127.0.0.1", **kw
-                )
+                ray.init(address="local", num_cpus=int(workers), _node_ip_address="127.0.0.1", **kw)
             else:
                 ray.init(address=address, **kw)
         self.workers = int(ray.cluster_resources().get("CPU", workers))
