@@ -25,7 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, check_output_dir, json_text
+from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.core.progress import Counter, Progress
 from simulator.media.video import iter_frames, probe
 from simulator.mitigation.grf import OpacityRule
@@ -191,20 +191,6 @@ def _write_png(path: Path, img: NDArray[np.uint8]) -> None:
         Image.fromarray(img).save(tmp, format="PNG", compress_level=1)
 
 
-def _previous_files(out: Path) -> list[Path]:
-    """Files a previous ``frames`` run wrote into ``out`` (listed in its frames.json)."""
-    import json
-
-    index = out / FRAMES_JSON
-    if not index.is_file():
-        return []
-    try:
-        names = [f["file"] for f in json.loads(index.read_text())["frames"]]
-    except (ValueError, KeyError, TypeError):
-        raise InputError(f"{index}: not a frames.json written by vimsim frames") from None
-    return [out / n for n in names if Path(n).name == n and n.endswith(".png")] + [index]
-
-
 def render_frames(
     video,
     headpath,
@@ -233,8 +219,9 @@ def render_frames(
 
     Eyes: ``left`` and ``right`` for a stereo layout or grains at a finite distance
     (parallax), else one view named ``both`` (both eyes see the same image). Inputs are
-    checked before ``outdir`` is touched; then the files of a previous run listed in its
-    ``frames.json`` are removed, each PNG appears only when complete, and
+    checked before ``outdir`` is touched (a file of an output name that no earlier
+    ``frames`` run wrote is refused: :class:`~simulator.core.fileio.OutputFolder`); then
+    the files of the previous run listed in the folder's manifest are removed, each PNG appears only when complete, and
     ``frames.json`` is written last.
 
     Returns
@@ -275,16 +262,13 @@ def render_frames(
     for n in names:
         if (out / n).resolve() in inputs:
             raise InputError(f"{out / n}: output would overwrite an input; choose another -o")
+    # The one folder rule: a PNG of an output name that no earlier `frames` run wrote
+    # (no manifest lists it: a user's file, goldens copied here) is refused, never replaced.
+    folder = OutputFolder(out, names, "frames")
+    folder.check(inputs)
     if ctx is None:
         ctx = create_context()
-    out = check_output_dir(out)
-    for p in _previous_files(out):
-        try:
-            p.unlink(missing_ok=True)
-        except OSError as e:
-            raise InputError(
-                f"{p}: cannot remove the previous run's output ({e.strerror})"
-            ) from None
+    out = folder.prepare(inputs)
 
     idx = [frame_index(t, info.fps) for t in times]
     decoded = decode_frames(video, idx)
@@ -369,4 +353,5 @@ def render_frames(
     }
     with atomic_output(out / FRAMES_JSON) as tmp:
         Path(tmp).write_text(json_text(index) + "\n")
+    folder.complete()
     return index
