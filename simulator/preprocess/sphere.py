@@ -476,6 +476,10 @@ def preprocess_sphere(
             ),
         }
         save_grid(out, dps, px, grid, meta, field_dps=(spool, field_dtype))
+    except OSError as e:
+        if e.filename is None:  # the spool beside the output filled the disk: name the output
+            e.filename = str(out)
+        raise
     finally:
         spool.close()
     return out

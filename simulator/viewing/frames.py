@@ -38,6 +38,8 @@ __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_fram
 
 #: The index file of a frames folder, written last (the folder is complete when it exists).
 FRAMES_JSON = "frames.json"
+#: The most moments one ``frames`` run renders (``--every``, ``--at``): each is a PNG per eye.
+MAX_MOMENTS = 10_000
 
 
 def frame_name(time_s: float, eye: str) -> str:
@@ -52,7 +54,8 @@ def moments(
     """The requested video times (seconds, rounded to 1 ms, sorted, duplicates dropped).
 
     ``at``: a list of times or a comma-separated string (``"1,2.5,10"``); ``every``: a
-    step in seconds from 0 to the end. Exactly one. Every time must lie in the video,
+    step in seconds (>= 1 ms) from 0 to the end. Exactly one; at most :data:`MAX_MOMENTS`
+    times (checked before any list is made). Every time must lie in the video,
     ``0 <= t < n_frames / fps``; else InputError.
     """
     end = n_frames / fps
@@ -60,8 +63,13 @@ def moments(
         raise InputError("give the moments as --at T1,T2,... or --every S (one of them)")
     if every is not None:
         every = float(every)
-        if not (every > 0 and math.isfinite(every)):
-            raise InputError(f"--every must be a positive number of seconds, e.g. 2; got {every}")
+        if not (every >= 0.001 and math.isfinite(every)):  # times are kept to 1 ms
+            raise InputError(f"--every must be at least 0.001 seconds, e.g. 2; got {every:g}")
+        if end / every > MAX_MOMENTS:  # checked before a list is made (memory)
+            raise InputError(
+                f"--every {every:g} s gives {math.ceil(end / every):,} moments in {end:g} s of "
+                f"video; at most {MAX_MOMENTS:,} (a larger step, or --at)"
+            )
         times = list(np.arange(0.0, end, every))
     else:
         if isinstance(at, str):
@@ -78,6 +86,8 @@ def moments(
             times = [float(t) for t in at]
         if not times:
             raise InputError("--at is empty; give times in seconds, e.g. 1,2.5,10")
+        if len(times) > MAX_MOMENTS:
+            raise InputError(f"--at lists {len(times):,} times; at most {MAX_MOMENTS:,}")
     out = sorted({round(t, 3) for t in times})
     bad = [t for t in out if not (math.isfinite(t) and 0.0 <= t < end)]
     if bad:

@@ -31,10 +31,10 @@ def frame_range(
     e = dur if end_s is None else float(end_s)
     if not (np.isfinite(s) and np.isfinite(e)):
         raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if s < 0 or s >= dur:  # before --end: a --start past the end never talks of an --end
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
     if e <= s:
         raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
-    if s < 0 or s >= dur:
-        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
     if e > dur + 1e-6:
         raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
     eps = 1e-6
