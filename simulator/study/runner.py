@@ -28,7 +28,8 @@ from simulator import __version__
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_output_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
-from simulator.media.gridfile import content_hash
+from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
+from simulator.media.video import probe
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
@@ -69,6 +70,66 @@ def _file_sha(path: Path, memo: dict) -> str:
 def _grid_key(v: VideoSpec) -> str:
     return _sha({"video": content_hash(v.path), "options": v.options(), "grid": GRID_VERSION,
                  "vimsim": __version__})  # fmt: skip
+
+
+def _check_videos(manifest: Manifest) -> None:
+    """InputError (a manifest error, before any work) for a ``[[videos]] path`` that is
+    not a video PyAV can read."""
+    for v in manifest.videos:
+        try:
+            probe(v.path)
+        except InputError as e:
+            raise InputError(f"{manifest.path}: [[videos]] id {v.id!r}: {e}") from None
+        except OSError as e:
+            raise InputError(
+                f"{manifest.path}: [[videos]] id {v.id!r}: {v.path}: not a readable video "
+                f"({e.strerror or type(e).__name__})"
+            ) from None
+
+
+def cache_problem(path: Path, v: VideoSpec) -> str | None:
+    """Why the cached grid ``path`` cannot serve video ``v`` (None: it can). Checked before
+    use: the grid file's format (every array and its meta, as :func:`load_grid` checks),
+    the content hash of the video it was made from, and its options (method, layout,
+    eye, flow backend, window matrix shape, cell size)."""
+    import warnings
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            g = load_grid(path)
+    except (InputError, OSError, ValueError, KeyError, EOFError) as e:
+        return f"not a valid grid file ({' '.join(str(e).split())[:120]})"
+    meta = g.meta if isinstance(g.meta, dict) else {}
+    video = meta.get("video") if isinstance(meta.get("video"), dict) else {}
+    if video.get("content_hash") != content_hash(v.path):
+        return "made from another video (content hash differs)"
+    want = {"method": v.method, "layout": v.layout, "eye": v.eye}
+    for k, x in want.items():
+        if meta.get(k, "paper" if k == "method" else None) != x:
+            return f"made with {k} = {meta.get(k)!r}, not {x!r}"
+    gm = meta.get("grid") if isinstance(meta.get("grid"), dict) else {}
+    if gm.get("size") != [v.window_size, v.window_size]:
+        return f"made with windows of {gm.get('size')} px, not {v.window_size}"
+    if v.method == "sphere" and g.field_dps is not None:
+        cell = cells_from_meta(meta).cell_deg
+        if abs(float(cell) - float(v.cell_deg)) > 1e-9:
+            return f"made with cell_deg = {cell:g}, not {v.cell_deg:g}"
+    return None
+
+
+def _drop_bad_cache(manifest: Manifest, grids: dict[str, Path]) -> dict[str, str]:
+    """Remove every cached grid that fails :func:`cache_problem` (the cache is ours: it is
+    made again); ``{video id: "rebuilt: why"}``."""
+    bad = {}
+    for v in manifest.videos:
+        path = grids[v.id]
+        if path.is_file():
+            why = cache_problem(path, v)
+            if why is not None:
+                path.unlink(missing_ok=True)
+                bad[v.id] = f"rebuilt: {why}"
+    return bad
 
 
 def _video_dict(v: VideoSpec) -> dict:
@@ -136,6 +197,7 @@ def run_study(
     out = Path(outdir).absolute()
     cache = (Path(cache_dir) if cache_dir else (manifest.cache or default_cache_dir())).absolute()
     _check_outputs(manifest, out, cache)
+    _check_videos(manifest)
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
         return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), outputs)
@@ -192,10 +254,11 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     total = sum(1 + w.render for w in todo)
     need_grid = {w.video for w in todo}
     video_info: dict[str, dict] = {}
+    bad = _drop_bad_cache(manifest, grids)  # a corrupt or foreign entry is made again
     for v in manifest.videos:
         hit = grids[v.id].is_file()
         video_info[v.id] = {"path": str(v.path), "grid": str(grids[v.id]),
-                            "cache": "hit" if hit else "miss", "preprocess_s": 0.0}  # fmt: skip
+                            "cache": "hit" if hit else bad.get(v.id, "miss"), "preprocess_s": 0.0}  # fmt: skip
         if not hit:
             total += 1
     done = failed = 0
@@ -277,6 +340,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
                             if w.render:
                                 renders[w.id] = {"status": line}
                             tick(False, 1 + w.render)
+                            _maybe_finish(out, w, keys, results, renders, rows)  # its row
             elif kind == "epof":
                 recs = (
                     res if res is not None else [{"id": it["id"], "status": line} for it in payload]
