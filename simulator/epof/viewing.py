@@ -171,13 +171,15 @@ def compute_epof(
         "rule": rule,
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
+        "video_content_hash": (grid.meta.get("video") or {}).get("content_hash"),
     }
     return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
 
 
 def epof_settings(result: EpofResult) -> dict:
     """The settings of a computed EPOF (:func:`compute_epof`'s ``meta``) as recorded in
-    the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds."""
+    the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds, and
+    the content hash of the video the grid was made from."""
     m = result.meta
     rule = m.get("rule")
     fr = m.get("frustum_deg")
@@ -188,6 +190,8 @@ def epof_settings(result: EpofResult) -> dict:
         "top_k": m.get("top_k"),
         "opacity_rule": None if rule is None else rule.describe(),
         "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
+        # the video the grid was made from (``render --opacity EPOF.csv`` checks it)
+        "video_content_hash": m.get("video_content_hash"),
     }
 
 

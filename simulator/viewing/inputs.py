@@ -6,6 +6,7 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.epof.viewing import EpofResult
+from simulator.media.gridfile import content_hash
 from simulator.media.video import MediaInfo, probe
 
 __all__ = ["check_right_eye", "csv_opacity", "frame_range"]
@@ -45,9 +46,16 @@ def frame_range(
     return f0, f1
 
 
-def csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+def csv_opacity(res: EpofResult, path, frames, n_video: int, video=None) -> np.ndarray:
     """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
-    has a row for each of them and no frame beyond the video)."""
+    has a row for each of them and no frame beyond the video, and, when the CSV records
+    the content hash of its video (``# video_content_hash``), ``video`` has that hash)."""
+    want = (res.meta.get("settings") or {}).get("video_content_hash")
+    if video is not None and isinstance(want, str) and want != content_hash(video):
+        raise InputError(
+            f"{path}: EPOF CSV was computed for another video (its video_content_hash is "
+            f"not that of {video}); compute it with vimsim epof on this video's grid"
+        )
     fr = np.asarray(res.frame, np.int64)
     if fr.size and (fr.min() < 0 or fr.max() >= n_video):
         raise InputError(

@@ -146,7 +146,7 @@ def plan_viewing(
     if grid is not None:
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
-        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
+        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames, video=video)
     if mit.local and grf is not None and grid is None:
         raise InputError(
             f"--mitigation local-grf needs --grid GRID.npz with a sphere-mode field; make one "
