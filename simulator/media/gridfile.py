@@ -29,6 +29,7 @@ import json
 import os
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -251,7 +252,7 @@ def _check_headers(p: Path, need: set[str]) -> None:
                     )
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError) as e:
         raise InputError(
             f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
         ) from None
@@ -315,7 +316,7 @@ def load_grid(path: str | os.PathLike) -> GridFile:
             arrs["field_dps"] = LazyField(p)
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, MemoryError) as e:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, MemoryError) as e:
         raise InputError(
             f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
         ) from None
