@@ -118,8 +118,14 @@ def _vidstr() -> bytes:
 
 HEADPATH_SEEDS = {
     "canonical": [_canonical()],
-    "keyframes-json": [json.dumps([{"time_s": 0, "yaw_deg": 1, "pitch_deg": 2},
-                                   {"time_s": 1, "yaw_deg": 30, "pitch_deg": -5}]).encode()],  # fmt: skip
+    "keyframes-json": [
+        json.dumps(
+            [
+                {"time_s": 0, "yaw_deg": 1, "pitch_deg": 2},
+                {"time_s": 1, "yaw_deg": 30, "pitch_deg": -5},
+            ]
+        ).encode()
+    ],
     "360vidstr": [_vidstr()],
     "corbillon": [_real("corbillon_mmsys18_multiviewpoint/user1_quaternion.txt")],
     "corbillon-euler": [_real("corbillon_mmsys18_multiviewpoint/user1_euler.txt")],
