@@ -23,11 +23,11 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO / "tests" / "study"))
-from ray_loopback import kill_raylet, loopback_cluster, use_loopback  # noqa: E402
+from ray_loopback import kill_raylet, loopback_cluster, use_loopback
 
 use_loopback()
 
-from simulator.cli import main  # noqa: E402
+from simulator.cli import main
 
 OUT = REPO / "bench" / "_out" / "ray_node_kill"
 N_VIEWINGS = 24

@@ -11,7 +11,6 @@ import pytest
 from simulator.cli import main
 from simulator.media.gridfile import load_grid
 from simulator.study.manifest import load_manifest
-from simulator.study.runner import cache_problem
 
 
 def _toml(video: str = "clip.mp4") -> str:
@@ -45,6 +44,8 @@ def _grid(d: Path) -> Path:
 
 
 def test_cache_problem_names_what_is_wrong(study, tmp_path):
+    from simulator.study.runner import cache_problem
+
     m = load_manifest(study / "s.toml")
     v = m.videos[0]
     assert cache_problem(_grid(study), v) is None

@@ -8,8 +8,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-from simulator.study.executors import safe_import_path
-
 _PLANT = "from pathlib import Path\nPath({marker!r}).write_text('ran {name}')\n"
 
 
@@ -26,6 +24,8 @@ def _vimsim() -> list[str]:
 
 
 def test_safe_import_path_drops_the_working_folder(tmp_path):
+    from simulator.study.executors import safe_import_path
+
     cwd = str(tmp_path)
     path = ["", ".", cwd, "/usr/lib/python3.11", cwd + "/sub"]
     assert safe_import_path(path, cwd) == ["/usr/lib/python3.11", cwd + "/sub"]
