@@ -63,11 +63,13 @@ def run(code: Path) -> dict[str, tuple[str, bool]]:
     with tempfile.TemporaryDirectory() as t:
         xml = Path(t) / "r.xml"
         env = dict(os.environ, PYTHONPATH=str(code), MPLBACKEND="Agg")
-        subprocess.run(
-            [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", "not signal",
+        subprocess.run(  # memory capped: a case that allocates without bound fails, not the run
+            ["prlimit", f"--as={12 * 2**30}", sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", "-k", "not signal",
              f"--junitxml={xml}", "--rootdir", str(REPO), *(str(REPO / f) for f in FILES)],
             cwd=code, env=env, check=False, capture_output=True, text=True,
         )  # fmt: skip
+        if not xml.is_file():
+            raise SystemExit(f"pytest gave no report for {code}")
         out = {}
         for tc in ET.parse(xml).getroot().iter("testcase"):
             name = tc.get("name", "")
