@@ -36,6 +36,21 @@ FUZZ = settings(
     database=None,
 )
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "headtraces"
+#: Inputs tried per reader in this run; written to ``$VIMSIM_FUZZ_COUNTS`` (JSON) at the end.
+COUNTS: dict[str, int] = {}
+
+
+def _count(reader: str) -> None:
+    COUNTS[reader] = COUNTS.get(reader, 0) + 1
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _write_counts():
+    yield
+    if os.environ.get("VIMSIM_FUZZ_COUNTS"):
+        Path(os.environ["VIMSIM_FUZZ_COUNTS"]).write_text(json.dumps(COUNTS, indent=1))
+
+
 EXAMPLE_DATA = Path(__file__).resolve().parents[1] / "examples" / "study_example.csv"
 
 
@@ -147,6 +162,7 @@ def test_fuzz_headpath_readers(fmt):
     @FUZZ
     @given(inputs(seeds), st.booleans())
     def run(data, every_user):
+        _count(f"headpath {fmt}")
         read = load_all_users if every_user else load_headpath
         _reads(lambda p: read(p, fmt), data, "trace.json" if "json" in fmt else "trace.csv")
 
@@ -181,6 +197,7 @@ def test_fuzz_grid_bytes(grids):
     @FUZZ
     @given(inputs(list(grids.values())))
     def run(data):
+        _count("grid file (bytes)")
         _reads(_load_grid_fully, data, "g.npz")
 
     run()
@@ -203,6 +220,7 @@ def test_fuzz_grid_arrays(grids):
     @FUZZ
     @given(st.sampled_from(sorted(grids)), st.data())
     def run(name, data):
+        _count("grid file (arrays, meta)")
         with np.load(io.BytesIO(grids[name]), allow_pickle=False) as z:
             arrs = {k: z[k] for k in z.files}
         key = data.draw(st.sampled_from(sorted(arrs)))
@@ -257,6 +275,7 @@ def test_fuzz_epof_csv():
     @FUZZ
     @given(inputs([EPOF_SEED]))
     def run(data):
+        _count("EPOF CSV")
         _reads(read_epof_csv, data, "e.csv")
 
     run()
@@ -272,6 +291,7 @@ def test_fuzz_study_manifest(tmp_path_factory):
     @FUZZ
     @given(inputs([MANIFEST_SEED]))
     def run(data):
+        _count("study manifest")
         m = d / "s.toml"
         m.write_bytes(data)
         try:
@@ -290,6 +310,7 @@ def test_fuzz_camera_csv():
     @FUZZ
     @given(inputs([CAMERA_SEED]))
     def run(data):
+        _count("camera CSV")
         _reads(load_camera_csv, data, "camera.csv")
 
     run()
@@ -301,6 +322,7 @@ def test_fuzz_study_data():
     @FUZZ
     @given(inputs([EXAMPLE_DATA.read_bytes()]))
     def run(data):
+        _count("study data (analyze)")
         _reads(read_study, data, "DATA.csv")
 
     run()
@@ -319,6 +341,7 @@ def test_fuzz_frames_json(tmp_path_factory):
     @FUZZ
     @given(inputs([seed.encode()]))
     def run(data):
+        _count("frames.json")
         with tempfile.TemporaryDirectory() as t:
             new, gold = Path(t) / "new", Path(t) / "gold"
             new.mkdir()
