@@ -121,6 +121,7 @@ CASES: list[tuple] = [
     ("synth-seconds-huge", None, ["synth", "{d}/s.mp4", "--scene", "rotate", "--seconds", "1e9"], 2, "at most 100,000", ()),
     ("synth-fps-huge", None, ["synth", "{d}/s.mp4", "--scene", "rotate", "--fps", "1e9"], 2, "fps", ()),
     ("synth-size-huge", None, ["synth", "{d}/s.mp4", "--scene", "rotate", "--size", "99999x99999"], 2, "--size", ()),
+    ("synth-size-memory", None, ["synth", "{d}/s.mp4", "--scene", "rotate", "--seconds", "0.1", "--size", "16384x8192"], 2, "--size 16384x8192", ()),
     ("synth-truth-cell-tiny", None, ["synth", "{d}/s.mp4", "--scene", "rotate", "--truth-cell", "0.01"], 2, "--truth-cell", ()),
     ("hp-synth-seconds-huge", None, ["headpath", "synth", "look-around", "-o", "{d}/h.csv", "--seconds", "1e12"], 2, "at most", ()),
     ("hp-synth-rate-huge", None, ["headpath", "synth", "look-around", "-o", "{d}/h.csv", "--seconds", "10", "--rate", "1e9"], 2, "at most", ()),

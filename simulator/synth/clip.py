@@ -140,12 +140,15 @@ def synthesize(
     n = cfg.n_frames
     c = cfg.truth_cell_deg  # the truth is held whole: refused before any work if it cannot fit
     check_fits(n * round(180 / c) * round(360 / c) * 4.0 * len(cfg.eyes), "--truth-cell")
+    workers = max(1, min(4, os.cpu_count() or 1))
+    # frames in flight (2 per worker + the one written) at ~48 bytes a pixel while drawn
+    # (measured: 2048x1024 at 2 workers peaks at 540 MB, ~37 bytes a pixel in flight)
+    check_fits(W * H * len(cfg.eyes) * 48.0 * (2 * workers + 1), f"--size {W}x{H}")
     frame_size = (W, H * len(cfg.eyes))
     it = range(n)
     bar = Counter(progress, n)
     # Frames are independent: render a few ahead on worker threads (numpy and cv2 release
     # the GIL for most of the work), write them in order.
-    workers = max(1, min(4, os.cpu_count() or 1))
     with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw, ThreadPoolExecutor(workers) as pool:
         pending = []
         for k in it:
