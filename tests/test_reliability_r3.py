@@ -76,6 +76,25 @@ def _other_video_epof(d: Path) -> None:
     assert main(["epof", str(d / "G.npz"), str(d / "P.csv"), "-o", str(d / "e.csv")]) == 0
 
 
+def _bad_deflate(d: Path) -> None:
+    """B.npz: G.npz re-zipped with deflate, a few bytes inside pof_dps.npy's compressed
+    stream changed (found by the fuzzer: zlib.error escaped as an internal error)."""
+    import zipfile
+
+    with zipfile.ZipFile(d / "G.npz") as src:
+        members = {i.filename: src.read(i.filename) for i in src.infolist()}
+    with zipfile.ZipFile(d / "B.npz", "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for name, data in members.items():
+            zf.writestr(name, data)
+    with zipfile.ZipFile(d / "B.npz") as zf:
+        info = zf.getinfo("pof_dps.npy")
+    raw = bytearray((d / "B.npz").read_bytes())
+    start = info.header_offset + 30 + len(info.filename) + len(info.extra)
+    mid = start + 1  # the stream header: the first read (the .npy header check) fails
+    raw[mid : mid + 8] = b"\xff\x00\xff\x00\xff\x00\xff\x00"
+    (d / "B.npz").write_bytes(bytes(raw))
+
+
 def _both(*makers):
     def make(d: Path) -> None:
         for m in makers:
@@ -146,6 +165,9 @@ CASES: list[tuple] = [
     ("render-opacity-garbage", _text("B.csv", "frame,x\n1,2\n"), [*RENDER, "-o", "{d}/o", "--opacity", "{d}/B.csv"], 2, "B.csv", ()),
     ("render-opacity-empty", _text("B.csv", ""), [*RENDER, "-o", "{d}/o", "--opacity", "{d}/B.csv"], 2, "B.csv", ()),
     ("an-epof-csv-garbage", _text("B.csv", "id,condition,epof_csv\nP1,GR,x.csv\n"), ["analyze", "{d}/B.csv", "-o", "{d}/o"], 2, "", ()),
+    # --- found by the fuzzer (tests/test_fuzz.py), kept as cases
+    ("grid-bad-deflate", _bad_deflate, ["epof", "{d}/B.npz", "{d}/P.csv", "-o", "{d}/e.csv"], 2, "B.npz", ()),
+    ("an-unbalanced-quote", _text("B.csv", '"id,condition,flow\nP1,GR,2\nP2,NR,3\n'), ["analyze", "{d}/B.csv", "-o", "{d}/o"], 2, "B.csv", ()),
     # --- camera CSVs (synth --scene trajectory)
     ("camera-garbage", _text("C.csv", "hello\x00world"), ["synth", "{d}/s.mp4", "--scene", "trajectory", "--camera", "{d}/C.csv"], 2, "C.csv", ()),
     ("camera-time-order", _text("C.csv", CAMERA + "1,0,0,0,0,0,0\n0,0,0,1,0,0,0\n"), ["synth", "{d}/s.mp4", "--scene", "trajectory", "--camera", "{d}/C.csv"], 2, "C.csv", ()),
@@ -168,6 +190,7 @@ CLASSES = {
     "non-video": ("render-not-video", "frames-not-video", "render-right", "render-grid-is", "export-not",
                   "study-"),
     "epof-csv": ("render-opacity", "an-epof"),
+    "fuzz-found": ("grid-bad-deflate", "an-unbalanced-quote"),
     "camera-csv": ("camera-",),
     "messages": ("hp-columns-long", "hp-header-long", "an-column-long", "epof-output-long", "bare-"),
 }  # fmt: skip
