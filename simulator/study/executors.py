@@ -165,6 +165,7 @@ class LocalExecutor:
             # What every task needs, imported once in the server (no GL context is made there).
             ctx.set_forkserver_preload(
                 [
+                    "concurrent.futures.process",  # what a worker unpickles first
                     "simulator.study.tasks",
                     "simulator.sphere",
                     "simulator.preprocess",
