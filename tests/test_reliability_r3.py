@@ -128,6 +128,7 @@ CASES: list[tuple] = [
     ("compare-report-foreign-diff", _both(_frames_pair, _copy("p.png", "r/t0000.100_both.diff.png")), ["compare", "{d}/n", "{d}/g", "--report", "{d}/r"], 2, "not written by vimsim compare", ()),
     ("compare-force-alone", _frames_pair, ["compare", "{d}/n", "{d}/g", "--force"], 2, "--force goes with --update", ()),
     ("compare-bad-golden-json", _both(_frames_pair, _text("g/frames.json", "{oops")), ["compare", "{d}/n", "{d}/g", "--update", "--force", "--report", "{d}/r"], 2, "frames.json", ("r", "r/t0000.100_both.diff.png", "r/t0000.100_both.side.png", "r/compare.json", "r/.vimsim-manifest.json")),
+    ("study-foreign-viewings", _both(_copy("P.csv", "o/viewings.csv"), _study(_VIDEO_A.format(path="v.mp4"))), ["study", "{d}/S.toml", "-o", "{d}/o", "--cache-dir", "{d}/c", "--no-progress"], 2, "not written by vimsim study", ()),
     ("export-foreign", _copy("P.csv", "o/VimsimEpof.cs"), ["export", "{d}/G.npz", "-o", "{d}/o"], 2, "not written by vimsim export", ()),
     # --- options that size work: bounded, checked before any folder is created
     ("frames-every-tiny", None, [*FRAMES, "-o", "{d}/o", "--every", "1e-9"], 2, "--every", ()),
@@ -184,7 +185,8 @@ CASES: list[tuple] = [
 
 #: The class of each case (for the measure): by id prefix.
 CLASSES = {
-    "folder": ("frames-foreign", "frames-golden", "frames-video", "hp-all", "compare-", "export-foreign"),
+    "folder": ("frames-foreign", "frames-golden", "frames-video", "hp-all", "compare-", "export-foreign",
+               "study-foreign"),
     "bounds": ("frames-every", "frames-at", "demo-seconds", "synth-seconds", "synth-fps", "synth-size",
                "synth-truth", "hp-synth", "render-eye", "view-size", "render-start", "render-end"),
     "non-video": ("render-not-video", "frames-not-video", "render-right", "render-grid-is", "export-not",

@@ -26,7 +26,7 @@ from pathlib import Path
 
 from simulator import __version__
 from simulator.core.errors import InputError
-from simulator.core.fileio import check_output_dir
+from simulator.core.fileio import OutputFolder
 from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
 from simulator.media.video import probe
@@ -42,6 +42,8 @@ VIEWING_COLUMNS = (
     "share_opacity_ge_0_5", "status",
 )  # fmt: skip
 _STAT_COLUMNS = VIEWING_COLUMNS[6:13]
+#: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).
+STUDY_FILES = ("viewings.csv", "study.json")
 
 
 def default_cache_dir() -> Path:
@@ -149,6 +151,8 @@ def _check_outputs(m: Manifest, out: Path, cache: Path) -> None:
         r = d.resolve()
         if r in inputs or (d.exists() and not d.is_dir()):
             raise InputError(f"{d}: {what} is a file (an input?); give a folder")
+    # the one folder rule for the files at OUTDIR's top: a user's viewings.csv is refused
+    OutputFolder(out, STUDY_FILES, "study").check(inputs)
     roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
     for p in inputs:
         if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
@@ -216,11 +220,11 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
             f"{manifest.path}: [render] cpus = {cpus}, but the largest node of the Ray "
             f"cluster has {ex.max_task_cpus} CPUs: a render task would never start"
         )
-    check_output_dir(out)
+    folder = OutputFolder(out, STUDY_FILES, "study")
+    folder.prepare()  # the completion marker (study.json) and viewings.csv go first
     (cache / "grids").mkdir(parents=True, exist_ok=True)
     for sub in ("epof", "state"):
         (out / sub).mkdir(exist_ok=True)
-    (out / "study.json").unlink(missing_ok=True)  # the completion marker goes first
 
     # ---- plan: grid keys, viewing keys, what is unchanged
     t0 = time.perf_counter()
@@ -397,6 +401,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
         "versions": outputs.versions(ex_info),
         "timings_s": timings,
     }
+    folder.complete()
     tasks.write_json(out / "study.json", summary)  # last: the study is complete
     return summary
 
