@@ -149,8 +149,13 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI; return the exit status (0 ok, 2 bad input/usage, 1 internal error)."""
     parser = build_parser()
     args = parser.parse_args(argv)
-    if getattr(args, "func", None) is None:
-        parser.print_help(sys.stderr)
+    if getattr(args, "func", None) is None:  # bare `vimsim` (or `vimsim headpath`)
+        sub = f" {args.command}" if getattr(args, "command", None) else ""
+        print(
+            f"usage: vimsim{sub} COMMAND ...\nvimsim{sub}: error: no command given; "
+            f"`vimsim{sub} --help` lists the commands",
+            file=sys.stderr,
+        )
         return 2
     from simulator.commands._signals import exit_status, handle_signals, signal_name
     from simulator.core.fileio import input_scope
@@ -235,8 +240,24 @@ def _open_log(args: argparse.Namespace, inputs: list[str], argv) -> object | Non
     return fh
 
 
+#: The most characters of one word (a name, a value: often user text) a message quotes,
+#: and of the whole message; longer ones are cut in the middle (``abc...xyz``).
+WORD_MAX = 120
+LINE_MAX = 600
+
+
+def _excerpt(word: str, n: int) -> str:
+    if len(word) <= n:
+        return word
+    keep = n - 3
+    return f"{word[: keep - keep // 3]}...{word[len(word) - keep // 3 :]}"
+
+
 def _one_line(e: object) -> str:
-    return " ".join(str(e).split())
+    """``e`` as one line quoting a bounded excerpt of any user text in it: every word at
+    most :data:`WORD_MAX` characters, the line at most :data:`LINE_MAX`."""
+    words = [_excerpt(w, WORD_MAX) for w in str(e).split()]
+    return _excerpt(" ".join(words), LINE_MAX)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,6 @@ from __future__ import annotations
 import math
 import os
 import time
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -195,17 +194,12 @@ def _exact_epof(scene, time_s, res) -> np.ndarray:
     )
 
 
-def _render(cfg: DemoConfig, source, hpath, outdir, grid, progress) -> str | None:
-    """Render the per-eye videos with GRFs (what ``vimsim render`` runs); the error line
-    of a failure (e.g. no EGL), which the summary and README report, else None."""
+def _render(cfg: DemoConfig, source, hpath, outdir, grid, progress) -> None:
+    """Render the per-eye videos with GRFs (what ``vimsim render`` runs). The demo stops at
+    the first failed step (as every step before it): a failed render raises, and the
+    folder keeps no completion marker."""
     view = ViewSpec(RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)))
-    try:
-        render_viewing(source, hpath, outdir, grid=grid, view=view, progress=progress)
-    except Exception as e:  # noqa: BLE001 - reported in README/summary; the rest stands
-        error = f"{type(e).__name__}: {e}"
-        warnings.warn(f"render failed: {error}", stacklevel=3)
-        return error
-    return None
+    render_viewing(source, hpath, outdir, grid=grid, view=view, progress=progress)
 
 
 def _accuracy(grid, truth_win, res, res_truth_grid, exact) -> dict:
@@ -308,10 +302,21 @@ def run_demo(
     ``progress(done, total)`` follows each long step's frames; ``note(text)`` receives one
     line per finished step (the CLI prints them).
 
-    Raises InputError for an unusable output folder. A renderer failure (e.g. no EGL)
-    is recorded in the summary and README instead of aborting the other outputs.
+    Raises InputError for an unusable output folder or options sizing too much work
+    (checked before the folder is touched). The demo stops at the first failed step (a
+    renderer failure too, e.g. no EGL): no completion marker, the manifest incomplete.
     """
 
+    # Every option that sizes the work is checked before the folder is touched.
+    scfg = SynthConfig(
+        "coaster",
+        seconds=cfg.seconds,
+        fps=cfg.fps,
+        size=cfg.eye_size,
+        layout="top-bottom",
+        seed=cfg.seed,
+        truth_cell_deg=4.0,
+    )
     folder = OutputFolder(
         output, [k for k in _FILES if "/" not in k] + ["grid.npz.partial.npz"], "demo"
     )
@@ -323,15 +328,6 @@ def run_demo(
         note(f"writing to {out}")
 
     # 1. The clip and its truth.
-    scfg = SynthConfig(
-        "coaster",
-        seconds=cfg.seconds,
-        fps=cfg.fps,
-        size=cfg.eye_size,
-        layout="top-bottom",
-        seed=cfg.seed,
-        truth_cell_deg=4.0,
-    )
     video, tpath = synthesize(scfg, out / "coaster.mp4", crf=18, progress=progress)
     t0 = _step(
         log,
@@ -370,9 +366,11 @@ def run_demo(
     t0 = _step(log, "epof: EPOF, opacity and truth", t0, note)
 
     # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs).
+    # The demo stops at the first failed step (as every step above): a failed render
+    # raises, the folder keeps no completion marker and its manifest says incomplete.
     render_error = None
     if cfg.render:
-        render_error = _render(cfg, source, hpath, out / "render", grid, progress)
+        _render(cfg, source, hpath, out / "render", grid, progress)
         t0 = _step(log, f"render: two eyes at {cfg.render_size[0]}x{cfg.render_size[1]}", t0, note)
 
     # 6. Plots, README, summary.

@@ -540,6 +540,9 @@ def long_video(tmp_path_factory) -> Path:
     [("synth", signal.SIGINT), ("preprocess-sphere", signal.SIGTERM), ("render", signal.SIGTERM)],
 )  # fmt: skip
 def test_signal_cleans_up(base, long_video, tmp_path, which, sig):
+    """The signal lands at a known point (the child waits there: inside the clip's or the
+    render's temporary file, or after the sphere field's first row went to its spool), so
+    it always tests the cleanup, never a run that finished first."""
     d = tmp_path / "c"
     shutil.copytree(base, d)
     shutil.copy(long_video, d / "long.mp4")
@@ -547,21 +550,18 @@ def test_signal_cleans_up(base, long_video, tmp_path, which, sig):
     argv = {
         "synth": ["synth", str(d / "t.mp4"), "--scene", "rotate", "--seconds", "60", "--size", "256x128"],
         "preprocess-sphere": ["preprocess", str(d / "long.mp4"), "-o", str(d / "g.npz"), "--method",
-                              "sphere", "--cell", "10", "--window-size", "32"],
+                              "sphere", "--cell", "10", "--window-size", "32", "--no-progress"],
         "render": ["render", str(d / "long.mp4"), str(d / "P.csv"), "-o", str(d / "o"), "--eye-size",
                    "256x256", "--no-progress", "--hold-last", "--opacity", "0.5"],
     }[which]  # fmt: skip
-    # sphere mode writes its file at the end: signal it while it computes
-    # sphere mode streams its field to an unnamed temporary file: signal it once its
-    # progress bar shows that the work has started
-    sphere = which.startswith("pre")
-    rc, err = _run_and_signal(argv, sig, d, after_stderr="preprocess (sphere)" if sphere else None)
-    if rc == 0:
-        pytest.skip(f"{which} finished before the signal arrived")  # not counted as a pass
+    where = "spool" if which.startswith("pre") else "video"
+    ready = tmp_path / "ready"
+    rc, err = _signal_slow_child(argv, where, sig, ready, require_ready=True)
     assert rc == 128 + sig, err
     assert "Traceback" not in err and ("SIGTERM" if sig == signal.SIGTERM else "SIGINT") in err
     after = _snapshot(d)
     assert not [n for n in after if ".tmp-" in n], after
+    assert "t.mp4" not in after and "g.npz" not in after and "o/summary.json" not in after
     assert {k: v for k, v in after.items() if k in before} == before
 
 
@@ -589,19 +589,31 @@ def test_sphere_field_streamed_equals_in_memory(base):
 #: clip), ``analysis`` = while the statistics are computed (before the folder is touched).
 #: It touches ``$READY`` when it gets there. ``demo`` runs at the tiny test size.
 _SLOW_CHILD = """
-import dataclasses, os, sys, time
+import dataclasses, os, sys, threading, time
 from pathlib import Path
 where = sys.argv[1]
 def _wait():
     Path(os.environ["READY"]).touch()
-    time.sleep(60)
+    # the main thread sleeps until the signal; a worker thread (render's encoder) is slowed
+    # only, so that the main thread, interrupted, can still join it
+    time.sleep(60 if threading.current_thread() is threading.main_thread() else 0.2)
 if where == "video":
     from simulator.media.video import VideoWriter
-    _orig = VideoWriter.write
+    _orig, _orig_enc = VideoWriter.write, VideoWriter.encode
     def _slow(self, *a, **k):
         _orig(self, *a, **k)
         _wait()
-    VideoWriter.write = _slow
+    def _slow_enc(self, *a, **k):
+        _orig_enc(self, *a, **k)
+        _wait()
+    VideoWriter.write, VideoWriter.encode = _slow, _slow_enc
+elif where == "spool":
+    from simulator.media.gridfile import FieldSpool
+    _orig = FieldSpool.append
+    def _slow(self, *a, **k):
+        _orig(self, *a, **k)
+        _wait()
+    FieldSpool.append = _slow
 elif where == "save":
     from matplotlib.figure import Figure
     _orig = Figure.savefig
@@ -625,18 +637,21 @@ sys.exit(main(sys.argv[2:]))
 """
 
 
-def _signal_slow_child(argv, where, sig, ready: Path, timeout=60.0):
+def _signal_slow_child(argv, where, sig, ready: Path, timeout=60.0, require_ready=False):
     """Run the slowed child, wait until it reaches its slow step, send ``sig``;
-    (status, stderr)."""
+    (status, stderr). ``require_ready``: fail (not skip) if it never got there."""
     env = dict(os.environ, PYTHONUNBUFFERED="1", MPLBACKEND="Agg", READY=str(ready))
     p = subprocess.Popen([sys.executable, "-c", _SLOW_CHILD, where, *argv], env=env, cwd=REPO,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE)  # fmt: skip
     t0 = time.monotonic()
     while time.monotonic() - t0 < timeout and p.poll() is None and not ready.exists():
         time.sleep(0.02)
+    reached = ready.exists()
     p.send_signal(sig)
     _out, err = p.communicate(timeout=timeout)
     ready.unlink(missing_ok=True)
+    if require_ready:
+        assert reached, f"the child never reached its known point ({where}): {err.decode()[-500:]}"
     return p.returncode, err.decode()
 
 

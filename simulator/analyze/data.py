@@ -90,7 +90,8 @@ def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
     ]
     if not lines:
         raise InputError(f"{path}: no header line; expected a CSV with columns id,condition,...")
-    parsed = list(csv.reader([ln for _, ln in lines]))
+    # one record per line: an unbalanced quote never swallows the lines after it
+    parsed = [next(csv.reader([ln]), []) for _, ln in lines]
     header = [_norm_col(c) for c in parsed[0]]
     if len(header) == 1 and ";" in lines[0][1]:
         raise InputError(f"{path}: header is separated by ';'; expected commas (CSV)")

@@ -47,7 +47,14 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--update",
         action="store_true",
-        help="after the comparison, copy the new frames (and frames.json) over the goldens (after review)",
+        help="after the comparison, copy the new frames (and frames.json) over the goldens "
+        "(after review); refused when a frame fails unless --force; the replaced goldens are "
+        "kept in GOLDEN_DIR.backup-DATE beside them",
+    )
+    p.add_argument(
+        "--force",
+        action="store_true",
+        help="with --update: update even though some frames fail the comparison",
     )
     p.set_defaults(func=run)
 
@@ -56,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     """Compare; print one line per failing frame; 0 pass, 1 regression, 2 bad input."""
     from pathlib import Path
 
+    from simulator.core.errors import InputError
     from simulator.testing.compare import (
         DEFAULT_MAX_DIFF,
         DEFAULT_PSNR_DB,
@@ -65,8 +73,10 @@ def run(args: argparse.Namespace) -> int:
 
     psnr = DEFAULT_PSNR_DB if args.psnr is None else args.psnr
     mad = DEFAULT_MAX_DIFF if args.max_diff is None else args.max_diff
+    if args.force and not args.update:
+        raise InputError("--force goes with --update (update goldens although frames fail)")
     if args.update and not Path(args.golden_dir).is_dir():
-        names = update_goldens(args.frames_dir, args.golden_dir)
+        names, _ = update_goldens(args.frames_dir, args.golden_dir)
         print(f"vimsim compare: {len(names)} goldens created in {args.golden_dir}")
         return 0
     rep = compare_dirs(
@@ -81,8 +91,16 @@ def run(args: argparse.Namespace) -> int:
         f"vimsim compare: {len(rep.scores) - len(rep.failures)}/{len(rep.scores)} frames pass "
         f"(lowest PSNR {worst:.2f} dB); report {rep.report_dir}/compare.json"
     )
+    if args.update and not rep.passed and not args.force:
+        print(
+            f"vimsim compare: goldens NOT updated: {len(rep.failures)} frames fail; review "
+            "them, then --update --force",
+            file=sys.stderr,
+        )
+        return 1
     if args.update:
-        names = update_goldens(args.frames_dir, args.golden_dir)
-        print(f"vimsim compare: {len(names)} goldens updated in {args.golden_dir}")
+        names, backup = update_goldens(args.frames_dir, args.golden_dir)
+        kept = f"; the replaced goldens kept in {backup}" if backup else ""
+        print(f"vimsim compare: {len(names)} goldens updated in {args.golden_dir}{kept}")
         return 0
     return 0 if rep.passed else 1

@@ -323,7 +323,7 @@ def _convert_all(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from simulator.core.errors import InputError
-    from simulator.core.fileio import check_not_input, check_output_dir
+    from simulator.core.fileio import OutputFolder, check_not_input
     from simulator.traces.path import save_headpath_csv
     from simulator.traces.readers import load_all_users
 
@@ -338,8 +338,11 @@ def _convert_all(args: argparse.Namespace) -> int:
     targets = {u: out / f"{src.stem}_user{u:0{width}d}.csv" for u in users}
     for t in targets.values():
         check_not_input(t, [src])  # one line, exit 2: an output would replace the input
-    check_output_dir(out)
+    # The one folder rule: a CSV of an output name that no earlier run wrote is refused.
+    folder = OutputFolder(out, [t.name for t in targets.values()], "headpath convert")
+    folder.prepare([src])
     for u, hp in users.items():
         save_headpath_csv(targets[u], hp)
+    folder.complete()
     print(f"wrote {len(users)} head paths to {out}/ ({src.stem}_user{1:0{width}d}.csv ..)")
     return 0

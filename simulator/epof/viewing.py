@@ -174,6 +174,7 @@ def compute_epof(
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
         "flow_weights": None if flow_weights is None else list(flow_weights),
+        "video_content_hash": (grid.meta.get("video") or {}).get("content_hash"),
     }
     if cov is not None:
         meta["coverage_rule"] = grid.meta["coverage"]["rule"]
@@ -264,7 +265,8 @@ def _parts(grid, angles, view: Frustum, rows, sphere: bool, flow_weights):
 
 def epof_settings(result: EpofResult) -> dict:
     """The settings of a computed EPOF (:func:`compute_epof`'s ``meta``) as recorded in
-    the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds."""
+    the CSV's ``#`` lines: method, FOV, frustum, top-k, opacity rule and thresholds, and
+    the content hash of the video the grid was made from."""
     m = result.meta
     rule = m.get("rule")
     fr = m.get("frustum_deg")
@@ -276,6 +278,8 @@ def epof_settings(result: EpofResult) -> dict:
         "opacity_rule": None if rule is None else rule.describe(),
         "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
         **({"flow_weights": m["flow_weights"]} if m.get("flow_weights") else {}),
+        # the video the grid was made from (``render --opacity EPOF.csv`` checks it)
+        "video_content_hash": m.get("video_content_hash"),
     }
 
 

@@ -32,6 +32,7 @@ import json
 import os
 import tempfile
 import zipfile
+import zlib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -271,7 +272,7 @@ def _check_headers(p: Path, need: set[str]) -> None:
                     )
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as e:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, KeyError) as e:
         raise InputError(
             f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
         ) from None
@@ -336,7 +337,7 @@ def load_grid(path: str | os.PathLike) -> GridFile:
                 arrs[k] = LazyField(p, k + ".npy")
     except InputError:
         raise
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, MemoryError) as e:
+    except (zipfile.BadZipFile, zlib.error, ValueError, OSError, EOFError, MemoryError) as e:
         raise InputError(
             f"{p}: not a vimsim grid file (.npz expected): {type(e).__name__}"
         ) from None

@@ -13,6 +13,7 @@ error, so an interrupted encode never leaves an MP4 that looks complete.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import threading
@@ -393,6 +394,15 @@ def read_frame(
     raise InputError(f"{path}: has no frame {index}")
 
 
+def _naming(e: BaseException, target, tmp) -> BaseException:
+    """``e`` naming ``target`` where it names no file or the temporary one (an OSError of
+    the encoder writing the temporary file: the user knows the output's name)."""
+    if isinstance(e, OSError) and (e.filename is None or str(e.filename) == str(tmp)):
+        # PyAV's errors have a read-only filename: a plain OSError of the same errno
+        return OSError(e.errno, e.strerror or str(e), str(target))
+    return e
+
+
 class VideoWriter:
     """H.264 MP4 writer (PyAV), atomic: the file appears under its name only on success.
 
@@ -464,6 +474,20 @@ class VideoWriter:
                 raise
 
     def write(self, frame: NDArray[np.uint8]) -> None:
+        try:
+            self._write(frame)
+        except OSError as e:  # a full disk: say which output, not its temporary name
+            raise _naming(e, self.path, self._tmp) from None
+
+    def encode(self, vf) -> None:
+        """Encode and mux one ``av.VideoFrame`` (an OSError names the output file)."""
+        try:
+            for pkt in self._stream.encode(vf):
+                self._container.mux(pkt)
+        except OSError as e:
+            raise _naming(e, self.path, self._tmp) from None
+
+    def _write(self, frame: NDArray[np.uint8]) -> None:
         import av
 
         if frame.shape != (self.size[1], self.size[0], 3) or frame.dtype != np.uint8:
@@ -488,11 +512,19 @@ class VideoWriter:
             return
         self._closed = True
         try:
-            if ok:
-                for pkt in self._stream.encode():
-                    self._container.mux(pkt)
-        finally:
-            self._container.close()
+            try:
+                if ok:
+                    for pkt in self._stream.encode():
+                        self._container.mux(pkt)
+            finally:
+                if ok:
+                    self._container.close()
+                else:  # already failing: the first error is the one to report
+                    with contextlib.suppress(Exception):
+                        self._container.close()
+        except BaseException as e:  # noqa: BLE001 - re-raised
+            self._out.discard()  # a full disk while flushing: no temporary left
+            raise _naming(e, self.path, self._tmp) from None
         if ok:
             self._out.commit()
         else:

@@ -507,6 +507,10 @@ def preprocess_sphere(
             out, dps, px, grid, meta, field_dps=(spool, field_dtype),
             field_trans_dps=(ego.trans, field_dtype), extras=ego.arrays(),
         )  # fmt: skip
+    except OSError as e:
+        if e.filename is None:  # the spool beside the output filled the disk: name the output
+            e.filename = str(out)
+        raise
     finally:
         spool.close()
         ego.trans.close()

@@ -67,10 +67,7 @@ def _write_yuv420p(writer, frame: NDArray[np.uint8]) -> None:
         raise ValueError(
             f"frame must be ({h * 3 // 2}, {w}) uint8 yuv420p; got {frame.shape} {frame.dtype}"
         )
-    vf = av.VideoFrame.from_ndarray(frame, format="yuv420p")
-    vf.pts = writer.frame_pts()
-    for pkt in writer._stream.encode(vf):
-        writer._container.mux(pkt)
+    writer.encode(av.VideoFrame.from_ndarray(frame, format="yuv420p"))
     writer.n_written += 1
 
 

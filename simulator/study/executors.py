@@ -21,12 +21,16 @@ from __future__ import annotations
 
 import collections
 import concurrent.futures as cf
+import contextlib
 import multiprocessing
+import multiprocessing.forkserver
 import os
 import signal
 import socket
+import sys
 import threading
 from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
 
 from simulator.core.errors import InputError
 
@@ -87,8 +91,54 @@ def _on_sigint(signum, frame) -> None:
         raise KeyboardInterrupt
 
 
+#: Where the ``simulator`` package is imported from: the one import-path entry a worker
+#: needs beside the interpreter's own (site-packages, PYTHONPATH: what the user chose).
+_PACKAGE_ROOT = str(Path(__file__).resolve().parents[2])
+
+
+def safe_import_path(path: list[str], cwd: str | None = None) -> list[str]:
+    """``path`` (a ``sys.path``) without the entries that name the working folder (``''``,
+    ``'.'``, the folder itself), unless the package is imported from there: a worker
+    imports only the package and the interpreter's libraries, never a ``json.py`` or
+    ``concurrent.py`` lying in the folder a study was started from."""
+    here = os.path.realpath(cwd if cwd is not None else os.getcwd())
+    keep = []
+    for entry in path:
+        real = os.path.realpath(os.path.join(here, entry))
+        if real == here and real != _PACKAGE_ROOT:
+            continue
+        keep.append(entry)
+    return keep
+
+
 def _worker_init() -> None:
+    # The pool hands each worker the driver's sys.path (with the working folder first
+    # when the driver was started as ``python -m`` / ``-c``): drop it before any task.
+    sys.path[:] = safe_import_path(sys.path)
     signal.signal(signal.SIGINT, _on_sigint)
+
+
+@contextlib.contextmanager
+def _safe_path_env():
+    """New Python processes started inside do not put their working folder first on the
+    import path (``PYTHONSAFEPATH``, Python 3.11): the fork server is ``python -c ...``."""
+    old = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("PYTHONSAFEPATH", None)
+        else:
+            os.environ["PYTHONSAFEPATH"] = old
+
+
+def _start_fork_server() -> None:
+    """Start the fork server now, from the package's folder with a safe import path, so
+    that its preloads (and every worker forked from it) import nothing from the folder the
+    study was started in."""
+    with _safe_path_env():
+        multiprocessing.forkserver.ensure_running()
 
 
 def _run_task(fn, args):
@@ -106,7 +156,10 @@ class LocalExecutor:
     process that has imported the task module once, then forks each worker): no
     re-import per worker, and none of the caller's threads (decoders, encoders, a test
     runner's) are forked with a lock held, which can deadlock a plain ``fork``.
-    Elsewhere ``spawn``.
+    Elsewhere ``spawn``. Workers import only the package: the fork server starts with a
+    safe import path and each worker drops the working folder from the one it is handed
+    (:func:`safe_import_path`), so a ``json.py`` in the folder a study is started from is
+    never run.
 
     The rest wait here, not in the pool's queue: when a worker process dies (killed, out
     of memory, a crash in a native library) the pool fails every task it holds, so it
@@ -123,7 +176,9 @@ class LocalExecutor:
             ctx = multiprocessing.get_context("forkserver")
             # What every task needs, imported once in the server (no GL context is made there).
             ctx.set_forkserver_preload(list(WORKER_PRELOAD))
+            _start_fork_server()
         else:
+            os.environ["PYTHONSAFEPATH"] = "1"  # every spawned worker: no working folder
             ctx = multiprocessing.get_context("spawn")
         self._ctx = ctx
         self._pool = self._new_pool()
@@ -233,11 +288,15 @@ class RayExecutor:
         if address is not None:
             check_ray_address(address)
         kw = {"include_dashboard": False, "log_to_driver": False, "configure_logging": False}
-        if address is None:  # a runtime for this machine only: keep it on loopback
-            # address="local": a new runtime even if another cluster's address is on record
-            ray.init(address="local", num_cpus=int(workers), _node_ip_address="127.0.0.1", **kw)
-        else:
-            ray.init(address=address, **kw)
+        # Ray puts the driver's working folder on every worker's import path: connect from
+        # the package's own root (already on it), so a worker imports nothing from the
+        # folder the study was started in.
+        with contextlib.chdir(_PACKAGE_ROOT), _safe_path_env():
+            if address is None:  # a runtime for this machine only: keep it on loopback
+                # address="local": a new runtime even if another cluster's address is on record
+                ray.init(address="local", num_cpus=int(workers), _node_ip_address="127.0.0.1", **kw)
+            else:
+                ray.init(address=address, **kw)
         self.workers = int(ray.cluster_resources().get("CPU", workers))
         self._remote: dict = {}
         self._closing: threading.Thread | None = None

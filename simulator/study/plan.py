@@ -19,18 +19,25 @@ from pathlib import Path
 
 from simulator import __version__
 from simulator.core.errors import InputError
+from simulator.core.fileio import OutputFolder
 from simulator.core.mapcache import cache_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
-from simulator.media.gridfile import content_hash
+from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
 from simulator.media.video import probe
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
 from simulator.traces.readers import TraceFile, load_headpath
 
+#: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).
+STUDY_FILES = ("viewings.csv", "study.json")
+
 __all__ = [
+    "STUDY_FILES",
     "Plan",
     "base_row",
+    "cache_problem",
     "check_outputs",
     "check_plan",
+    "check_videos",
     "default_cache_dir",
     "dry_run",
     "plan_study",
@@ -95,6 +102,9 @@ class Plan:
     unchanged: dict[str, dict]
     todo: list[ViewingSpec]
     problems: list[str] = field(default_factory=list)
+    #: cached grids that cannot serve their video (``{video id: "rebuilt: why"}``): a run
+    #: removes and remakes them, a dry run reports them
+    stale: dict[str, str] = field(default_factory=dict)
 
     @property
     def n_tasks(self) -> int:
@@ -108,6 +118,11 @@ def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
     memo: dict = {}
     grids = {v.id: cache / "grids" / f"{_grid_key(v)[:32]}.npz" for v in m.videos}
     plan = Plan(grids, {k: p.is_file() for k, p in grids.items()}, {}, {}, [])
+    for v in m.videos:  # an entry is checked before use (format, video, options)
+        why = cache_problem(grids[v.id], v) if plan.hits[v.id] else None
+        if why is not None:
+            plan.hits[v.id] = False
+            plan.stale[v.id] = f"rebuilt: {why}"
     for w in m.viewings:
         plan.keys[w.id] = viewing_key(m, w, grids[w.video], memo)
         prev = read_state(out / "state" / f"{w.id}.json") if resume else None
@@ -168,13 +183,59 @@ def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
     return found
 
 
+def check_videos(manifest: Manifest) -> None:
+    """InputError (a manifest error, before any work) for a ``[[videos]] path`` that is
+    not a video PyAV can read."""
+    for v in manifest.videos:
+        try:
+            probe(v.path)
+        except InputError as e:
+            raise InputError(f"{manifest.path}: [[videos]] id {v.id!r}: {e}") from None
+        except OSError as e:
+            raise InputError(
+                f"{manifest.path}: [[videos]] id {v.id!r}: {v.path}: not a readable video "
+                f"({e.strerror or type(e).__name__})"
+            ) from None
+
+
+def cache_problem(path: Path, v: VideoSpec) -> str | None:
+    """Why the cached grid ``path`` cannot serve video ``v`` (None: it can). Checked before
+    use: the grid file's format (every array and its meta, as :func:`load_grid` checks),
+    the content hash of the video it was made from, and its options (method, layout,
+    eye, window matrix shape, cell size)."""
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            g = load_grid(path)
+    except (InputError, OSError, ValueError, KeyError, EOFError) as e:
+        return f"not a valid grid file ({' '.join(str(e).split())[:120]})"
+    meta = g.meta if isinstance(g.meta, dict) else {}
+    video = meta.get("video") if isinstance(meta.get("video"), dict) else {}
+    if video.get("content_hash") != content_hash(v.path):
+        return "made from another video (content hash differs)"
+    want = {"method": v.method, "layout": v.layout, "eye": v.eye}
+    for k, x in want.items():
+        if meta.get(k, "paper" if k == "method" else None) != x:
+            return f"made with {k} = {meta.get(k)!r}, not {x!r}"
+    gm = meta.get("grid") if isinstance(meta.get("grid"), dict) else {}
+    if gm.get("size") != [v.window_size, v.window_size]:
+        return f"made with windows of {gm.get('size')} px, not {v.window_size}"
+    if v.method == "sphere" and g.field_dps is not None:
+        cell = cells_from_meta(meta).cell_deg
+        if abs(float(cell) - float(v.cell_deg)) > 1e-9:
+            return f"made with cell_deg = {cell:g}, not {v.cell_deg:g}"
+    return None
+
+
 def check_outputs(m: Manifest, out: Path, cache: Path) -> None:
-    """Refuse an OUTDIR or cache that would overwrite an input (or is one)."""
+    """Refuse an OUTDIR or cache that would overwrite an input (or is one), and a file of
+    an output name at OUTDIR's top that no earlier study wrote (the one folder rule)."""
     inputs = {p.resolve() for p in m.input_files()}
     for d, what in ((out, "output folder"), (cache, "cache folder")):
         r = d.resolve()
         if r in inputs or (d.exists() and not d.is_dir()):
             raise InputError(f"{d}: {what} is a file (an input?); give a folder")
+    OutputFolder(out, STUDY_FILES, "study").check(inputs)
     roots = [out.resolve() / n for n in ("epof", "render", "state", "videos", "analysis")]
     for p in inputs:
         if p.parent == out.resolve() and p.name in ("viewings.csv", "study.json"):
@@ -210,7 +271,7 @@ def dry_run(manifest: Manifest, outdir, *, cache_dir=None, resume: bool = True) 
     todo = {w.id for w in plan.todo}
     need = {w.video for w in plan.todo}
     videos = {
-        v.id: {"grid": str(plan.grids[v.id]), "cache": "hit" if plan.hits[v.id] else "miss",
+        v.id: {"grid": str(plan.grids[v.id]), "cache": "hit" if plan.hits[v.id] else plan.stale.get(v.id, "miss"),
                "preprocess": v.id in need and not plan.hits[v.id], "method": v.method}
         for v in manifest.videos
     }  # fmt: skip

@@ -23,13 +23,15 @@ from dataclasses import asdict
 from pathlib import Path
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import check_output_dir
+from simulator.core.fileio import OutputFolder
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
 from simulator.study.plan import (
+    STUDY_FILES,
     Plan,
     base_row,
+    check_videos,
     default_cache_dir,
     dry_run,
     plan_study,
@@ -93,6 +95,7 @@ def run_study(
     """
     t_start, c_start = time.perf_counter(), time.process_time()
     out, cache = study_folders(manifest, outdir, cache_dir)
+    check_videos(manifest)  # a [[videos]] path that is not a video: a manifest error
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
         return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start))
@@ -101,26 +104,31 @@ def run_study(
         raise
 
 
-def _prepare(manifest: Manifest, out: Path, cache: Path, ex) -> None:
+def _prepare(manifest: Manifest, out: Path, cache: Path, ex) -> OutputFolder:
+    """Checks that need the executor, then the folders; the folder manifest of OUTDIR's
+    top files (:data:`STUDY_FILES`), whose completion marker ``study.json`` goes first."""
     cpus = manifest.render["cpus"]
     if ex.name == "ray" and any(w.render for w in manifest.viewings) and cpus > ex.max_task_cpus:
         raise InputError(
             f"{manifest.path}: [render] cpus = {cpus}, but the largest node of the Ray "
             f"cluster has {ex.max_task_cpus} CPUs: a render task would never start"
         )
-    check_output_dir(out)
+    folder = OutputFolder(out, STUDY_FILES, "study")
+    folder.prepare()  # the completion marker (study.json) and viewings.csv go first
     (cache / "grids").mkdir(parents=True, exist_ok=True)
     for sub in ("epof", "state"):
         (out / sub).mkdir(exist_ok=True)
-    (out / "study.json").unlink(missing_ok=True)  # the completion marker goes first
+    return folder
 
 
 def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
     t_start, c_start = start
     timings: dict[str, float] = {}
-    _prepare(manifest, out, cache, ex)
+    folder = _prepare(manifest, out, cache, ex)
     t0 = time.perf_counter()
     plan = plan_study(manifest, out, cache, resume)
+    for vid in plan.stale:  # a corrupt or foreign cache entry: ours, made again
+        plan.grids[vid].unlink(missing_ok=True)
     rows: dict[str, dict] = {}
     for w in manifest.viewings:
         if w.id in plan.unchanged:
@@ -150,6 +158,7 @@ def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
     timings["cpu_tasks"] = sched.cpu_tasks
     summary = _summary(manifest, out, cache, ex_info, sched.video_info, table, report)
     summary["timings_s"] = timings
+    folder.complete()
     tasks.write_json(out / "study.json", summary)  # last: the study is complete
     return summary
 
@@ -214,7 +223,8 @@ class _Scheduler:
         for v in manifest.videos:
             hit = plan.hits[v.id]
             self.video_info[v.id] = {"path": str(v.path), "grid": str(plan.grids[v.id]),
-                                     "cache": "hit" if hit else "miss", "preprocess_s": 0.0}  # fmt: skip
+                                     "cache": "hit" if hit else plan.stale.get(v.id, "miss"),
+                                     "preprocess_s": 0.0}  # fmt: skip
             self.total += 0 if hit else 1
 
     def tick(self, ok: bool, n: int = 1) -> None:

@@ -61,8 +61,11 @@ def _source(video: dict) -> Source:
 
 
 def _error_line(e: BaseException) -> str:
-    """One line for a failed step: the InputError's message, or the internal error's type."""
+    """One line for a failed step: the InputError's message, an OSError's file and reason
+    (a full disk), or the internal error's type."""
     text = " ".join(str(e).split())
+    if isinstance(e, OSError) and e.strerror:  # an environment error: a full disk, permissions
+        return f"{e.filename}: {e.strerror}" if e.filename else e.strerror
     return text if isinstance(e, InputError) else f"internal error: {type(e).__name__}: {text}"
 
 

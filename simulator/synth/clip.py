@@ -23,6 +23,7 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
+from simulator.core.resources import check_fits
 from simulator.media.video import VideoWriter
 from simulator.sphere.geometry import lonlat_to_dir
 from simulator.synth.scenes import SynthConfig, SynthScene, make_scene
@@ -122,7 +123,8 @@ def synthesize(
     ``scene``: an already built scene of ``cfg`` (e.g. a trajectory scene), else
     :func:`make_scene` builds it.
     Returns ``(video_path, truth_path)``. Both are written atomically; the truth file is
-    written after the video, so a truth file implies a complete video.
+    written after the video, so a truth file implies a complete video, and a failure
+    while writing the truth removes this run's video (no clip without its truth).
     """
 
     out = Path(out)
@@ -136,12 +138,17 @@ def synthesize(
         raise ValueError("synthesize: scene.cfg differs from cfg")
     W, H = cfg.size
     n = cfg.n_frames
+    c = cfg.truth_cell_deg  # the truth is held whole: refused before any work if it cannot fit
+    check_fits(n * round(180 / c) * round(360 / c) * 4.0 * len(cfg.eyes), "--truth-cell")
+    workers = max(1, min(4, os.cpu_count() or 1))
+    # frames in flight (2 per worker + the one written) at ~48 bytes a pixel while drawn
+    # (measured: 2048x1024 at 2 workers peaks at 540 MB, ~37 bytes a pixel in flight)
+    check_fits(W * H * len(cfg.eyes) * 48.0 * (2 * workers + 1), f"--size {W}x{H}")
     frame_size = (W, H * len(cfg.eyes))
     it = range(n)
     bar = Counter(progress, n)
     # Frames are independent: render a few ahead on worker threads (numpy and cv2 release
     # the GIL for most of the work), write them in order.
-    workers = max(1, min(4, os.cpu_count() or 1))
     with VideoWriter(out, cfg.fps, frame_size, crf=crf) as vw, ThreadPoolExecutor(workers) as pool:
         pending = []
         for k in it:
@@ -152,7 +159,15 @@ def synthesize(
         for f in pending:
             vw.write(f.result())
             bar.update(1)
+    try:
+        return out, _write_truth(cfg, scene, out, n, frame_size)
+    except BaseException:
+        out.unlink(missing_ok=True)  # this run's video without its truth would look complete
+        raise
 
+
+def _write_truth(cfg: SynthConfig, scene: SynthScene, out: Path, n: int, frame_size) -> Path:
+    """The truth file of the clip ``out`` just written (atomically); returns its path."""
     # Truth on the coarse grid (cell centres), per eye, per frame interval.
     c = cfg.truth_cell_deg
     n_lat, n_lon = round(180 / c), round(360 / c)
@@ -223,4 +238,4 @@ def synthesize(
     tpath = truth_path_for(out)
     with atomic_output(tpath) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(f, **arrays)
-    return out, tpath
+    return tpath

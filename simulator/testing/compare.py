@@ -10,8 +10,10 @@ is at least ``psnr_db`` and its mean absolute difference at most ``max_diff``.
 
 from __future__ import annotations
 
+import datetime
 import json
 import math
+import os
 import shutil
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +22,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, check_output_dir, json_text
+from simulator.core.fileio import OutputFolder, atomic_output, check_output_dir, json_text
 from simulator.viewing.frames import FRAMES_JSON
 
 __all__ = [
@@ -28,6 +30,7 @@ __all__ = [
     "DEFAULT_PSNR_DB",
     "CompareReport",
     "FrameScore",
+    "backup_folder",
     "compare_dirs",
     "update_goldens",
 ]
@@ -257,7 +260,14 @@ def compare_dirs(
         psnr, mad, ssim = _measures(a, b)
         ok = psnr >= psnr_db and mad <= max_diff
         scores.append(FrameScore(name, psnr, mad, ssim, ok))
-    rep = check_output_dir(rep)
+    names = [
+        f"{s.name.removesuffix('.png')}.{kind}.png" for s in scores if not s.passed
+        for kind in ("diff", "side")
+    ]  # fmt: skip
+    # The one folder rule: a file of a report name that no earlier compare wrote is refused.
+    rep = OutputFolder(rep, [*names, REPORT_JSON], "compare").prepare(
+        [*new.values(), *gold.values()]
+    )
     from PIL import Image
 
     final = []
@@ -291,14 +301,29 @@ def compare_dirs(
     }
     with atomic_output(rep / REPORT_JSON) as tmp:
         Path(tmp).write_text(json_text(doc) + "\n")
+    OutputFolder(rep, [*names, REPORT_JSON], "compare").complete()
     return report
 
 
-def update_goldens(new_dir, golden_dir) -> list[str]:
+def backup_folder(golden_dir: Path, now: datetime.datetime | None = None) -> Path:
+    """A new dated folder beside ``golden_dir`` for the goldens an update replaces:
+    ``GOLDEN.backup-YYYYMMDD-HHMMSS`` (UTC; ``-2``, ``-3`` ... when taken)."""
+    now = now or datetime.datetime.now(datetime.UTC)
+    base = golden_dir.parent / f"{golden_dir.name}.backup-{now:%Y%m%d-%H%M%S}"
+    cand, k = base, 1
+    while cand.exists() or cand.is_symlink():
+        k += 1
+        cand = base.with_name(f"{base.name}-{k}")
+    return cand
+
+
+def update_goldens(new_dir, golden_dir) -> tuple[list[str], Path | None]:
     """Copy the frames (and ``frames.json``) of ``new_dir`` over ``golden_dir`` (created),
     each atomically; golden frames with no new counterpart are removed only when the
-    golden ``frames.json`` lists them (a ``frames`` run wrote them). Returns the names
-    copied."""
+    golden ``frames.json`` lists them (a ``frames`` run wrote them). The goldens replaced
+    or removed (and the old ``frames.json``) are first copied to a dated backup folder
+    beside ``golden_dir`` (:func:`backup_folder`). Returns the names copied and the
+    backup folder (None when nothing was replaced)."""
     new_dir, golden_dir = Path(new_dir), Path(golden_dir)
     if new_dir.resolve() == golden_dir.resolve():
         raise InputError(f"{new_dir}: the frames and the golden folder are the same folder")
@@ -323,6 +348,8 @@ def update_goldens(new_dir, golden_dir) -> list[str]:
             "vimsim frames; remove it by hand"
         )
     check_output_dir(golden_dir)
+    old = [gold[n] for n in sorted(gold)] + ([gj] if gj.is_file() else [])
+    backup = _backup(old, golden_dir) if old else None
     for name, p in new.items():
         with atomic_output(golden_dir / name) as tmp:
             shutil.copyfile(p, tmp)
@@ -331,4 +358,20 @@ def update_goldens(new_dir, golden_dir) -> list[str]:
     if (new_dir / FRAMES_JSON).is_file():
         with atomic_output(gj) as tmp:
             shutil.copyfile(new_dir / FRAMES_JSON, tmp)
-    return sorted(new)
+    return sorted(new), backup
+
+
+def _backup(files: list[Path], golden_dir: Path) -> Path:
+    """Copy ``files`` into a new :func:`backup_folder`, complete before it gets its name
+    (a temporary folder renamed, so a half-made backup never looks like one)."""
+    dest = backup_folder(golden_dir)
+    tmp = dest.with_name(f".{dest.name}.tmp-{os.getpid()}")
+    try:
+        tmp.mkdir()
+        for f in files:
+            shutil.copy2(f, tmp / f.name)
+        os.rename(tmp, dest)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return dest

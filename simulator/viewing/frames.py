@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import EYES
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, check_output_dir, json_text
+from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.core.progress import Counter, Progress
 from simulator.media.source import as_source
 from simulator.media.video import iter_frames, probe
@@ -40,6 +40,8 @@ __all__ = ["FRAMES_JSON", "decode_frames", "frame_name", "moments", "render_fram
 
 #: The index file of a frames folder, written last (the folder is complete when it exists).
 FRAMES_JSON = "frames.json"
+#: The most moments one ``frames`` run renders (``--every``, ``--at``): each is a PNG per eye.
+MAX_MOMENTS = 10_000
 
 
 def frame_name(time_s: float, eye: str) -> str:
@@ -54,7 +56,8 @@ def moments(
     """The requested video times (seconds, rounded to 1 ms, sorted, duplicates dropped).
 
     ``at``: a list of times or a comma-separated string (``"1,2.5,10"``); ``every``: a
-    step in seconds from 0 to the end. Exactly one. Every time must lie in the video,
+    step in seconds (>= 1 ms) from 0 to the end. Exactly one; at most :data:`MAX_MOMENTS`
+    times (checked before any list is made). Every time must lie in the video,
     ``0 <= t < n_frames / fps``; else InputError.
     """
     end = n_frames / fps
@@ -62,8 +65,13 @@ def moments(
         raise InputError("give the moments as --at T1,T2,... or --every S (one of them)")
     if every is not None:
         every = float(every)
-        if not (every > 0 and math.isfinite(every)):
-            raise InputError(f"--every must be a positive number of seconds, e.g. 2; got {every}")
+        if not (every >= 0.001 and math.isfinite(every)):  # times are kept to 1 ms
+            raise InputError(f"--every must be at least 0.001 seconds, e.g. 2; got {every:g}")
+        if end / every > MAX_MOMENTS:  # checked before a list is made (memory)
+            raise InputError(
+                f"--every {every:g} s gives {math.ceil(end / every):,} moments in {end:g} s of "
+                f"video; at most {MAX_MOMENTS:,} (a larger step, or --at)"
+            )
         times = list(np.arange(0.0, end, every))
     else:
         if isinstance(at, str):
@@ -80,6 +88,8 @@ def moments(
             times = [float(t) for t in at]
         if not times:
             raise InputError("--at is empty; give times in seconds, e.g. 1,2.5,10")
+        if len(times) > MAX_MOMENTS:
+            raise InputError(f"--at lists {len(times):,} times; at most {MAX_MOMENTS:,}")
     out = sorted({round(t, 3) for t in times})
     bad = [t for t in out if not (math.isfinite(t) and 0.0 <= t < end)]
     if bad:
@@ -193,20 +203,6 @@ def _write_png(path: Path, img: NDArray[np.uint8]) -> None:
 
     with atomic_output(path) as tmp:
         Image.fromarray(img).save(tmp, format="PNG", compress_level=1)
-
-
-def _previous_files(out: Path) -> list[Path]:
-    """Files a previous ``frames`` run wrote into ``out`` (listed in its frames.json)."""
-    import json
-
-    index = out / FRAMES_JSON
-    if not index.is_file():
-        return []
-    try:
-        names = [f["file"] for f in json.loads(index.read_text())["frames"]]
-    except (ValueError, KeyError, TypeError):
-        raise InputError(f"{index}: not a frames.json written by vimsim frames") from None
-    return [out / n for n in names if Path(n).name == n and n.endswith(".png")] + [index]
 
 
 def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) -> list[dict]:
@@ -337,9 +333,10 @@ def render_frames(
 
     Eyes: ``left`` and ``right`` for a stereo layout or grains at a finite distance
     (parallax), else one view named ``both`` (both eyes see the same image). Inputs are
-    checked before ``outdir`` is touched; then the files of a previous run listed in its
-    ``frames.json`` are removed, each PNG appears only when complete, and
-    ``frames.json`` is written last.
+    checked before ``outdir`` is touched (a file of an output name that no earlier
+    ``frames`` run wrote is refused: :class:`~simulator.core.fileio.OutputFolder`); then
+    the files of the previous run listed in the folder's manifest are removed, each PNG
+    appears only when complete, and ``frames.json`` is written last.
 
     Returns
     -------
@@ -379,19 +376,17 @@ def render_frames(
     for n in names:
         if (out / n).resolve() in inputs:
             raise InputError(f"{out / n}: output would overwrite an input; choose another -o")
+    # The one folder rule: a PNG of an output name that no earlier `frames` run wrote
+    # (no manifest lists it: a user's file, goldens copied here) is refused, never replaced.
+    folder = OutputFolder(out, names, "frames")
+    folder.check(inputs)
     if ctx is None:
         ctx = create_context()
-    out = check_output_dir(out)
-    for p in _previous_files(out):
-        try:
-            p.unlink(missing_ok=True)
-        except OSError as e:
-            raise InputError(
-                f"{p}: cannot remove the previous run's output ({e.strerror})"
-            ) from None
+    out = folder.prepare(inputs)
 
     rows = _draw_frames(ctx, source, plan, config, out, times, eyes, progress)
     index = _index(source, plan, view, headpath, rows, ctx)
     with atomic_output(out / FRAMES_JSON) as tmp:
         Path(tmp).write_text(json_text(index) + "\n")
+    folder.complete()
     return index

@@ -6,6 +6,7 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.epof.viewing import EpofResult
+from simulator.media.gridfile import content_hash
 
 __all__ = ["csv_opacity", "frame_range"]
 
@@ -35,10 +36,10 @@ def frame_range(
     e = dur if end_s is None else float(end_s)
     if not (np.isfinite(s) and np.isfinite(e)):
         raise InputError(f"{src}--start/--end must be finite seconds; got {s}, {e}")
+    if s < 0 or s >= dur:  # before --end: a --start past the end never talks of an --end
+        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
     if e <= s:
         raise InputError(f"{src}--end {e:g} s must be after --start {s:g} s")
-    if s < 0 or s >= dur:
-        raise InputError(f"{src}--start {s:g} s is outside the video (0 to {dur:g} s)")
     if e > dur + 1e-6:
         raise InputError(f"{src}--end {e:g} s is beyond the video's end ({dur:g} s)")
     eps = 1e-6
@@ -71,9 +72,16 @@ def _frame_range_times(times, fps: float, start_s, end_s, video: str) -> tuple[i
     return f0, f1
 
 
-def csv_opacity(res: EpofResult, path, frames, n_video: int) -> np.ndarray:
+def csv_opacity(res: EpofResult, path, frames, n_video: int, video=None) -> np.ndarray:
     """The opacity of video frames ``frames`` from an EPOF CSV (InputError unless the CSV
-    has a row for each of them and no frame beyond the video)."""
+    has a row for each of them and no frame beyond the video, and, when the CSV records
+    the content hash of its video (``# video_content_hash``), ``video`` has that hash)."""
+    want = (res.meta.get("settings") or {}).get("video_content_hash")
+    if video is not None and isinstance(want, str) and want != content_hash(video):
+        raise InputError(
+            f"{path}: EPOF CSV was computed for another video (its video_content_hash is "
+            f"not that of {video}); compute it with vimsim epof on this video's grid"
+        )
     fr = np.asarray(res.frame, np.int64)
     if fr.size and (fr.min() < 0 or fr.max() >= n_video):
         raise InputError(

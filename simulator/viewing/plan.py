@@ -198,7 +198,7 @@ def plan_viewing(
     if grid is not None:
         grid.check_video(info, source=grid.path, frames=(f0, f1) if ranged else None)
     if op_csv is not None:
-        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames)
+        op_from_csv = csv_opacity(op_csv, opacity, frames, info.n_frames, video=video)
     _check_needs_grid(view, grid)
 
     # Per-frame head angles and opacity (EPOF rows when a grid is given).

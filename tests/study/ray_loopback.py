@@ -75,9 +75,17 @@ def _stop(p: subprocess.Popen) -> None:
 
 @contextlib.contextmanager
 def loopback_cluster(
-    log_dir: Path, *, cpus_per_node: int = 1, nodes: int = 2, timeout_s: float = 90
+    log_dir: Path,
+    *,
+    cpus_per_node: int = 1,
+    nodes: int = 2,
+    timeout_s: float = 90,
+    node_procs: list | None = None,
 ):
     """Yield ``"127.0.0.1:PORT"`` of a cluster of ``nodes`` nodes, ``cpus_per_node`` CPUs each.
+
+    ``node_procs``: a list that receives each node's ``ray start`` process (head first),
+    e.g. for :func:`kill_raylet`.
 
     :data:`RAY_ENV` must be in ``os.environ`` before ``ray`` is first imported in this
     process (Ray reads it at import): call :func:`use_loopback` at the top of the module.
@@ -100,6 +108,8 @@ def loopback_cluster(
             log = open(log_dir / f"ray_node{i}.log", "w")  # noqa: SIM115
             procs.append(subprocess.Popen(cmd, env=env, stdout=log, stderr=subprocess.STDOUT,
                                           start_new_session=True))  # fmt: skip
+            if node_procs is not None:
+                node_procs.append(procs[-1])
             if i == 0:  # the head's GCS must listen before a node can join
                 t0 = time.monotonic()
                 while True:
@@ -130,3 +140,30 @@ def loopback_cluster(
         with contextlib.suppress(OSError):
             if rec.read_text().strip() == f"127.0.0.1:{port}":
                 rec.unlink()
+
+
+def raylet_pid(node: subprocess.Popen) -> int | None:
+    """The pid of the raylet of ``node`` (a ``ray start`` process of :func:`loopback_cluster`):
+    the process named ``raylet`` in its process group (read from /proc)."""
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit():
+            continue
+        try:
+            if os.getpgid(int(d.name)) != node.pid:
+                continue
+            exe = (d / "cmdline").read_bytes().split(b"\0")[0]
+        except OSError:
+            continue
+        if exe == b"raylet" or exe.endswith(b"/raylet"):
+            return int(d.name)
+    return None
+
+
+def kill_raylet(node: subprocess.Popen) -> int:
+    """SIGKILL the raylet of ``node`` (a node failure: its workers lose their raylet and
+    exit); returns the pid killed."""
+    pid = raylet_pid(node)
+    if pid is None:
+        raise RuntimeError("no raylet found in the node's process group")
+    os.kill(pid, signal.SIGKILL)
+    return pid

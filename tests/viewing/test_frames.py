@@ -164,8 +164,16 @@ def test_cli_frames_compare_exit_codes(ctx, clip, golden, tmp_path, capsys):
     assert cap.out.startswith("vimsim compare: the input files differ: video")  # before figures
     g2 = tmp_path / "g2"
     assert main(["compare", str(out), str(g2), "--update"]) == 0  # creates the goldens
-    assert main(["compare", str(shifted), str(g2), "--update"]) == 0
+    before = {q.name: q.read_bytes() for q in g2.iterdir()}
+    capsys.readouterr()
+    assert main(["compare", str(shifted), str(g2), "--update"]) == 1  # refused: frames fail
+    assert "NOT updated" in capsys.readouterr().err
+    assert {q.name: q.read_bytes() for q in g2.iterdir()} == before
+    assert main(["compare", str(shifted), str(g2), "--update", "--force"]) == 0
     assert main(["compare", str(shifted), str(g2)]) == 0
+    (backup,) = tmp_path.glob("g2.backup-*")  # the replaced goldens, dated, beside them
+    assert {q.name: q.read_bytes() for q in backup.iterdir()} == before
+    assert main(["compare", str(out), str(backup)]) == 0  # the backup is a golden folder
 
 
 @pytest.mark.parametrize(
@@ -227,4 +235,7 @@ def test_failed_frames_run_leaves_no_pngs(ctx, clip, tmp_path, monkeypatch):
     with pytest.raises(OSError):
         _frames(ctx, clip, tmp_path / "o")
     assert len(calls) >= 2
-    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == []
+    # no PNG, no frames.json: only the folder manifest, saying the run is incomplete
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == [".vimsim-manifest.json"]
+    m = json.loads((tmp_path / "o" / ".vimsim-manifest.json").read_text())
+    assert m["state"] == "incomplete" and m["command"] == "frames"
