@@ -27,6 +27,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import PendingOutput, check_input_file
+from simulator.media.x264 import x264_params
 from simulator.sphere.geometry import check_equirect_aspect, split_eye
 
 __all__ = [
@@ -324,6 +325,9 @@ class VideoWriter:
     threads : x264 encoder threads (None: x264's default, about 1.5 per core); a task that
         declares its CPUs (``vimsim study``) passes them
 
+    The same frames give the same file in any process: x264's AVX-512 kernels, which
+    read memory they never wrote, are left out (:func:`simulator.media.x264.x264_params`).
+
     Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
     """
 
@@ -357,10 +361,12 @@ class VideoWriter:
         self._stream = self._container.add_stream("libx264", rate=rate)
         self._stream.width, self._stream.height = w, h
         self._stream.pix_fmt = "yuv420p"
+        params = x264_params()  # reproducible bits: no AVX-512 kernels (media/x264.py)
         self._stream.options = {
             "crf": str(crf),
             "preset": preset,
             **({} if threads is None else {"threads": str(int(threads))}),
+            **({} if params is None else {"x264-params": params}),
         }
         self._closed = False
         self.n_audio_packets = 0
