@@ -1,8 +1,8 @@
 """x264's CPU kernels for reproducible H.264 output: everything the CPU has except AVX-512.
 
-x264 (core 165, as bundled with PyAV 18) reads heap memory it never wrote in the AVX-512
-kernels of its macroblock-tree rate control: the encoded stream then depends on what
-that memory held before, i.e. on the process's history. A fresh process gets zeroed pages
+x264 (core 165, as bundled with PyAV 18), on its AVX-512 kernels with its macroblock-tree
+rate control on (the default), reads heap memory it never wrote: the encoded stream then
+depends on what that memory held before, i.e. on the process's history. A fresh process gets zeroed pages
 and repeats itself; a long one (``vimsim demo`` after synth and preprocess, a study
 worker) gets recycled heap and the same frames encode to different bits (about 35-40 dB
 PSNR between two runs). Evidence (``docs/reliability.md``, "Reproducible encodes"):
