@@ -31,6 +31,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 
 from simulator.media import video
+from simulator.media.source import Source
 from simulator.mitigation.grf import GrfConfig
 from simulator.render import RenderConfig, create_context, render_video
 from simulator.testing.reference import ffmpeg_exe
@@ -84,8 +85,8 @@ def run_ours(
     cfg = RenderConfig(eye_size=(eye, eye), grf=GrfConfig())
     c0 = time.process_time()
     res = render_video(
-        ctx, str(src), (str(out / "left.mp4"), str(out / "right.mp4")), angles,
-        opacity=np.ones(len(angles)), config=cfg, layout=layout, progress=False,
+        ctx, Source.open(src, layout=layout), (str(out / "left.mp4"), str(out / "right.mp4")),
+        angles, opacity=np.ones(len(angles)), config=cfg, progress=False,
     )  # fmt: skip
     return res.timings_s["total"], time.process_time() - c0, res.timings_s
 

@@ -28,6 +28,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import PendingOutput, check_input_file
+from simulator.media.x264 import x264_params
 from simulator.sphere.geometry import check_equirect_aspect, split_eye
 
 __all__ = [
@@ -419,6 +420,9 @@ class VideoWriter:
     times_s : None (frame ``i`` at ``i / fps``), or each frame's time in seconds (a
         variable-rate source's timestamps: the output keeps its timing, from its first frame)
 
+    The same frames give the same file in any process: x264's AVX-512 kernels, which
+    read memory they never wrote, are left out (:func:`simulator.media.x264.x264_params`).
+
     Use as a context manager; ``write(frame)`` takes ``(height, width, 3)`` uint8 RGB.
     """
 
@@ -453,10 +457,12 @@ class VideoWriter:
         self._stream = self._container.add_stream("libx264", rate=rate)
         self._stream.width, self._stream.height = w, h
         self._stream.pix_fmt = "yuv420p"
+        params = x264_params()  # reproducible bits: no AVX-512 kernels (media/x264.py)
         self._stream.options = {
             "crf": str(crf),
             "preset": preset,
             **({} if threads is None else {"threads": str(int(threads))}),
+            **({} if params is None else {"x264-params": params}),
         }
         self._times = None
         if times_s is not None:  # timestamps in 1/90000 s, from the first frame

@@ -140,3 +140,19 @@ def test_prefetch_early_exit_stops_thread_and_closes_source():
 def test_prefetch_bad_depth():
     with pytest.raises(ValueError, match="depth"):
         next(prefetch([1], depth=0))
+
+
+def test_x264_params_leave_out_only_avx512():
+    """The writer's x264-params: x264's own CPU detection less the AVX-512 bit (whose
+    kernels read memory they never wrote: the bits depended on the heap), or nothing on
+    a CPU without AVX-512. tests/render: the render test across heap fills."""
+    import av  # noqa: F401 - loads libavcodec and its x264
+
+    from simulator.media.x264 import _flag, _loaded_x264, x264_params
+
+    lib = _loaded_x264()
+    assert lib is not None
+    bit = _flag(lib, "AVX512") & ~_flag(lib, "AVX2")
+    assert bit == 1 << 16  # x264.h X264_CPU_AVX512
+    detected = int(lib.x264_cpu_detect())
+    assert x264_params() == (f"asm={detected & ~bit}" if detected & bit else None)

@@ -820,3 +820,49 @@ def test_asymmetric_frustum_reaches_the_renderer(ctx):
     assert abs(cols["right"] - tr / (tl + tr) * size) <= 1.0
     sym = RenderConfig(eye_size=(size, size), hfov_deg=90.0, vfov_deg=80.0, grf=None)
     assert sym.image_plane("left")[1] == (0.0, 0.0)
+
+
+# --------------------------------------------------------------- reproducible encodes
+def _textured_stereo(path: Path, n: int) -> None:
+    """A top-bottom clip of a smooth seeded texture drifting eastward (each eye its own
+    texture): content with motion for x264's macroblock tree."""
+    rng = np.random.default_rng(5)
+    tex = cv2.GaussianBlur(rng.integers(0, 256, (128, 512, 3), np.uint8), (0, 0), 2.0)
+    frames = [np.concatenate([np.roll(tex[:64], 3 * i, axis=1), np.roll(tex[64:], 3 * i, axis=1)])
+              for i in range(n)]  # fmt: skip
+    write_clip(path, [f[:, :128].repeat(2, axis=0).repeat(2, axis=1) for f in frames], 10)
+
+
+def test_render_is_the_same_whatever_the_heap_held(ctx, tmp_path):
+    """Two renders of the same viewing give byte-identical eye videos even when the heap
+    they reuse held different bytes (glibc's MALLOC_PERTURB_ fills it, as a long process
+    such as ``vimsim demo`` or a study worker reuses it). x264's AVX-512 kernels of its
+    macroblock tree read memory they never wrote (simulator/media/x264.py): on an
+    AVX-512 CPU each fill byte gave its own left.mp4 before they were left out."""
+    import subprocess
+    import sys
+
+    from simulator.media.video import iter_frames
+
+    vid = tmp_path / "tb.mp4"
+    _textured_stereo(vid, 12)
+    path = tmp_path / "p.csv"
+    path.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,-20,0,0\n1.2,40,10,5\n")
+    outs = []
+    for fill in (0, 85, 170):
+        out = tmp_path / f"out{fill}"
+        argv = ["render", str(vid), str(path), "-o", str(out), "--eye-size", "160x160",
+                "--layout", "top-bottom", "--opacity", "0.6", "--no-progress", "--no-audio"]  # fmt: skip
+        env = dict(os.environ, MALLOC_PERTURB_=str(fill))
+        r = subprocess.run([sys.executable, "-m", "simulator", *argv], check=False, env=env,
+                           capture_output=True, text=True, timeout=120)  # fmt: skip
+        assert r.returncode == 0, r.stderr
+        outs.append(out)
+    for eye in ("left.mp4", "right.mp4"):
+        first = [np.array(f) for f in iter_frames(outs[0] / eye)]
+        assert len(first) == 12
+        for out in outs[1:]:
+            assert (out / eye).read_bytes() == (outs[0] / eye).read_bytes(), (out, eye)
+            assert all(
+                np.array_equal(a, np.array(b)) for a, b in zip(first, iter_frames(out / eye))
+            )
