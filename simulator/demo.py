@@ -202,6 +202,18 @@ def _render(cfg: DemoConfig, source, hpath, outdir, grid, progress) -> None:
     render_viewing(source, hpath, outdir, grid=grid, view=view, progress=progress)
 
 
+def _epof_and_truth(grid, grid_def, hp, scfg, tpath, out):
+    """``(EPOF result, window truth, EPOF of the truth grid, exact viewport EPOF)``; the
+    EPOF CSV written to ``out/epof.csv``."""
+    res = compute_epof(grid, hp)
+    write_epof_csv(out / "epof.csv", res)
+    tr = load_truth(tpath)
+    scene = make_scene(scfg)
+    truth_win = window_truth_dps(scene, grid_def, tr.time_s, "left", rays=16)
+    res_truth_grid = compute_epof(replace(grid, pof_dps=truth_win.astype(np.float32)), hp)
+    return res, truth_win, res_truth_grid, _exact_epof(scene, tr.time_s, res)
+
+
 def _accuracy(grid, truth_win, res, res_truth_grid, exact) -> dict:
     """Relative errors of the window POFs and the EPOF against the analytic truth."""
     est = grid.pof_dps[1:].astype(np.float64)
@@ -356,19 +368,11 @@ def run_demo(
     )
 
     # 4. EPOF and opacity; the truth beside them.
-    res = compute_epof(grid, hp)
-    write_epof_csv(out / "epof.csv", res)
-    tr = load_truth(tpath)
-    scene = make_scene(scfg)
-    truth_win = window_truth_dps(scene, grid_def, tr.time_s, "left", rays=16)
-    res_truth_grid = compute_epof(replace(grid, pof_dps=truth_win.astype(np.float32)), hp)
-    exact = _exact_epof(scene, tr.time_s, res)
+    res, truth_win, res_truth_grid, exact = _epof_and_truth(grid, grid_def, hp, scfg, tpath, out)
     t0 = _step(log, "epof: EPOF, opacity and truth", t0, note)
 
-    # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs).
-    # The demo stops at the first failed step (as every step above): a failed render
-    # raises, the folder keeps no completion marker and its manifest says incomplete.
-    render_error = None
+    # 5. Render the per-eye videos with GRFs (what ``vimsim render`` runs); a failure raises.
+    render_error = None  # a failed render raises (above); the summary keeps the field
     if cfg.render:
         _render(cfg, source, hpath, out / "render", grid, progress)
         t0 = _step(log, f"render: two eyes at {cfg.render_size[0]}x{cfg.render_size[1]}", t0, note)

@@ -44,7 +44,7 @@ def _grid(d: Path) -> Path:
 
 
 def test_cache_problem_names_what_is_wrong(study, tmp_path):
-    from simulator.study.runner import cache_problem
+    from simulator.study.plan import cache_problem
 
     m = load_manifest(study / "s.toml")
     v = m.videos[0]
