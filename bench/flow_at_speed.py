@@ -1,4 +1,4 @@
-"""Flow at speed and at any depth, split into rotation and translation (issue 27), today against after, in one run.
+"""Flow at speed and at any depth, split into rotation and translation, today against after, in one run.
 
 Clips: ``vimsim synth --scene trajectory`` renders (textured room, analytic truth) at 30 fps
 of camera paths sampled at 60 Hz (two poses per frame interval: the truth row, taken at
@@ -27,7 +27,7 @@ Measured, each against the analytic truth (same cell grid, same viewport integra
    deg/s, frame by frame and on 5-frame means;
 5. cost: sphere-mode preprocess seconds, after / today, same clips, same run.
 
-"today" = the code before issue 27 (``--today /work/old``: run through its CLI with
+"today" = the code before this change (``--today /work/old``: run through its CLI with
 ``PYTHONPATH``); "after" = this worktree. Both run as subprocesses
 (``python -m simulator preprocess --method sphere``), timed the same way.
 
@@ -263,7 +263,7 @@ def measure_clip(name, traj, room, kind, size, today) -> tuple[dict, dict]:
         if tag == "after":
             row["after"]["omega"] = omega_error(grid, tru)
             row["after"].update(trans_part(grid, tru, cell))
-    if kind == "trans":  # paper mode (unchanged by issue 27): its forward window's POF
+    if kind == "trans":  # paper mode (unchanged by this change): its forward window's POF
         g, _ = preprocess(vid, "after", str(REPO), method="paper")
         pg = load_grid(g)
         p0 = int(np.argmin(np.abs(pg.pitch_deg)))

@@ -1,4 +1,4 @@
-"""Flow and cost of every input projection against the same content as equirect (issue 25, "Must measure").
+"""Flow and cost of every input projection against the same content as equirect.
 
 Usage: .venv/bin/python bench/projection_flow.py [--seconds 2] [--size 1024x512] [--no-render]
 

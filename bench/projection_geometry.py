@@ -1,4 +1,4 @@
-"""Geometry of every input projection against ffmpeg v360 (issue 25, "Must measure").
+"""Geometry of every input projection against ffmpeg v360.
 
 Usage: .venv/bin/python bench/projection_geometry.py [--pano PATH] [--size 256] [--fov 90]
 

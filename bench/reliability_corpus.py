@@ -1,4 +1,4 @@
-"""The reliability corpus of issue 28 run against two checkouts: cases correct per
+"""The reliability corpus (round 3) run against two checkouts: cases correct per
 contract, by class, this checkout side by side with another (``--before DIR``, e.g. a
 ``git archive`` of main's commit before the change).
 

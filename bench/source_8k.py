@@ -1,4 +1,4 @@
-"""8K sources (issue 25, "Must measure"): sphere-mode preprocess throughput against decoding alone, and peak memory against length.
+"""8K sources: sphere-mode preprocess throughput against decoding alone, and peak memory against length.
 
 Usage: .venv/bin/python bench/source_8k.py [--frames 300,3000] [--size 7680x3840]
 

@@ -1,4 +1,4 @@
-"""A study as a lab runs it (issue 26): two synthetic videos, 48 users of one dataset file on
+"""A study as a lab runs it: two synthetic videos, 48 users of one dataset file on
 one, single traces on the other, two conditions, renders for a subset with start/end/review,
 one trace known to warn. Times ``vimsim study --dry-run`` (goal <= 1 s for 48 users) and the
 run, and checks that the warnings are counted and attributed to the right viewing.

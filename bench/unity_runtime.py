@@ -1,4 +1,4 @@
-"""Load time and memory of the exported C# runtime (Mono) for a 2-minute export, both modes, before and after issue 31.
+"""Load time and memory of the exported C# runtime (Mono) for a 2-minute export, both modes, before and after format 3 (the grain layout and settings in the file, asynchronous load, float16 sphere field).
 
 "Before": the runtime and exporter of commit ``BASE`` (format version 2: sphere mode summed the
 whole field into double running sums at load, ~117 MB for 2 minutes at 30 fps; paper mode built
@@ -31,7 +31,7 @@ from simulator.preprocess import SphereConfig, field_meta
 from simulator.sphere.windows import grid_preset
 
 REPO = Path(__file__).resolve().parents[1]
-BASE = "e8a4aea"  # the last commit before issue 31 (format version 2)
+BASE = "e8a4aea"  # the last commit with format version 2
 FPS, T = 30.0, 3600  # 2 minutes
 RUNS = 3
 

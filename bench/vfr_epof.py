@@ -1,4 +1,4 @@
-"""Variable frame rate (issue 25, "Must measure"): EPOF on a clip with irregular timestamps against the analytic truth, frame by frame.
+"""Variable frame rate: EPOF on a clip with irregular timestamps against the analytic truth, frame by frame.
 
 Usage: .venv/bin/python bench/vfr_epof.py [--seconds 3] [--size 512x256]
 

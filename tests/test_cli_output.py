@@ -1,4 +1,4 @@
-"""What every command says (issue 26): --quiet and --log FILE everywhere, progress bars only on
+"""What every command says: --quiet and --log FILE everywhere, progress bars only on
 a terminal, result lines on stdout and diagnostics on stderr, the cache variable's old name."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""A real full disk under every writer (issue 28): each command writes into a tiny tmpfs.
+"""A real full disk under every writer: each command writes into a tiny tmpfs.
 
 It must fail in one line naming the file (exit 1; a study may instead give its viewings
 the error as their status, exit 3), leave no temporary file, no file that looks complete

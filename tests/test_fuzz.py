@@ -1,4 +1,4 @@
-"""Property-based fuzzing of every reader (issue 28): random bytes and mutated valid files
+"""Property-based fuzzing of every reader: random bytes and mutated valid files
 fed to the head-path formats, grid files, EPOF CSVs, study manifests, camera CSVs,
 ``frames.json`` and study data. Each must read the file or raise ``InputError`` (which
 the CLI prints as one line, exit 2): never any other exception (a traceback).

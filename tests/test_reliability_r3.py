@@ -1,4 +1,4 @@
-"""Reliability corpus, round 3 (issue 28): the cases of ``test_reliability.CASES`` plus
+"""Reliability corpus, round 3: the cases of ``test_reliability.CASES`` plus
 the commands and faults found since: folder outputs that replaced a user's files,
 options that size work without bounds, non-video inputs, EPOF CSVs of another video,
 unbounded echoes of user text, a bare ``vimsim``.
@@ -241,7 +241,7 @@ def test_corpus_r3(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
 
 
 def test_corpus_r3_size():
-    """With the earlier table: at least 120 cases of bad input and faults (issue 28)."""
+    """With the earlier table: at least 120 cases of bad input and faults."""
     from test_reliability import CASES as EARLIER
 
     ids = [c[0] for c in CASES]

@@ -1,6 +1,6 @@
 """The EPOF split into the camera's rotation and translation, and the weighted EPOF of ``--flow-weights``.
 
-How a speed is split. At every cell and frame a sphere-mode grid made since issue 27
+How a speed is split. At every cell and frame a sphere-mode grid recording the camera's rotation
 holds the measured speed ``s`` (``field_dps``), the speed with the fitted camera
 rotation removed ``s_t`` (``field_trans_dps``: the translation's parallax plus anything
 moving on its own) and the camera's angular velocity ``omega`` (``ego_omega_dps``),

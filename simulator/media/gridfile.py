@@ -20,7 +20,7 @@ A ``.npz`` (no pickles; loaded with ``allow_pickle=False``) holding
 
 Optional (sphere mode): ``field_dps`` float16/float32 (T, n_lat, n_lon), the per-frame
 angular-speed field on a lon/lat grid, described by ``meta["field"]``; and (sphere-mode
-grids made since issue 27, described by ``meta["ego"]``) ``field_trans_dps`` (the same
+grids recording the camera's rotation, described by ``meta["ego"]``) ``field_trans_dps`` (the same
 field with the camera rotation removed), ``ego_omega_dps`` float32 (T, 3) (the camera's
 angular velocity, deg/s, world frame) and ``ego_confidence`` float32 (T,).
 """

@@ -1,4 +1,4 @@
-"""K_OF (issue 26): the group-size-invariant default, the paper's formula one option away."""
+"""K_OF: the group-size-invariant default, the paper's formula one option away."""
 
 from __future__ import annotations
 

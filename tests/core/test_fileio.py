@@ -3,7 +3,7 @@ leaves the old file byte-identical and no temporary, whatever fails (the writer,
 rename, a real full disk, a signal); folder manifests refuse files they did not write.
 
 Writing in place instead of temporary-name-then-rename makes these tests fail (checked
-by mutating ``atomic_output`` to yield the target itself: issue 24)."""
+by mutating ``atomic_output`` to yield the target itself)."""
 
 from __future__ import annotations
 

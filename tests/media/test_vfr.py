@@ -1,4 +1,4 @@
-"""Variable frame rate: frame times from the stream's timestamps, everywhere (issue 25)."""
+"""Variable frame rate: frame times from the stream's timestamps, everywhere."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """The study's grid cache is validated before use and a bad entry is made again; a
-``[[videos]] path`` that is not a video is a manifest error (issue 28)."""
+``[[videos]] path`` that is not a video is a manifest error."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """A study imports only the package: workers never run a module lying in the folder the
-study is started from (issue 28)."""
+study is started from."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Studies as labs run them (issue 26): user lists and ranges, a render subset with its own
+"""Studies as labs run them: user lists and ranges, a render subset with its own
 range, --dry-run, warnings attributed to the right viewing and kept on resume."""
 
 from __future__ import annotations

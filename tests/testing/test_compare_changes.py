@@ -1,4 +1,4 @@
-"""vimsim compare reads frames.json too (issue 26): what changed, the cause first."""
+"""vimsim compare reads frames.json too: what changed, the cause first."""
 
 from __future__ import annotations
 

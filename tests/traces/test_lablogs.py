@@ -1,4 +1,4 @@
-"""Lab logs (issue 26): JSON keyed by timestamps (SIT-VR shape), clock times, skipped and zero rows."""
+"""Lab logs: JSON keyed by timestamps (SIT-VR shape), clock times, skipped and zero rows."""
 
 from __future__ import annotations
 

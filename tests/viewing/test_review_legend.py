@@ -1,4 +1,4 @@
-"""Legibility (issue 26): the review strip's legend and threshold lines, local-grf without an
+"""Legibility: the review strip's legend and threshold lines, local-grf without an
 opacity it does not use, the EPOF plot's yaw line broken at the seam."""
 
 from __future__ import annotations

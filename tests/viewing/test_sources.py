@@ -1,4 +1,4 @@
-"""Every source a lab shoots through the CLI: projections, stills as clips, URLs, bad input (issue 25)."""
+"""Every source a lab shoots through the CLI: projections, stills as clips, URLs, bad input."""
 
 from __future__ import annotations
 
