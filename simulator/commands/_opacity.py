@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.commands._types import percentile, seconds
+from simulator.commands._types import nonneg_float, percentile, seconds
 from simulator.core.choices import OPACITY_SOURCES
 
 __all__ = ["add_opacity_arguments", "rule_from_args"]
 
 
 def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
-    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule``."""
+    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule
+    --low-dps --high-dps``."""
     g = p.add_argument_group("GRF opacity rule (EPOF -> opacity)")
     g.add_argument(
         "--low-pct",
@@ -35,10 +36,26 @@ def add_opacity_arguments(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         "--opacity-rule",
-        choices=("comfort", "paper"),
+        choices=("comfort", "paper", "absolute"),
         default="comfort",
         help="comfort (default): eased, see --ease-in/--ease-out; paper: the paper's rule, "
-        "opacity follows the EPOF frame by frame (no smoothing, no easing)",
+        "opacity follows the EPOF frame by frame (no smoothing, no easing); absolute: eased "
+        "as comfort, opacity 0 at --low-dps and 1 at --high-dps deg/s whatever the video "
+        "(comfort and paper are relative: percentiles of this video's flow)",
+    )
+    g.add_argument(
+        "--low-dps",
+        type=nonneg_float,
+        default=None,
+        metavar="A",
+        help="absolute rule: opacity 0 at A deg/s (default 5, the vection band's lower edge)",
+    )
+    g.add_argument(
+        "--high-dps",
+        type=nonneg_float,
+        default=None,
+        metavar="B",
+        help="absolute rule: opacity 1 at B deg/s (default 30, the provocative band's lower edge)",
     )
     g.add_argument(
         "--smooth",
@@ -69,7 +86,20 @@ def rule_from_args(args: argparse.Namespace):
     """The :class:`simulator.mitigation.grf.OpacityRule` the options ask for (InputError if
     ``--opacity-rule paper`` is combined with smoothing or easing)."""
     from simulator.core.errors import InputError
+    from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
     from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, OpacityRule
+
+    lo_dps, hi_dps = getattr(args, "low_dps", None), getattr(args, "high_dps", None)
+    absolute = args.opacity_rule == "absolute"
+    if not absolute and (lo_dps is not None or hi_dps is not None):
+        raise InputError("--low-dps/--high-dps need --opacity-rule absolute")
+    if absolute:
+        lo_dps = ABSOLUTE_LOW_DPS if lo_dps is None else lo_dps
+        hi_dps = ABSOLUTE_HIGH_DPS if hi_dps is None else hi_dps
+        if not lo_dps < hi_dps:
+            raise InputError(f"--low-dps ({lo_dps:g}) must be below --high-dps ({hi_dps:g}) deg/s")
+    else:
+        lo_dps = hi_dps = None
 
     given = [
         f"--{n.replace('_', '-')}"
@@ -90,4 +120,6 @@ def rule_from_args(args: argparse.Namespace):
         args.smooth or 0.0,
         COMFORT_EASE_IN_S if args.ease_in is None else args.ease_in,
         COMFORT_EASE_OUT_S if args.ease_out is None else args.ease_out,
+        low_dps=lo_dps,
+        high_dps=hi_dps,
     )

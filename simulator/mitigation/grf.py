@@ -272,6 +272,11 @@ class OpacityRule:
     ``ease_out_s`` (a slew-rate limit, as the ease-in / ease-out times of Unity XR
     Interaction Toolkit's tunneling vignette); 0 = no limit. All zero (the default) is
     the paper's rule, unsmoothed; :func:`comfort_rule` is the CLI's default.
+
+    ``low_dps`` and ``high_dps`` (both or neither) make the rule **absolute**: opacity 0 at
+    ``low_dps``, 1 at ``high_dps`` deg/s whatever the video (the named bands of
+    :mod:`simulator.mitigation.bands`); the percentiles and ``source`` are then unused.
+    The paper's rule is relative: every video gets grains in its own top tenth of flow.
     """
 
     low_pct: float = 10.0
@@ -280,8 +285,20 @@ class OpacityRule:
     smoothing_s: float = 0.0
     ease_in_s: float = 0.0
     ease_out_s: float = 0.0
+    low_dps: float | None = None
+    high_dps: float | None = None
 
     def __post_init__(self) -> None:
+        if (self.low_dps is None) != (self.high_dps is None):
+            raise InputError("absolute opacity rule needs both --low-dps and --high-dps")
+        if self.low_dps is not None:
+            lo, hi = self.low_dps, self.high_dps
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo):
+                raise InputError(
+                    f"--low-dps / --high-dps must be finite deg/s >= 0; got {lo}, {hi}"
+                )
+            if not lo < hi:
+                raise InputError(f"--low-dps ({lo:g}) must be below --high-dps ({hi:g}) deg/s")
         if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
             raise InputError(
                 f"opacity percentiles must satisfy 0 <= low < high <= 100; got {self.low_pct}, {self.high_pct}"
@@ -293,6 +310,11 @@ class OpacityRule:
         for name, v in (("ease-in", self.ease_in_s), ("ease-out", self.ease_out_s)):
             if not (v >= 0.0 and math.isfinite(v)):
                 raise InputError(f"opacity {name} time must be >= 0 seconds; got {v}")
+
+    @property
+    def is_absolute(self) -> bool:
+        """True when the thresholds are fixed deg/s (``low_dps``/``high_dps``)."""
+        return self.low_dps is not None
 
     @property
     def is_paper(self) -> bool:
@@ -309,16 +331,31 @@ class OpacityRule:
             "ease_in_s": self.ease_in_s,
             "ease_out_s": self.ease_out_s,
             "rule": "paper" if self.is_paper else "eased",
+            **(
+                {"scale": "absolute", "low_dps": self.low_dps, "high_dps": self.high_dps}
+                if self.is_absolute
+                else {}
+            ),
         }
 
-    def fit(self, grid: GridFile | None, epof_dps) -> tuple[float, float]:
-        """``(lo, hi)`` thresholds in deg/s from the grid's flow or this viewing's EPOF."""
+    def fit(self, grid: GridFile | None, epof_dps, *, keep=None) -> tuple[float, float]:
+        """``(lo, hi)`` thresholds in deg/s: the absolute ones, or percentiles of the grid's
+        flow or of this viewing's EPOF. ``keep`` (bool, one per grid row for source
+        ``grid``, one per EPOF sample for ``viewing``) leaves rows out, e.g. artefacts."""
+        if self.is_absolute:
+            return float(self.low_dps), float(self.high_dps)
         if self.source == "grid":
             if grid is None:
                 raise InputError("opacity source 'grid' needs the grid file")
-            vals = np.array(grid.pof_dps, np.float64).ravel()  # our own copy
+            pof = grid.pof_dps
+            if keep is not None and len(keep) == len(pof) and not np.all(keep):
+                pof = np.asarray(pof)[np.asarray(keep, bool)]
+            vals = np.array(pof, np.float64).ravel()  # our own copy
         else:
-            vals = np.array(epof_dps, np.float64).ravel()
+            vals = np.asarray(epof_dps, np.float64)
+            if keep is not None and len(keep) == len(vals):
+                vals = vals[np.asarray(keep, bool)]
+            vals = np.array(vals, np.float64).ravel()
         finite = np.isfinite(vals)
         if not finite.all():
             vals = vals[finite]

@@ -41,7 +41,8 @@ _VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condi
 _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
-    "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
+    "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule", "low_dps", "high_dps",
+    "artefacts",
 )  # fmt: skip
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
                 "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
@@ -355,10 +356,28 @@ def _epof(m: Path, t) -> dict:
         "opacity_source": e.get("opacity_source", (str,), "grid", choices=("grid", "viewing")),
         "smooth_s": e.number("smooth", 0.0, lo=0.0),
         # As vimsim epof: the eased comfort rule by default, the paper's one option away.
-        "opacity_rule": e.get("opacity_rule", (str,), "comfort", choices=("comfort", "paper")),
+        "opacity_rule": e.get(
+            "opacity_rule", (str,), "comfort", choices=("comfort", "paper", "absolute")
+        ),
         "ease_in_s": e.number("ease_in", None, lo=0.0),
         "ease_out_s": e.number("ease_out", None, lo=0.0),
+        **_absolute(e),
+        # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
+        "artefacts": e.get("artefacts", (bool,), False),
     }
+
+
+def _absolute(e: _Entry) -> dict:
+    """``low_dps``/``high_dps`` of the absolute opacity rule (only with it; defaults 5, 30)."""
+    lo, hi = e.number("low_dps", None, lo=0.0), e.number("high_dps", None, lo=0.0)
+    if e.t.get("opacity_rule") != "absolute":
+        if lo is not None or hi is not None:
+            e.fail('low_dps/high_dps need opacity_rule = "absolute"')
+        return {}
+    lo, hi = (5.0 if lo is None else lo), (30.0 if hi is None else hi)
+    if not lo < hi:
+        e.fail(f"low_dps ({lo:g}) must be below high_dps ({hi:g}) deg/s")
+    return {"low_dps": lo, "high_dps": hi}
 
 
 def _render(m: Path, t) -> dict:

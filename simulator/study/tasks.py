@@ -170,6 +170,8 @@ def _rule(opts: dict) -> OpacityRule:
         opts["smooth_s"],
         COMFORT_EASE_IN_S if ease_in is None else ease_in,
         COMFORT_EASE_OUT_S if ease_out is None else ease_out,
+        low_dps=opts.get("low_dps"),  # the absolute rule (opacity_rule = "absolute")
+        high_dps=opts.get("high_dps"),
     )
 
 
