@@ -24,7 +24,9 @@ from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
+from simulator.mitigation.bands import draw_bands
 from simulator.mitigation.grf import OpacityRule
+from simulator.preprocess.artefacts import Artefacts
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 
@@ -56,7 +58,9 @@ class EpofResult:
 
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
-    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV).
+    opacity rule's (lo, hi) in deg/s (NaN when read back from a CSV). ``artefact``: the
+    artefact kind of each row (``""`` = none; :mod:`simulator.preprocess.artefacts`), or
+    None when artefacts were not looked for (the CSV then has no ``artefact`` column).
     """
 
     frame: NDArray[np.int64]
@@ -68,9 +72,12 @@ class EpofResult:
     opacity: NDArray[np.float64]
     thresholds_dps: tuple[float, float] = (math.nan, math.nan)
     meta: dict = field(default_factory=dict, compare=False)
+    artefact: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frame)
+        if self.artefact is not None and len(self.artefact) != n:
+            raise ValueError(f"EpofResult: artefact has {len(self.artefact)} rows; frame has {n}")
         for c in EPOF_COLUMNS:
             if len(getattr(self, c)) != n:
                 raise ValueError(
@@ -90,6 +97,7 @@ def compute_epof(
     method: str = "auto",
     frustum: Frustum | None = None,
     frames: tuple[int, int] | None = None,
+    artefacts: Artefacts | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -115,6 +123,11 @@ def compute_epof(
     time range; the cost is proportional to it). The head path must cover those times;
     opacity percentiles of source ``grid`` still come from the whole grid, those of
     source ``viewing`` from these rows, and smoothing / easing start at ``f0``.
+
+    ``artefacts`` (:class:`simulator.preprocess.artefacts.Artefacts`, one kind per grid
+    row): artefact frames are left out of the opacity percentiles (both sources), their
+    opacity is held from the previous clean frame, and the result's ``artefact`` column
+    names their kind; their EPOF is kept as measured.
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -158,8 +171,20 @@ def compute_epof(
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
-    thr = rule.fit(grid, e)
-    op = rule(e, thr, fps=grid.fps)
+    kinds = None
+    if artefacts is not None:
+        if len(artefacts.kind) != grid.n_frames:
+            raise InputError(
+                f"artefacts: {len(artefacts.kind)} frames; the grid has {grid.n_frames}"
+            )
+        kinds = tuple(artefacts.kind[int(r)] for r in rows)
+        bad = np.array([k != "" for k in kinds], bool)
+        keep = ~bad if rule.source == "viewing" else ~artefacts.mask
+        thr = rule.fit(grid, e, keep=keep if keep.any() else None)
+        op = rule(_held(e, bad), thr, fps=grid.fps)
+    else:
+        thr = rule.fit(grid, e)
+        op = rule(e, thr, fps=grid.fps)
     h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     meta = {
         "hfov_deg": h,
@@ -172,7 +197,20 @@ def compute_epof(
         "fps": grid.fps,
         "method": "sphere" if sphere else "paper",
     }
-    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta)
+    return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta, kinds)
+
+
+def _held(e: NDArray, bad: NDArray) -> NDArray[np.float64]:
+    """``e`` with each flagged sample replaced by the last clean one before it (the first
+    clean one for a leading run): the opacity holds through an artefact."""
+    out = np.array(e, np.float64)
+    if not bad.any() or bad.all():
+        return out
+    idx = np.where(~bad, np.arange(out.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    first = int(np.flatnonzero(~bad)[0])
+    idx[idx < 0] = first
+    return out[idx]
 
 
 def epof_settings(result: EpofResult) -> dict:
@@ -214,7 +252,8 @@ def write_epof_csv(
     settings: dict | None = None,
 ) -> None:
     """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically, then
-    the ``extra`` columns (name -> array of one value per row), if any, in order.
+    the ``extra`` columns (name -> array of one value per row), if any, in order, then
+    ``artefact`` (the kind, empty for a clean frame) when the result has one.
 
     The settings that produced it come first as ``# key: JSON value`` comment lines
     (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
@@ -225,11 +264,13 @@ def write_epof_csv(
         settings = epof_settings(result)
     for k, v in (settings or {}).items():
         buf.write(f"# {k}: {_json_value(v)}\n")
-    buf.write(",".join((*EPOF_COLUMNS, *extra)) + "\n")
+    art = result.artefact
+    buf.write(",".join((*EPOF_COLUMNS, *extra, *(("artefact",) if art is not None else ()))) + "\n")
     cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
     cols += [np.round(np.asarray(v, float), 9) + 0.0 for v in extra.values()]
     for i, fr in enumerate(result.frame):
-        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + "\n")
+        tail = f",{art[i]}" if art is not None else ""
+        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + tail + "\n")
     with atomic_output(path) as tmp:
         Path(tmp).write_text(buf.getvalue())
 
@@ -262,12 +303,15 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
     if len(lines) < 2:
         raise InputError(f"{p}: EPOF file has a header but no rows")
+    ai = cols.index("artefact") if "artefact" in cols else None
+    rows_ = [ln.split(",") for ln in lines[1:]]
+    if any(len(r) != len(cols) for r in rows_):
+        raise InputError(f"{p}: every row needs {len(cols)} fields")
+    kinds = tuple(r[ai].strip() for r in rows_) if ai is not None else None
     try:
-        data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+        data = np.array([[float(v) for j, v in enumerate(r) if j != ai] for r in rows_])
     except ValueError:
         raise InputError(f"{p}: non-numeric value in an EPOF row") from None
-    if data.ndim != 2 or data.shape[1] != len(cols):
-        raise InputError(f"{p}: every row needs {len(cols)} fields")
     data = data[:, : len(EPOF_COLUMNS)]
     if not np.all(np.isfinite(data)):
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
@@ -279,7 +323,8 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         thr = thr if thr and len(thr) == 2 else (math.nan, math.nan)
     except (TypeError, ValueError):
         thr = (math.nan, math.nan)
-    return EpofResult(**arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {})
+    return EpofResult(**arrs, thresholds_dps=thr, artefact=kinds,
+                      meta={"settings": settings} if settings else {})  # fmt: skip
 
 
 def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -> None:
@@ -300,6 +345,13 @@ def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -
     )
     ax.plot(t, result.epof_dps, color="tab:blue", lw=1.0)
     ax.set_ylabel("EPOF (deg/s)")
+    ax.set_ylim(0, max(float(np.max(result.epof_dps)) * 1.05, 1.0))
+    draw_bands(ax, labels=False)  # the named flow bands (mitigation/bands), deg/s
+    if result.artefact is not None:  # artefact frames: grey, their opacity held
+        for k, a_ in enumerate(result.artefact):
+            if a_:
+                ax.axvspan(t[k] - 0.5 / (result.meta.get("fps") or 30), t[k] + 0.5 / (result.meta.get("fps") or 30),
+                           color="0.5", alpha=0.35, lw=0)  # fmt: skip
     lo, hi = result.thresholds_dps
     for v, name in ((lo, "opacity 0"), (hi, "opacity 1")):
         if math.isfinite(v):

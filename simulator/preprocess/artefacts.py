@@ -27,23 +27,29 @@ grid file). Thresholds are stated beside each detector and measured in
 
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import cv2
 import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output, check_input_file
 from simulator.media.video import iter_frames, probe
 
 __all__ = [
     "ARTEFACT_KINDS",
     "Artefacts",
     "FrameSignals",
+    "artefacts_for_grid",
     "detect_artefacts",
     "frame_signals",
+    "load_artefacts",
     "no_artefacts",
+    "save_artefacts",
 ]
 
 #: The kinds, in the order a frame carrying two is labelled (the first wins).
@@ -364,3 +370,39 @@ def detect_artefacts(
         e["end_s"] = e["end_frame"] / rate if rate else math.nan
     return Artefacts(tuple(kind), tuple(events), period, meta={"detected": True,
                      "signals": "picture+flow" if sig is not None else "flow"})  # fmt: skip
+
+
+def artefacts_for_grid(grid, *, video=None) -> Artefacts:
+    """The artefacts of a grid file's rows: from its video's pictures and its flow when
+    the video (``video``, else the path its meta records) is there, else from its flow
+    only (keyframes and cuts, labelled ``keyframe``)."""
+    m = grid.meta
+    src = video or m.get("video", {}).get("path")
+    if src and Path(src).is_file():
+        sig = frame_signals(src, layout=m.get("layout", "mono"), eye=m.get("eye", "left"),
+                            start=int(m.get("start_frame", 0)),
+                            end=int(m.get("start_frame", 0)) + grid.n_frames)  # fmt: skip
+        if sig.n_frames == grid.n_frames:
+            return detect_artefacts(sig, grid.pof_dps)
+    return detect_artefacts(None, grid.pof_dps, fps=grid.fps)
+
+
+def save_artefacts(path, art: Artefacts) -> None:
+    """``art`` as JSON (atomic): the kinds per frame, the events, the keyframe period."""
+    d = {"format": "vimsim-artefacts", "version": 1, "kind": list(art.kind),
+         "events": list(art.events), "keyframe_period": art.keyframe_period, "meta": art.meta}  # fmt: skip
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(json.dumps(d, allow_nan=False, default=float) + "\n")
+
+
+def load_artefacts(path) -> Artefacts:
+    """Read what :func:`save_artefacts` wrote (InputError if it is not that)."""
+    p = check_input_file(path, "artefacts")
+    try:
+        d = json.loads(p.read_text())
+        assert d.get("format") == "vimsim-artefacts"
+        kind = tuple(str(k) for k in d["kind"])
+        assert all(k in ("", *ARTEFACT_KINDS) for k in kind)
+    except (ValueError, KeyError, AssertionError, TypeError):
+        raise InputError(f"{p}: not a vimsim artefacts file") from None
+    return Artefacts(kind, tuple(d.get("events", ())), d.get("keyframe_period"), d.get("meta", {}))
