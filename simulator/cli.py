@@ -35,11 +35,12 @@ COMMANDS: dict[str, str] = {
     "analyze": "analyze",
     "export": "export",
     "study": "study",
+    "screen": "screen",
 }
 
 
 #: Commands whose ``-o`` is a folder (the rest write one file).
-FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo", "frames", "export", "study"})
+FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo", "frames", "export", "study", "screen"})
 #: Suffixes ``--plot`` / ``headpath plot -o`` may have (matplotlib writes these).
 PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
 _OUTPUT_KEYS = ("output", "plot")

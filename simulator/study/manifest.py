@@ -66,6 +66,8 @@ class VideoSpec:
     window_size: int = 256
     flow: str = "dis"
     cell_deg: float = 4.0
+    #: A grid the user already made of this video (checked to match); None: the cache's.
+    grid_file: Path | None = None
 
     def options(self) -> dict:
         """The preprocessing options (what the grid cache key is made of, besides the video)."""

@@ -74,6 +74,7 @@ def _grid_key(v: VideoSpec) -> str:
 def _video_dict(v: VideoSpec) -> dict:
     d = asdict(v)
     d["path"] = str(v.path)
+    d["grid_file"] = None if v.grid_file is None else str(v.grid_file)
     return d
 
 
@@ -163,7 +164,8 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     # ---- plan: grid keys, viewing keys, what is unchanged
     t0 = time.perf_counter()
     memo: dict = {}
-    grids = {v.id: cache / "grids" / f"{_grid_key(v)[:32]}.npz" for v in manifest.videos}
+    grids = {v.id: v.grid_file or cache / "grids" / f"{_grid_key(v)[:32]}.npz"
+             for v in manifest.videos}  # fmt: skip
     opts = {"epof": manifest.epof, "render": manifest.render, "grf": manifest.grf}
     rows: dict[str, dict] = {}
     keys: dict[str, str] = {}

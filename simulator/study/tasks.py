@@ -28,6 +28,7 @@ from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.mitigation.grf import COMFORT_EASE_IN_S, COMFORT_EASE_OUT_S, GrfConfig, OpacityRule
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
+from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.render.eye import RenderConfig
@@ -44,6 +45,7 @@ __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 _GRIDS: dict[tuple, GridFile] = {}
 _TRACES: dict[tuple, dict[int, HeadPath]] = {}
 _GL: list = []
+_ARTEFACTS: dict[tuple, Artefacts] = {}
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
 WEIGHT_CACHE_BYTES = 192 << 20
@@ -74,6 +76,15 @@ def _grid(path: str) -> GridFile:
             g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
         _GRIDS[key] = g
     return _GRIDS[key]
+
+
+def _artefacts(path: str, grid: GridFile) -> Artefacts:
+    """The artefacts of a grid's video, detected once per worker and grid."""
+    key = _file_key(path)
+    if key not in _ARTEFACTS:
+        _ARTEFACTS.clear()
+        _ARTEFACTS[key] = artefacts_for_grid(grid)
+    return _ARTEFACTS[key]
 
 
 def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
@@ -186,6 +197,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
     try:
         grid = _grid(grid_path)
         rule = _rule(opts)
+        art = _artefacts(grid_path, grid) if opts.get("artefacts") else None
         if grid.field_dps is not None and opts["method"] != "paper":
             # One worker serves every viewing of this video: let exact EPOF keep the
             # weights of more orientation bins (bounded, not growing with the video).
@@ -213,6 +225,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                     rule=rule,
                     hold=opts["hold_last"],
                     method=opts["method"],
+                    artefacts=art,
                 )
             write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
             rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
