@@ -7,7 +7,8 @@ at 20 deg/s and at 3 and 6 deg/s (calm), ``forward``. Artefacts made with ffmpeg
 B-frames, no scene-cut keyframes; truth: the decoder's key frames), a hard cut (coaster
 then rotate at frame 90), a fade to black (from 3 s over 1.5 s; truth: every frame from
 91 on), a static overlay (SMPTE bars 160x48) fading in from 2 s to 3 s (truth: frames
-61-90). Each clip is preprocessed in sphere mode, then :func:`detect_artefacts`.
+61-90). Real: three.js's MaryOculus.mp4 (../shared/data/real, side-by-side stereo, a
+static camera: a calm clip) clean and re-encoded with pumping (GOP 24). Each clip is preprocessed in sphere mode, then :func:`detect_artefacts`.
 Recall = truth frames labelled with the right kind / truth frames; false alarms = frames
 labelled outside the truth. The reference ratio: detection time / preprocess time.
 
@@ -47,12 +48,17 @@ def keyframes(path: Path) -> set[int]:
         return {i for i, f in enumerate(c.decode(video=0)) if f.key_frame and i > 0}
 
 
+REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" / "equirect"
+MARY = REAL / "threejs" / "MaryOculus.mp4"  # real CG stereo clip, static camera (calm)
+
+
 def measure(path: Path, d: Path) -> tuple:
+    layout = "side-by-side" if "mary" in path.stem.lower() else "mono"
     t0 = time.perf_counter()
-    preprocess_sphere(path, d / (path.stem + ".npz"), grid=grid_preset("default"))
+    preprocess_sphere(path, d / (path.stem + ".npz"), grid=grid_preset("default"), layout=layout)
     t1 = time.perf_counter()
     g = load_grid(d / (path.stem + ".npz"))
-    a = detect_artefacts(frame_signals(path), g.pof_dps)
+    a = detect_artefacts(frame_signals(path, layout=layout), g.pof_dps)
     return a, time.perf_counter() - t1, t1 - t0
 
 
@@ -72,6 +78,13 @@ def main() -> None:
                 ff("-i", str(d / f"{base}.mp4"), "-c:v", "libx264", "-x264-params", x264, "-qp", qp,
                    "-pix_fmt", "yuv420p", str(out))  # fmt: skip
                 cases.append((out.stem, out, "keyframe", keyframes(out)))
+        if MARY.is_file():  # the real calm clip, re-encoded with keyframe pumping (GOP 24)
+            for qp in ("42", "36"):
+                out = d / f"kf_mary_qp{qp}.mp4"
+                ff("-i", str(MARY), "-c:v", "libx264", "-x264-params", x264.replace("15", "24"),
+                   "-qp", qp, "-pix_fmt", "yuv420p", str(out))  # fmt: skip
+                cases.append((out.stem, out, "keyframe", keyframes(out)))
+            cases.append(("clean_real_mary", MARY, None, set()))
         ff("-i", str(d / "coaster.mp4"), "-i", str(d / "rotate.mp4"), "-filter_complex",
            "[0:v]trim=end_frame=90,setpts=PTS-STARTPTS[a];[1:v]trim=start_frame=90,"
            "setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]", "-map", "[v]", "-c:v", "libx264",
@@ -87,7 +100,9 @@ def main() -> None:
         for name in ("coaster", "rotate", "calm3", "calm6", "forward"):
             cases.append((f"clean_{name}", d / f"{name}.mp4", None, set()))
         t_det = t_pre = 0.0
-        print(f"{'clip':22s} {'kind':9s} {'truth':>5s} {'found':>5s} {'recall':>6s} {'false':>5s}  period")
+        print(
+            f"{'clip':22s} {'kind':9s} {'truth':>5s} {'found':>5s} {'recall':>6s} {'false':>5s}  period"
+        )
         for name, path, kind, truth in cases:
             a, td, tp = measure(path, d)
             t_det, t_pre = t_det + td, t_pre + tp
@@ -97,8 +112,10 @@ def main() -> None:
             rec = f"{hit / len(truth):.2f}" if truth else "-"
             print(f"{name:22s} {kind or 'clean':9s} {len(truth):5d} {hit:5d} {rec:>6s} {false:5d}  "
                   f"{a.keyframe_period}")  # fmt: skip
-        print(f"\ndetection {t_det:.1f} s against sphere preprocess {t_pre:.1f} s: "
-              f"ratio {t_det / t_pre:.2f}")
+        print(
+            f"\ndetection {t_det:.1f} s against sphere preprocess {t_pre:.1f} s: "
+            f"ratio {t_det / t_pre:.2f}"
+        )
 
 
 if __name__ == "__main__":

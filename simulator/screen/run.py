@@ -2,7 +2,8 @@
 
 Each video is preprocessed in sphere mode through the study's grid cache (or a grid the
 user already made of it, when its video's content hash matches), watched by ``n``
-scripted viewers (:func:`simulator.traces.path.synth`, seeds ``seed .. seed + n - 1``),
+scripted viewers (:func:`simulator.traces.path.synth`, seeds ``seed .. seed + n - 1``,
+made in the study's EPOF tasks as a manifest's ``viewers = {kind, n, seed}`` are),
 with artefacts (:mod:`simulator.preprocess.artefacts`) detected and left out. The study
 writes ``viewings.csv``, ``epof/`` and ``videos/``; :mod:`simulator.screen.report` adds
 ``screen/<video>/`` and ``screen/comparison.csv``.
@@ -14,26 +15,21 @@ import math
 import re
 from pathlib import Path
 
-from simulator.core.choices import SYNTH_KINDS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.media.gridfile import content_hash
 from simulator.media.video import probe
 from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
-from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
+from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
 from simulator.study.runner import run_study
-from simulator.traces.path import save_headpath_csv, synth
 
 __all__ = ["SCREEN_COLUMNS", "VIEWER_KINDS", "check_viewers", "screen_videos"]
-
-#: Scripted viewers a screening can use (``keyframes`` needs a file: not a viewer model).
-VIEWER_KINDS: tuple[str, ...] = tuple(k for k in SYNTH_KINDS if k != "keyframes")
 
 
 def check_viewers(n, kind: str) -> None:
     """InputError unless ``n`` >= 1 scripted viewers of a known kind."""
-    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise InputError(f"--viewers must be an integer >= 1; got {n!r}")
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100_000:
+        raise InputError(f"--viewers must be an integer in 1..100000; got {n!r}")
     if kind not in VIEWER_KINDS:
         raise InputError(f"unknown viewer kind {kind!r}; expected one of {', '.join(VIEWER_KINDS)}")
 
@@ -95,12 +91,10 @@ def screen_videos(
     if not paths:
         raise InputError("screen needs at least one video")
     grid_files = [check_input_file(g, "grid") for g in grids]
-    infos = {}
     for p in paths:
         info = probe(p)
         if not info.is_video or info.n_frames < 2:
             raise InputError(f"{p}: is a still image; screen needs a video")
-        infos[p] = info
     out = Path(outdir)
     taken: set[str] = set()
     specs, views, reused = [], [], {}
@@ -110,17 +104,11 @@ def screen_videos(
         if g is not None:
             reused[vid] = str(g)
         specs.append(VideoSpec(id=vid, path=p.resolve(), method="sphere", grid_file=g))
-    out.mkdir(parents=True, exist_ok=True)
-    for spec in specs:
-        info = infos[next(p for p in paths if p.resolve() == spec.path)]
-        seconds = (info.n_frames + 1) / info.fps
-        folder = out / "viewers" / spec.id
-        folder.mkdir(parents=True, exist_ok=True)
-        for k in range(viewers):
-            trace = folder / f"viewer_{k + 1:03d}.csv"
-            save_headpath_csv(trace, synth(kind, seconds, seed=seed + k))
-            views.append(ViewingSpec(f"{spec.id}-v{k + 1:03d}", spec.id, trace.resolve(),
-                                     "canonical", None, f"viewer{k + 1:03d}"))  # fmt: skip
+    width = max(3, len(str(viewers)))
+    for spec in specs:  # viewer k: the scripted head path of seed + k - 1 (study tasks make it)
+        for k in range(1, viewers + 1):
+            views.append(ViewingSpec(f"{spec.id}-viewer{k:0{width}d}", spec.id, None,
+                                     SCRIPTED + kind, seed + k - 1, f"viewer{k:0{width}d}"))  # fmt: skip
     opts = _epof_options(epof or {}, artefacts)
     m = Manifest(path=(out / "screen.toml").resolve(), name="screen", videos=tuple(specs),
                  viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip

@@ -25,7 +25,7 @@ from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.sphere.headsets import resolve_fov
 from simulator.traces.readers import FORMATS, detect_format
 
-__all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
+__all__ = ["SCRIPTED", "VIEWER_KINDS", "Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
 
 _LAYOUTS = ("mono", "top-bottom", "side-by-side")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -37,7 +37,13 @@ _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
     "window_size", "flow", "cell",
 )  # fmt: skip
-_VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition", "render")
+_VIEWING_KEYS = ("id", "video", "trace", "viewers", "format", "user", "participant", "condition",
+                 "render")  # fmt: skip
+_VIEWERS_KEYS = ("kind", "n", "seed")
+#: Scripted viewers' head paths (``viewers = {kind = ...}``; keyframes needs a file).
+VIEWER_KINDS: tuple[str, ...] = ("look-around", "sine", "sweep", "static")
+#: ``ViewingSpec.format`` of a scripted viewer: ``synth:<kind>``, its seed in ``user``.
+SCRIPTED = "synth:"
 _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
@@ -86,11 +92,12 @@ class VideoSpec:
 
 @dataclass(frozen=True)
 class ViewingSpec:
-    """One viewing: a video watched along one trace (one user of a multi-user file)."""
+    """One viewing: a video watched along one trace (one user of a multi-user file), or
+    by a scripted viewer (``format`` ``synth:<kind>``, ``user`` its seed, no ``trace``)."""
 
     id: str
     video: str
-    trace: Path
+    trace: Path | None
     format: str = "auto"
     user: int | None = None
     participant: str = ""
@@ -117,7 +124,8 @@ class Manifest:
 
     def input_files(self) -> list[Path]:
         """Every file the study reads (for the never-overwrite-an-input check)."""
-        files = [self.path, *(v.path for v in self.videos), *(w.trace for w in self.viewings)]
+        files = [self.path, *(v.path for v in self.videos)]
+        files += [w.trace for w in self.viewings if w.trace is not None]
         if self.questionnaires:
             files.append(self.questionnaires["path"])
         return files
@@ -255,6 +263,9 @@ def _viewings(m: Path, base: Path, tables, videos) -> tuple[ViewingSpec, ...]:
         vid = e.get("video", (str,), required=True)
         if vid not in ids:
             e.fail(f"video {vid!r} is not a [[videos]] id; known: {', '.join(sorted(ids))}")
+        if "viewers" in e.t:
+            out += _scripted(e, vid, seen, where)
+            continue
         pattern = e.get("trace", (str,), required=True)
         fmt = e.get("format", (str,), "auto", choices=("auto", *FORMATS))
         user = e.get("user", (int, str))
@@ -313,6 +324,38 @@ def _viewings(m: Path, base: Path, tables, videos) -> tuple[ViewingSpec, ...]:
                 seen[vw_id] = where
                 out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, render))
     return tuple(out)
+
+
+def _scripted(e: _Entry, vid: str, seen: dict, where: str) -> list[ViewingSpec]:
+    """``viewers = {kind = "look-around", n = 30, seed = 0}``: n scripted viewers, viewer k
+    with seed ``seed + k - 1``, ids ``<video>-viewer<k>`` (or the ``id`` template with
+    ``{video}``, ``{participant}``, ``{user}`` = k)."""
+    for k in ("trace", "format", "user"):
+        if k in e.t:
+            e.fail(f"{k} and viewers are exclusive: scripted viewers have no trace file")
+    v = _Entry(e.m, f"{where}: viewers", e.t["viewers"], _VIEWERS_KEYS)
+    kind = v.get("kind", (str,), "look-around")
+    if kind not in VIEWER_KINDS:
+        v.fail(f"unknown viewer kind {kind!r}; expected one of {', '.join(VIEWER_KINDS)}")
+    n = v.number("n", 30, lo=1, hi=100_000, integer=True)
+    seed = v.number("seed", 0, lo=0, integer=True)
+    id_t, cond = e.get("id", (str,)), e.get("condition", (str,), "")
+    render = e.get("render", (bool,), False)
+    out = []
+    width = max(3, len(str(n)))
+    for k in range(1, n + 1):
+        f = {"video": vid, "participant": f"viewer{k:0{width}d}", "user": f"{k:0{width}d}",
+             "stem": f"viewer{k:0{width}d}", "condition": cond}  # fmt: skip
+        try:
+            vw_id = id_t.format(**f) if id_t else f"{vid}-{f['participant']}"
+        except (KeyError, IndexError, ValueError) as err:
+            e.fail(f"bad template in id ({err}); fields: video, participant, user, condition")
+        if not _ID_RE.match(vw_id) or vw_id in seen:
+            e.fail(f"viewing id {vw_id!r}: not a file name or used twice; give an id template")
+        seen[vw_id] = where
+        out.append(ViewingSpec(vw_id, vid, None, SCRIPTED + kind, seed + k - 1,
+                               f["participant"], cond, render))  # fmt: skip
+    return out
 
 
 def _questionnaires(m: Path, base: Path, t) -> dict | None:

@@ -79,7 +79,8 @@ def _video_dict(v: VideoSpec) -> dict:
 
 
 def _item(w: ViewingSpec) -> dict:
-    return {"id": w.id, "trace": str(w.trace), "format": w.format, "user": w.user}
+    return {"id": w.id, "trace": "" if w.trace is None else str(w.trace), "format": w.format,
+            "user": w.user}  # fmt: skip
 
 
 def _check_outputs(m: Manifest, out: Path, cache: Path) -> None:
@@ -172,7 +173,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     todo: list[ViewingSpec] = []
     for w in manifest.viewings:
         keys[w.id] = _sha({
-            "grid": grids[w.video].name, "trace": _file_sha(w.trace, memo), "format": w.format,
+            "grid": grids[w.video].name, "trace": _file_sha(w.trace, memo) if w.trace else "", "format": w.format,
             "user": w.user, "epof": opts["epof"], "vimsim": __version__,
             "render": [opts["render"], opts["grf"]] if w.render else None,
         })  # fmt: skip
@@ -345,7 +346,7 @@ def _base_row(w: ViewingSpec) -> dict:
         "participant": w.participant,
         "condition": w.condition,
         "video": w.video,
-        "trace": str(w.trace),
+        "trace": "" if w.trace is None else str(w.trace),
         "user": "" if w.user is None else w.user,
     }
 

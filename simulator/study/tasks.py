@@ -35,7 +35,7 @@ from simulator.render.eye import RenderConfig
 from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
-from simulator.traces.path import HeadPath
+from simulator.traces.path import HeadPath, synth
 from simulator.traces.readers import load_all_users, load_headpath
 from simulator.viewing.job import render_viewing
 
@@ -87,8 +87,12 @@ def _artefacts(path: str, grid: GridFile) -> Artefacts:
     return _ARTEFACTS[key]
 
 
-def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
-    """The head path of one viewing; a multi-user file is parsed once per worker."""
+def _trace(path: str, fmt: str, user: int | None, grid: GridFile | None = None) -> HeadPath:
+    """The head path of one viewing; a multi-user file is parsed once per worker. A
+    scripted viewer (``fmt`` ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+    if fmt.startswith("synth:"):
+        end = (int(grid.meta.get("start_frame", 0)) + grid.n_frames + 1) / grid.fps
+        return synth(fmt[len("synth:") :], end, seed=int(user or 0))
     if user is None:
         return load_headpath(path, fmt)
     key = (*_file_key(path), fmt)
@@ -215,7 +219,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                hp = _trace(it["trace"], it["format"], it["user"])
+                hp = _trace(it["trace"], it["format"], it["user"], grid)
                 res = compute_epof(
                     grid,
                     hp,
@@ -260,8 +264,8 @@ def render_task(
 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
+            hp = _trace(item["trace"], item["format"], item["user"], grid)
         mitigation = Mitigation(
             opts.get("mitigation", "grf"),
             aperture_min_deg=opts.get("aperture_min_deg", APERTURE_MIN_DEG),
