@@ -2,7 +2,7 @@
 false alarms per kind, and false alarms on the clean clips.
 
 Scenes (``vimsim synth``, 512x256, 30 fps, 6 s, CRF 10): ``coaster`` (fast), ``rotate``
-at 20 deg/s and at 3 and 6 deg/s (calm), ``forward``. Artefacts made with ffmpeg
+at 20 deg/s and at 3 and 6 deg/s (calm), ``forward``, and a 40 s ``coaster`` (clean). Artefacts made with ffmpeg
 (imageio-ffmpeg's binary): keyframe pumping (x264, constant QP 42 or 36, GOP 15, no
 B-frames, no scene-cut keyframes; truth: the decoder's key frames), a hard cut (coaster
 then rotate at frame 90), a fade to black (from 3 s over 1.5 s; truth: every frame from
@@ -38,7 +38,8 @@ def ff(*args: str) -> None:
 
 
 def synth(out: Path, *args: str) -> None:
-    subprocess.run([sys.executable, "-m", "simulator", "synth", str(out), "--seconds", "6",
+    secs = () if "--seconds" in args else ("--seconds", "6")
+    subprocess.run([sys.executable, "-m", "simulator", "synth", str(out), *secs,
                     "--size", "512x256", "--crf", "10", *args], check=True,
                    stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
 
@@ -71,6 +72,7 @@ def main() -> None:
         synth(d / "calm3.mp4", "--scene", "rotate", "--omega", "3")
         synth(d / "calm6.mp4", "--scene", "rotate", "--omega", "6")
         synth(d / "forward.mp4", "--scene", "forward")
+        synth(d / "coaster40.mp4", "--scene", "coaster", "--seconds", "40")  # a long clean ride
         cases = []  # (name, file, kind, truth frames)
         for base in ("calm3", "calm6", "coaster"):
             for qp in ("42", "36"):
@@ -97,7 +99,7 @@ def main() -> None:
            "-filter_complex", "[1:v]fade=t=in:st=2:d=1:alpha=1[o];[0:v][o]overlay=x=180:y=100:shortest=1",
            "-c:v", "libx264", "-crf", "12", "-pix_fmt", "yuv420p", str(d / "overlay.mp4"))  # fmt: skip
         cases.append(("overlay", d / "overlay.mp4", "overlay", set(range(61, 91))))
-        for name in ("coaster", "rotate", "calm3", "calm6", "forward"):
+        for name in ("coaster", "rotate", "calm3", "calm6", "forward", "coaster40"):
             cases.append((f"clean_{name}", d / f"{name}.mp4", None, set()))
         t_det = t_pre = 0.0
         print(

@@ -82,6 +82,7 @@ _FLAT_STD = 2.0
 # >= _MOVING gray levels) for >= _REST_S seconds, moving (>= _MOVE of the median) for the
 # _REST_S before its appearance; at least _MIN_BLOCKS such blocks appearing together.
 _REST = 0.15
+_REST_ABS = 0.35  # ... and below this many gray levels: still pixels, not a quiet part of the scene
 _MOVE = 0.5
 _MOVING = 0.8
 _REST_S = 1.0
@@ -286,7 +287,7 @@ def _overlays(sig: FrameSignals) -> NDArray[np.bool_]:
     g = np.median(d, axis=1)
     moving = g >= _MOVING
     rel = d / np.maximum(g, 1e-6)[:, None]
-    rest = (rel < _REST) & moving[:, None]
+    rest = (rel < _REST) & (d < _REST_ABS) & moving[:, None]
     n = max(2, round(_REST_S * sig.fps))
     out = np.zeros(T, bool)
     # start of a rest run of >= n frames, per block: rest[t..t+n) all true, rest[t-1] false
