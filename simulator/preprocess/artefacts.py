@@ -44,7 +44,10 @@ __all__ = [
     "ARTEFACT_KINDS",
     "Artefacts",
     "FrameSignals",
+    "SignalCollector",
     "artefacts_for_grid",
+    "artefacts_from_meta",
+    "artefacts_meta",
     "detect_artefacts",
     "frame_signals",
     "load_artefacts",
@@ -143,6 +146,54 @@ def no_artefacts(n_frames: int) -> Artefacts:
     return Artefacts(("",) * int(n_frames), meta={"detected": False})
 
 
+class SignalCollector:
+    """Builds :class:`FrameSignals` one frame at a time (a decoding pass that does
+    something else too, e.g. sphere preprocessing, feeds it): ``add(gray frame)``, then
+    ``result(fps)``. Keeps a few numbers per frame, not the frames."""
+
+    def __init__(self) -> None:
+        self.means: list[float] = []
+        self.stds: list[float] = []
+        self.corrs: list[float] = []
+        self.blocks: list[NDArray] = []
+        self.coarse: list[NDArray] = []
+        self._prev: NDArray | None = None
+
+    def add(self, frame: NDArray[np.uint8]) -> None:
+        """One gray frame (H, W) uint8 of the video, in order."""
+        bw, bh = BLOCKS
+        w, h = SIGNAL_SIZE
+        g = cv2.resize(frame, SIGNAL_SIZE, interpolation=cv2.INTER_AREA).astype(np.float32)
+        self.means.append(float(g.mean()))
+        self.stds.append(float(g.std()))
+        self.coarse.append(cv2.resize(g, (16, 8), interpolation=cv2.INTER_AREA).ravel())
+        if self._prev is None:
+            self.corrs.append(1.0)
+            self.blocks.append(np.zeros(bw * bh, np.float32))
+        else:
+            a, b = (
+                self.coarse[-2] - self.coarse[-2].mean(),
+                self.coarse[-1] - self.coarse[-1].mean(),
+            )
+            den = float(np.sqrt((a * a).sum() * (b * b).sum()))
+            self.corrs.append(float((a * b).sum() / den) if den > 1e-6 else 1.0)
+            d = np.abs(g - self._prev).reshape(bh, h // bh, bw, w // bw).mean(axis=(1, 3))
+            self.blocks.append(d.ravel().astype(np.float32))
+        self._prev = g
+
+    def result(self, fps: float, source: str = "video") -> FrameSignals:
+        """The signals so far (InputError for fewer than 2 frames)."""
+        if len(self.means) < 2:
+            raise InputError(f"{source}: fewer than 2 frames; artefact detection needs a video")
+        corr = np.array(self.corrs)
+        corr[0] = corr[1]
+        bd = np.stack(self.blocks)
+        bd[0] = bd[1]
+        return FrameSignals(
+            np.array(self.means), np.array(self.stds), corr, bd, np.stack(self.coarse), float(fps)
+        )
+
+
 def frame_signals(
     video, *, layout: str = "mono", eye: str = "left", start: int = 0, end: int | None = None
 ) -> FrameSignals:
@@ -151,34 +202,10 @@ def frame_signals(
     info = probe(video)
     if not info.is_video:
         raise InputError(f"{video}: is a still image; artefact detection needs a video")
-    bw, bh = BLOCKS
-    w, h = SIGNAL_SIZE
-    means, stds, corrs, blocks, coarse = [], [], [], [], []
-    prev = None
+    col = SignalCollector()
     for f in iter_frames(video, fmt="gray", layout=layout, eye=eye, start=start, end=end):
-        g = cv2.resize(f, SIGNAL_SIZE, interpolation=cv2.INTER_AREA).astype(np.float32)
-        means.append(float(g.mean()))
-        coarse.append(cv2.resize(g, (16, 8), interpolation=cv2.INTER_AREA).ravel())
-        stds.append(float(g.std()))
-        if prev is None:
-            corrs.append(1.0)
-            blocks.append(np.zeros(bw * bh, np.float32))
-        else:
-            a, b = coarse[-2] - coarse[-2].mean(), coarse[-1] - coarse[-1].mean()
-            den = float(np.sqrt((a * a).sum() * (b * b).sum()))
-            corrs.append(float((a * b).sum() / den) if den > 1e-6 else 1.0)
-            d = np.abs(g - prev).reshape(bh, h // bh, bw, w // bw).mean(axis=(1, 3))
-            blocks.append(d.ravel().astype(np.float32))
-        prev = g
-    if len(means) < 2:
-        raise InputError(f"{video}: fewer than 2 frames; artefact detection needs a video")
-    corr = np.array(corrs)
-    corr[0] = corr[1]
-    bd = np.stack(blocks)
-    bd[0] = bd[1]
-    return FrameSignals(
-        np.array(means), np.array(stds), corr, bd, np.stack(coarse), float(info.fps)
-    )
+        col.add(f)
+    return col.result(info.fps, str(video))
 
 
 def _neighbour_median(x: NDArray, nb: int = _NB) -> NDArray:
@@ -373,11 +400,38 @@ def detect_artefacts(
                      "signals": "picture+flow" if sig is not None else "flow"})  # fmt: skip
 
 
+def artefacts_meta(art: Artefacts) -> dict:
+    """``art`` as a grid file's ``meta["artefacts"]``: its runs (events), not one entry per
+    frame, so that the meta stays small for long videos."""
+    return {"n_frames": len(art.kind), "keyframe_period": art.keyframe_period,
+            "signals": art.meta.get("signals", ""), "events": [dict(e) for e in art.events]}  # fmt: skip
+
+
+def artefacts_from_meta(d: dict) -> Artefacts:
+    """The :class:`Artefacts` of a grid file's ``meta["artefacts"]`` (InputError if malformed)."""
+    try:
+        kind = [""] * int(d["n_frames"])
+        for e in d["events"]:
+            if e["kind"] not in ARTEFACT_KINDS:
+                raise ValueError(e["kind"])
+            for t in range(int(e["start_frame"]), int(e["end_frame"]) + 1):
+                kind[t] = e["kind"]
+    except (KeyError, TypeError, ValueError, IndexError):
+        raise InputError("grid meta artefacts: malformed; preprocess the video again") from None
+    return Artefacts(tuple(kind), tuple(d["events"]), d.get("keyframe_period"),
+                     meta={"detected": True, "signals": d.get("signals", ""), "stored": True})  # fmt: skip
+
+
 def artefacts_for_grid(grid, *, video=None) -> Artefacts:
-    """The artefacts of a grid file's rows: from its video's pictures and its flow when
-    the video (``video``, else the path its meta records) is there, else from its flow
-    only (keyframes and cuts, labelled ``keyframe``)."""
+    """The artefacts of a grid file's rows: those its preprocessing stored
+    (``meta["artefacts"]``), else from its video's pictures and its flow when the video
+    (``video``, else the path its meta records) is there (one decoding pass), else from
+    its flow only (keyframes and cuts, labelled ``keyframe``)."""
     m = grid.meta
+    if isinstance(m.get("artefacts"), dict) and video is None:
+        art = artefacts_from_meta(m["artefacts"])
+        if len(art.kind) == grid.n_frames:
+            return art
     src = video or m.get("video", {}).get("path")
     if src and Path(src).is_file():
         sig = frame_signals(src, layout=m.get("layout", "mono"), eye=m.get("eye", "left"),

@@ -32,6 +32,7 @@ from simulator.core.progress import Counter, Progress
 from simulator.flow.backends import DISFlow, FlowBackend, RayAngles, make_backend
 from simulator.media.gridfile import FieldSpool, content_hash, save_grid
 from simulator.media.video import iter_frames, prefetch, probe
+from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
 from simulator.preprocess.common import check_output_dir, common_meta, frame_range
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
@@ -355,11 +356,13 @@ def field_from_video(
     flow: str | FlowFn = "dis",
     progress: Callable[[int], None] | None = None,
     sink: FieldSpool | None = None,
+    on_frame: Callable[[NDArray[np.uint8]], None] | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
     Decodes the Y plane only; decoding and tile extraction run in a background thread
     while flow and splatting run in the caller's. Frames ``start <= k < end``.
+    ``on_frame(gray)`` sees every decoded frame first (in the decoding thread).
     """
 
     info = probe(path)
@@ -368,7 +371,8 @@ def field_from_video(
     w, h = info.eye_size(layout)
     est = FieldEstimator((w, h), info.fps, config, flow=flow)
     frames = iter_frames(path, fmt="gray", layout=layout, eye=eye, start=start, end=end)
-    tiles = prefetch((est.tiles(f) for f in frames), depth=4)
+    seen = frames if on_frame is None else (on_frame(f) or f for f in frames)
+    tiles = prefetch((est.tiles(f) for f in seen), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
         return _fields(est, tiles, last - int(start), progress, f"{path}: ", sink), info
@@ -402,6 +406,7 @@ def preprocess_sphere(
     end_s: float | None = None,
     field_dtype: str = "float16",
     progress: Progress | None = None,
+    artefacts: bool = False,
 ):
     """``vimsim preprocess --method sphere``: the field of a video and, derived from it,
     the window matrix of ``grid``, written as one grid file (atomic).
@@ -409,7 +414,9 @@ def preprocess_sphere(
     The grid file holds everything a paper-mode grid holds (``pof_dps``, ``pof_px`` of
     ``grid``, any preset and FOV; ``pof_px`` approximate, see :func:`window_pof`) plus
     ``field_dps`` (T, n_lat, n_lon) and ``meta["field"]`` (:func:`field_meta`).
-    No checkpoints: sphere mode runs at tens of frames per second.
+    No checkpoints: sphere mode runs at tens of frames per second. ``artefacts``: also
+    detect codec keyframes, cuts, fades and overlays in the same decoding pass
+    (:mod:`simulator.preprocess.artefacts`) and store them as ``meta["artefacts"]``.
 
     Every check (video, range, output directory, flow backend) runs before any work; the
     backend is built once (a ``torch:MODEL.pt`` is loaded and validated once).
@@ -438,11 +445,12 @@ def preprocess_sphere(
     cells = CellGrid(config.cell_deg)
     # the field streams to an unnamed temporary file: memory flat in the video's length
     spool = FieldSpool(cells.shape, out.parent if str(out.parent) else ".")
+    col = SignalCollector() if artefacts else None
     try:
         try:
             field_from_video(
                 video, config, layout=layout, eye=eye, start=start_f, end=end_f,
-                flow=backend, progress=tick, sink=spool,
+                flow=backend, progress=tick, sink=spool, on_frame=col and col.add,
             )  # fmt: skip
         finally:
             bar.close()
@@ -475,6 +483,8 @@ def preprocess_sphere(
                 replace(config, stride=config.stride or default_stride), field_dtype
             ),
         }
+        if col is not None:
+            meta["artefacts"] = artefacts_meta(detect_artefacts(col.result(fps, src), dps))
         save_grid(out, dps, px, grid, meta, field_dps=(spool, field_dtype))
     finally:
         spool.close()

@@ -19,13 +19,13 @@ import json
 import math
 from pathlib import Path
 
+import av
 import numpy as np
 
 from simulator.core.fileio import atomic_output
 from simulator.epof.viewing import read_epof_csv
 from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
-from simulator.sphere.geometry import extract_view
-from simulator.study.outputs import _frames_at
+from simulator.sphere.geometry import extract_view, split_eye
 
 __all__ = ["SCREEN_COLUMNS", "write_screen_outputs"]
 
@@ -39,8 +39,8 @@ MOMENT_SEP_S = 2.0
 
 
 def _fmt(v) -> str:
-    if isinstance(v, float):
-        return f"{round(v, 9) + 0.0:.10g}" if math.isfinite(v) else ""
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v) + 0.0:.10g}" if math.isfinite(v) else ""
     return str(v)
 
 
@@ -52,6 +52,44 @@ def _write_csv(path: Path, header, rows, comments=()) -> None:
     w.writerow(header)
     for r in rows:
         w.writerow([_fmt(v) for v in r])
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(buf.getvalue())
+
+
+def _frames_at(video, frames: list[int], layout: str, eye: str):
+    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``, decoding
+    on threads: forward to the next frame when it is near, else a seek to the keyframe
+    before it."""
+    with av.open(str(video)) as c:
+        s = c.streams.video[0]
+        s.thread_type = "AUTO"
+        fps = float(s.average_rate or s.guessed_rate)
+        t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
+        it, pos = None, -(10**9)
+        for f in frames:
+            if it is None or f - pos > 2 * round(fps):
+                c.seek(int((t0 + f / fps) / s.time_base), stream=s, backward=True, any_frame=False)
+                it = c.decode(s)
+            for fr in it:
+                pos = round((float(fr.pts * s.time_base) - t0) * fps) if fr.pts is not None else f
+                if pos >= f:
+                    yield (
+                        f,
+                        split_eye(fr.to_ndarray(format="rgb24"), layout, eye, source=str(video)),
+                    )
+                    break
+
+
+def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
+    """``map.csv``: one row per frame and pitch, one column per yaw (deg/s, 6 digits)."""
+    buf = io.StringIO()
+    buf.write(",".join(("frame", "time_s", "pitch_deg", "artefact", *(f"yaw_{y:g}" for y in yaw))))
+    buf.write("\n")
+    row = ",".join(["%.6g"] * len(yaw))
+    for i in range(len(frames)):
+        head = f"{int(frames[i])},{float(t[i]):.10g},"
+        for j, pv in enumerate(pitch):
+            buf.write(f"{head}{float(pv):g},{kinds[i]}," + row % tuple(pof[i, j]) + "\n")
     with atomic_output(path) as tmp:
         Path(tmp).write_text(buf.getvalue())
 
@@ -104,7 +142,12 @@ def _moments(m: np.ndarray, yaw, fps: float, bad: np.ndarray) -> list[dict]:
 
 def _thumbnails(v, g: dict, moments: list[dict], folder: Path, pitch0: float) -> None:
     """``moment_<rank>.png``: each moment's viewport with a caption under it."""
-    from PIL import Image, ImageDraw
+    from PIL import Image, ImageDraw, ImageFont
+
+    try:
+        font = ImageFont.load_default(size=13)
+    except TypeError:  # Pillow < 10.1: the fixed bitmap font
+        font = ImageFont.load_default()
 
     want = {}
     for mo in moments:
@@ -116,8 +159,8 @@ def _thumbnails(v, g: dict, moments: list[dict], folder: Path, pitch0: float) ->
             img = Image.new("RGB", (240, 276), "white")
             img.paste(Image.fromarray(view), (0, 0))
             cap = (f"#{mo['rank']} {mo['time_s']:.1f} s, yaw {mo['yaw_deg']:+.0f}: "
-                   f"{mo['pof_dps']:.0f} deg/s ({mo['band']})")  # fmt: skip
-            ImageDraw.Draw(img).text((4, 246), cap, fill="black")
+                   f"{mo['pof_dps']:.0f} deg/s {mo['band']}")  # fmt: skip
+            ImageDraw.Draw(img).text((4, 248), cap, fill="black", font=font)
             name = f"moment_{mo['rank']}.png"
             with atomic_output(folder / name) as tmp:
                 img.save(tmp, format="PNG")

@@ -103,7 +103,8 @@ def screen_videos(
         g = _matching_grid(p, grid_files)
         if g is not None:
             reused[vid] = str(g)
-        specs.append(VideoSpec(id=vid, path=p.resolve(), method="sphere", grid_file=g))
+        specs.append(VideoSpec(id=vid, path=p.resolve(), method="sphere", grid_file=g,
+                               artefacts=artefacts))  # fmt: skip
     width = max(3, len(str(viewers)))
     for spec in specs:  # viewer k: the scripted head path of seed + k - 1 (study tasks make it)
         for k in range(1, viewers + 1):
@@ -113,7 +114,7 @@ def screen_videos(
     m = Manifest(path=(out / "screen.toml").resolve(), name="screen", videos=tuple(specs),
                  viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip
     summary = run_study(m, out, executor=executor, workers=workers, cache_dir=cache_dir,
-                        progress=progress)  # fmt: skip
+                        progress=progress, video_outputs=False)  # fmt: skip
     summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts)
     summary["screen"]["reused_grids"] = reused
     summary["screen"]["viewers"] = {"n": viewers, "kind": kind, "seed": seed}

@@ -15,7 +15,7 @@ import glob
 import math
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from simulator.core.choices import MITIGATIONS
@@ -74,6 +74,8 @@ class VideoSpec:
     cell_deg: float = 4.0
     #: A grid the user already made of this video (checked to match); None: the cache's.
     grid_file: Path | None = None
+    #: Detect artefacts while preprocessing (sphere mode; not part of the cache key).
+    artefacts: bool = False
 
     def options(self) -> dict:
         """The preprocessing options (what the grid cache key is made of, besides the video)."""
@@ -494,12 +496,15 @@ def load_manifest(path) -> Manifest:
     st = _Entry(m, "[study]", data.get("study", {}), _STUDY_KEYS)
     videos = _videos(m, base, data.get("videos"))
     viewings = _viewings(m, base, data.get("viewings"), videos)
+    epof = _epof(m, data.get("epof"))
+    if epof["artefacts"]:  # detected in the preprocessing pass (sphere mode) where it runs
+        videos = tuple(replace(v, artefacts=True) for v in videos)
     return Manifest(
         path=m.resolve(),
         name=st.get("name", (str,), m.stem),
         videos=videos,
         viewings=viewings,
-        epof=_epof(m, data.get("epof")),
+        epof=epof,
         render=_render(m, data.get("render")),
         grf=_grf(m, data.get("grf")),
         questionnaires=_questionnaires(m, base, data.get("questionnaires")),

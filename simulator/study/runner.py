@@ -124,8 +124,12 @@ def run_study(
     cache_dir=None,
     resume: bool = True,
     progress=None,
+    video_outputs: bool = True,
 ) -> dict:
     """Run ``manifest`` into ``outdir``; returns the ``study.json`` summary.
+
+    ``video_outputs=False`` skips ``OUTDIR/videos/`` (a caller writing its own, e.g. a
+    screening).
 
     ``progress(done, failed, total)`` is called as tasks finish (units: a preprocess, a
     viewing's EPOF, a render). Failed viewings do not stop the study: their row's
@@ -140,13 +144,13 @@ def run_study(
     _check_outputs(manifest, out, cache)
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
-        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), outputs)
+        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), video_outputs)
     except BaseException:
         ex.close(cancel=True)
         raise
 
 
-def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
+def _run(manifest, out, cache, ex, resume, progress, start, video_outputs) -> dict:
     t_start, c_start = start
     timings: dict[str, float] = {}
     cpu_tasks = 0.0
@@ -302,7 +306,11 @@ def _run(manifest, out, cache, ex, resume, progress, start, outputs) -> dict:
     t0 = time.perf_counter()
     table = [rows[w.id] for w in manifest.viewings]
     outputs.write_viewings_csv(out / "viewings.csv", table, VIEWING_COLUMNS)
-    report = outputs.write_study_outputs(manifest, out, grids, table)
+    report = (
+        outputs.write_study_outputs(manifest, out, grids, table)
+        if video_outputs
+        else {"videos": {}}
+    )
     timings["outputs"] = time.perf_counter() - t0
     ex.join()
     timings["total"] = time.perf_counter() - t_start

@@ -132,6 +132,7 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
                     layout=video["layout"],
                     eye=video["eye"],
                     progress=False,
+                    artefacts=bool(video.get("artefacts")),
                 )
             else:
                 preprocess_video(
