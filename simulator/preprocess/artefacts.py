@@ -72,6 +72,8 @@ _DIFF_RATIO = 1.6  # picture change against the 90th percentile of the +-1 s aro
 _DIFF_RATIO_PERIODIC = 1.2  # ... on the period of at least 3 keyframes found
 _DIFF_FLOOR = 0.6  # gray levels (0..255)
 _CUT_DECORR = 0.5  # a cut: 1 - correlation of the 16 x 8 pictures above this ...
+_CUT_HIST = 0.3  # ... or the gray histogram changes by >= 0.3 (L1, of 2) ...
+_CUT_HIST_RATIO = 4.0  # ... and >= 4x the 90th percentile of its changes within 1 s
 _CUT_DECORR_RATIO = 4.0  # ... and this many times its neighbours'
 # Fades: the contrast changes by >= _FADE_STEP (log) every frame for >= _FADE_MIN_FRAMES,
 # by a factor >= exp(_FADE_TOTAL) in all; flat frames (contrast < _FLAT_STD) beside them.
@@ -101,6 +103,8 @@ class FrameSignals:
     block_diff : (T, B) mean absolute change per block (gray levels)
     coarse : (T, 128) the picture at 16 x 8 (gray levels), for fades
     fps : frames per second
+    hist : (T,) L1 distance between the 32-bin gray histograms of frames t - 1 and t
+        (0..2; camera motion over a 360 picture hardly changes it, a cut does)
     """
 
     mean: NDArray[np.float64]
@@ -109,6 +113,7 @@ class FrameSignals:
     block_diff: NDArray[np.float32]
     coarse: NDArray[np.float32]
     fps: float
+    hist: NDArray[np.float64] | None = None
 
     @property
     def n_frames(self) -> int:
@@ -157,7 +162,9 @@ class SignalCollector:
         self.corrs: list[float] = []
         self.blocks: list[NDArray] = []
         self.coarse: list[NDArray] = []
+        self.hists: list[float] = []
         self._prev: NDArray | None = None
+        self._hist: NDArray | None = None
 
     def add(self, frame: NDArray[np.uint8]) -> None:
         """One gray frame (H, W) uint8 of the video, in order."""
@@ -167,6 +174,9 @@ class SignalCollector:
         self.means.append(float(g.mean()))
         self.stds.append(float(g.std()))
         self.coarse.append(cv2.resize(g, (16, 8), interpolation=cv2.INTER_AREA).ravel())
+        hist = np.bincount(np.clip(g, 0, 255).astype(np.uint8).ravel() // 8, minlength=32) / g.size
+        self.hists.append(0.0 if self._hist is None else float(np.abs(hist - self._hist).sum()))
+        self._hist = hist
         if self._prev is None:
             self.corrs.append(1.0)
             self.blocks.append(np.zeros(bw * bh, np.float32))
@@ -189,8 +199,16 @@ class SignalCollector:
         corr[0] = corr[1]
         bd = np.stack(self.blocks)
         bd[0] = bd[1]
+        hist = np.array(self.hists)
+        hist[0] = hist[1]
         return FrameSignals(
-            np.array(self.means), np.array(self.stds), corr, bd, np.stack(self.coarse), float(fps)
+            np.array(self.means),
+            np.array(self.stds),
+            corr,
+            bd,
+            np.stack(self.coarse),
+            float(fps),
+            hist,
         )
 
 
@@ -247,6 +265,9 @@ def _spikes(sig: FrameSignals | None, pof_dps) -> tuple[NDArray, NDArray, NDArra
     )
     dec = 1.0 - sig.corr
     cut = (dec > _CUT_DECORR) & (dec > _CUT_DECORR_RATIO * _neighbour_median(dec))
+    if sig.hist is not None:  # the picture's histogram jumps (a fade's changes gradually)
+        h = np.asarray(sig.hist, np.float64)
+        cut |= (h >= _CUT_HIST) & (h >= _CUT_HIST_RATIO * _context_p90(h, max(_NB, round(sig.fps))))
     return spread, jump, cut
 
 

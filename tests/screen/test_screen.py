@@ -48,3 +48,93 @@ def test_still_image_exit_2(tmp_path, still, capsys):
     assert "still.png" in err and "still image" in err
     assert len(err.splitlines()) == 1
     assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def clips(tmp_path_factory):
+    """A tiny calm clip and the same clip with a hard cut to a faster one at frame 10."""
+    import subprocess
+
+    from simulator.synth import SynthConfig, synthesize
+    from simulator.testing.reference import ffmpeg_exe
+
+    d = tmp_path_factory.mktemp("screen")
+    synthesize(
+        SynthConfig("rotate", seconds=2.0, fps=10, size=(128, 64), omega_dps=3.0), d / "calm.mp4"
+    )
+    synthesize(SynthConfig("coaster", seconds=2.0, fps=10, size=(128, 64)), d / "ride.mp4")
+    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", "-i", str(d / "calm.mp4"), "-i",
+                    str(d / "ride.mp4"), "-filter_complex",
+                    ("[0:v]trim=end_frame=10,setpts=PTS-STARTPTS[a];[1:v]trim=start_frame=10,"
+                    "setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]"), "-map", "[v]",
+                    "-c:v", "libx264", "-crf", "12", "-pix_fmt", "yuv420p", str(d / "cut.mp4")],
+                   check=True)  # fmt: skip
+    return d
+
+
+def test_screen_end_to_end(clips, tmp_path, capsys):
+    out, cache = tmp_path / "o", tmp_path / "cache"
+    rc = main(["screen", str(clips / "calm.mp4"), str(clips / "cut.mp4"), "-o", str(out),
+               "--viewers", "3", "--cache-dir", str(cache), "--workers", "1", "--no-progress",
+               "--opacity-rule", "absolute"])  # fmt: skip
+    assert rc == 0
+    table = [ln for ln in (out / "screen" / "comparison.csv").read_text().splitlines()]
+    assert any(ln.startswith("# band provocative: 30 to 60 deg/s") for ln in table)
+    rows = [ln.split(",") for ln in table if not ln.startswith("#")]
+    head = rows[0]
+    by = {r[0]: dict(zip(head, r)) for r in rows[1:]}
+    assert set(by) == {"calm", "cut"} and by["calm"]["viewers"] == "3"
+    assert by["cut"]["artefact_kinds"] == "cut:1"  # the cut found, left out
+    assert float(by["calm"]["opacity_mean"]) == 0.0  # absolute rule: a calm clip, no grains
+    assert by["calm"]["opacity_rule"] == "absolute 5-30 deg/s"
+    epof = (out / "epof" / "cut-viewer001.csv").read_text().splitlines()
+    data = [ln for ln in epof if not ln.startswith("#")]
+    assert data[0].endswith(",artefact") and data[11].endswith(",cut")  # row of frame 10
+    for f in ("summary.png", "map.png", "map.csv", "epof_distribution.csv", "sphere_flow.csv",
+              "moments.csv", "moment_1.png"):  # fmt: skip
+        assert (out / "screen" / "cut" / f).is_file()
+    mo = (out / "screen" / "cut" / "moments.csv").read_text().splitlines()
+    assert all(",10," not in ln.split("band")[0] for ln in mo[1:])  # never the cut frame
+    # A grid already made is reused (and says so); the same numbers come out.
+    from simulator.preprocess.sphere import preprocess_sphere
+    from simulator.sphere.windows import grid_preset
+
+    preprocess_sphere(clips / "calm.mp4", tmp_path / "calm.npz", grid=grid_preset("default"))
+    capsys.readouterr()
+    rc = main(["screen", str(clips / "calm.mp4"), "-o", str(tmp_path / "o2"), "--viewers", "3",
+               "--cache-dir", str(tmp_path / "empty"), "--grid", str(tmp_path / "calm.npz"),
+               "--workers", "1", "--no-progress", "--opacity-rule", "absolute"])  # fmt: skip
+    assert rc == 0
+    assert "reused" in capsys.readouterr().err
+    assert not list((tmp_path / "empty" / "grids").glob("*.npz"))  # nothing preprocessed
+
+
+def test_manifest_viewers_option(clips, tmp_path):
+    from simulator.study.manifest import load_manifest
+
+    shutil_copy = (clips / "calm.mp4").read_bytes()
+    (tmp_path / "calm.mp4").write_bytes(shutil_copy)
+    m = tmp_path / "s.toml"
+    m.write_text('[[videos]]\nid = "calm"\npath = "calm.mp4"\nmethod = "sphere"\n\n'
+                 '[[viewings]]\nvideo = "calm"\nviewers = { kind = "look-around", n = 4, seed = 7 }\n'
+                 '\n[epof]\nartefacts = true\nopacity_rule = "absolute"\n')  # fmt: skip
+    man = load_manifest(m)
+    assert [w.id for w in man.viewings] == [f"calm-viewer{k:03d}" for k in range(1, 5)]
+    assert [w.user for w in man.viewings] == [7, 8, 9, 10]
+    assert man.epof["low_dps"] == 5.0 and man.videos[0].artefacts
+    out = tmp_path / "o"
+    assert main(["study", str(m), "-o", str(out), "--cache-dir", str(tmp_path / "c"),
+                 "--workers", "1", "--no-progress"]) == 0  # fmt: skip
+    assert len(list((out / "epof").glob("calm-viewer*.csv"))) == 4
+    for bad, msg in (('viewers = { kind = "zigzag" }', "unknown viewer kind"),
+                     ("viewers = { n = 0 }", "n = 0"),
+                     ('viewers = { n = 2 }\ntrace = "x.csv"', "exclusive")):  # fmt: skip
+        m.write_text(
+            f'[[videos]]\nid = "calm"\npath = "calm.mp4"\n\n[[viewings]]\nvideo = "calm"\n{bad}\n'
+        )
+        with pytest.raises(Exception, match=msg):
+            load_manifest(m)
+    m.write_text('[[videos]]\nid = "calm"\npath = "calm.mp4"\n\n[[viewings]]\nvideo = "calm"\n'
+                 'viewers = { n = 2 }\n\n[epof]\nopacity_rule = "absolute"\nlow_dps = 9\nhigh_dps = 3\n')  # fmt: skip
+    with pytest.raises(Exception, match="low_dps"):
+        load_manifest(m)
