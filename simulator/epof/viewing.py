@@ -171,20 +171,7 @@ def compute_epof(
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
-    kinds = None
-    if artefacts is not None:
-        if len(artefacts.kind) != grid.n_frames:
-            raise InputError(
-                f"artefacts: {len(artefacts.kind)} frames; the grid has {grid.n_frames}"
-            )
-        kinds = tuple(artefacts.kind[int(r)] for r in rows)
-        bad = np.array([k != "" for k in kinds], bool)
-        keep = ~bad if rule.source == "viewing" else ~artefacts.mask
-        thr = rule.fit(grid, e, keep=keep if keep.any() else None)
-        op = rule(_held(e, bad), thr, fps=grid.fps)
-    else:
-        thr = rule.fit(grid, e)
-        op = rule(e, thr, fps=grid.fps)
+    thr, op, kinds = _opacity(rule, grid, e, rows, artefacts)
     h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     meta = {
         "hfov_deg": h,
@@ -198,6 +185,21 @@ def compute_epof(
         "method": "sphere" if sphere else "paper",
     }
     return EpofResult(frames, t, yaw, pitch, roll, e, op, thr, meta, kinds)
+
+
+def _opacity(rule: OpacityRule, grid: GridFile, e, rows, artefacts: Artefacts | None):
+    """``(thresholds, opacity, kinds)`` of a viewing's EPOF ``e`` (grid rows ``rows``):
+    artefact frames left out of the percentiles and the opacity held through them."""
+    if artefacts is None:
+        thr = rule.fit(grid, e)
+        return thr, rule(e, thr, fps=grid.fps), None
+    if len(artefacts.kind) != grid.n_frames:
+        raise InputError(f"artefacts: {len(artefacts.kind)} frames; the grid has {grid.n_frames}")
+    kinds = tuple(artefacts.kind[int(r)] for r in rows)
+    bad = np.array([k != "" for k in kinds], bool)
+    keep = ~bad if rule.source == "viewing" else ~artefacts.mask
+    thr = rule.fit(grid, e, keep=keep if keep.any() else None)
+    return thr, rule(_held(e, bad), thr, fps=grid.fps), kinds
 
 
 def _held(e: NDArray, bad: NDArray) -> NDArray[np.float64]:
