@@ -69,7 +69,7 @@ _SPREAD_RATIO = 1.5  # a window "jumps" when its flow exceeds 1.5x its neighbour
 _SPREAD_FLOOR_DPS = 0.5  # ... plus this, so that a still scene's noise does not jump
 _SPREAD_MIN = 0.6  # share of windows that jump at once (everywhere: keyframe or cut)
 _DIFF_RATIO = 1.6  # picture change against the 90th percentile of the +-1 s around it
-_DIFF_RATIO_PERIODIC = 1.2  # ... on the period of at least 3 keyframes found
+_DIFF_RATIO_PERIODIC = 1.25  # ... on a regular period (most of its frames reset)
 _DIFF_FLOOR = 0.6  # gray levels (0..255)
 _CUT_DECORR = 0.5  # a cut: 1 - correlation of the 16 x 8 pictures above this ...
 _CUT_HIST = 0.3  # ... or the gray histogram changes by >= 0.3 (L1, of 2) ...
@@ -360,6 +360,26 @@ def _overlays(sig: FrameSignals) -> NDArray[np.bool_]:
     return out
 
 
+def _on_period(strong: NDArray, weak: NDArray) -> NDArray[np.bool_]:
+    """Weak resets that keep a regular period: the period of the strong ones (>= 3), else
+    the commonest gap between weak ones, if >= 70 % of the frames on it (>= 4, >= 5 frames
+    apart) are weak resets; those frames."""
+    T = weak.size
+    out = np.zeros(T, bool)
+    for cand in (strong, weak):
+        f = np.flatnonzero(cand[1:]) + 1
+        if f.size < (3 if cand is strong else 4):
+            continue
+        vals, counts = np.unique(np.diff(f), return_counts=True)
+        p = int(vals[np.argmax(counts)])
+        on = np.zeros(T, bool)
+        on[int(f[0]) % p :: p] = True
+        on[0] = False
+        if p >= 5 and on.sum() >= 4 and (weak[on]).mean() >= 0.7:
+            return on & weak
+    return out
+
+
 def _periodic(frames: list[int]) -> int | None:
     """The keyframe period when most gaps between detected keyframes are one value (or
     multiples of it: a keyframe missed)."""
@@ -398,12 +418,9 @@ def detect_artefacts(
         "overlay": _overlays(sig) if sig is not None else np.zeros(T, bool),
     }
     labels["keyframe"][0] = labels["cut"][0] = False  # row 0 repeats row 1
+    if sig is not None:  # weaker resets on a regular period count too
+        labels["keyframe"] |= _on_period(labels["keyframe"], (jump >= _DIFF_RATIO_PERIODIC) & ~cut)
     period = _periodic(np.flatnonzero(labels["keyframe"]).tolist())
-    if period is not None and sig is not None:  # weaker resets on the same period count too
-        phase = int(np.flatnonzero(labels["keyframe"])[0]) % period
-        on = np.zeros(T, bool)
-        on[phase::period] = True
-        labels["keyframe"] |= on & (jump >= _DIFF_RATIO_PERIODIC) & ~cut
     kind = [""] * T
     for k in reversed(ARTEFACT_KINDS):  # the first kind in ARTEFACT_KINDS wins
         for t in np.flatnonzero(labels[k]):

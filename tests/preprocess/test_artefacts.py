@@ -95,3 +95,15 @@ def test_json_round_trip(tmp_path):
     (tmp_path / "bad.json").write_text('{"format": "x"}')
     with pytest.raises(InputError, match="not a vimsim artefacts file"):
         load_artefacts(tmp_path / "bad.json")
+
+
+def test_weak_resets_on_a_regular_period_are_keyframes():
+    rng = np.random.default_rng(6)
+    diff = (1.0 + 0.05 * rng.standard_normal((T, 512))).astype(np.float32)
+    diff[12::12] *= 1.4  # too weak alone (< 1.6x), but every 12th frame
+    a = detect_artefacts(_signals(rng, diff=diff), 5 + rng.standard_normal((T, 11, 24)))
+    assert [i for i, k in enumerate(a.kind) if k] == list(range(12, T, 12))
+    diff = (1.0 + 0.05 * rng.standard_normal((T, 512))).astype(np.float32)
+    diff[[17, 40, 77, 95]] *= 1.4  # as weak, not periodic: nothing
+    a = detect_artefacts(_signals(rng, diff=diff), 5 + rng.standard_normal((T, 11, 24)))
+    assert a.counts()["keyframe"] == 0
