@@ -312,6 +312,7 @@ def _summary_png(path, vid, t, e, bad, m, yaw, g, moments, row, events, folder) 
     lo, med, hi = np.percentile(e, [10, 50, 90], axis=0)
     ax.fill_between(t, lo, hi, color="tab:blue", alpha=0.3, lw=0, label="10-90% of viewers")
     ax.plot(t, med, color="tab:blue", lw=1.2, label="median viewer")
+    ax.plot(t, g["sphere"][: len(t)], color="0.25", lw=0.8, ls="--", label="whole sphere")
     ax.set_ylim(0, max(float(hi.max()) * 1.05, 6.0))
     draw_bands(ax)
     for i in np.flatnonzero(bad):

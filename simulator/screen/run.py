@@ -22,6 +22,7 @@ from simulator.media.video import probe
 from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
 from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
 from simulator.study.runner import run_study
+from simulator.study.tasks import write_json
 
 __all__ = ["SCREEN_COLUMNS", "VIEWER_KINDS", "check_viewers", "screen_videos"]
 
@@ -118,6 +119,9 @@ def screen_videos(
     summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts)
     summary["screen"]["reused_grids"] = reused
     summary["screen"]["viewers"] = {"n": viewers, "kind": kind, "seed": seed}
+    summary["screen"]["artefacts"] = artefacts
+    write_json(out / "screen" / "screen.json", {"format": "vimsim-screen", "version": 1,
+               "study": "study.json", **summary["screen"]})  # fmt: skip
     return summary
 
 

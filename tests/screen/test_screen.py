@@ -93,6 +93,10 @@ def test_screen_end_to_end(clips, tmp_path, capsys):
     for f in ("summary.png", "map.png", "map.csv", "epof_distribution.csv", "sphere_flow.csv",
               "moments.csv", "moment_1.png"):  # fmt: skip
         assert (out / "screen" / "cut" / f).is_file()
+    import json
+
+    rep = json.loads((out / "screen" / "screen.json").read_text())
+    assert [e["kind"] for e in rep["videos"]["cut"]["artefacts"]] == ["cut"]
     mo = (out / "screen" / "cut" / "moments.csv").read_text().splitlines()
     assert all(",10," not in ln.split("band")[0] for ln in mo[1:])  # never the cut frame
     # A grid already made is reused (and says so); the same numbers come out.
