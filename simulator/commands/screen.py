@@ -7,6 +7,7 @@ import sys
 
 from simulator.commands._opacity import add_opacity_arguments
 from simulator.commands._types import nonneg_int
+from simulator.core.choices import LAYOUTS
 
 __all__ = ["register", "run"]
 
@@ -36,6 +37,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--grid", action="append", default=[], metavar="GRID.npz",
                    help="a grid you already made; used for the video it was made of "
                    "(same content), repeatable")  # fmt: skip
+    p.add_argument("--layout", choices=LAYOUTS, default="mono",
+                   help="frame layout of every VIDEO (stereo: the left eye is screened)")  # fmt: skip
     p.add_argument("--no-artefacts", action="store_true",
                    help="do not detect keyframes, cuts, fades and overlays (keep every frame)")  # fmt: skip
     p.add_argument("--executor", default="local", metavar="local|ray|ray:ADDRESS",
@@ -79,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         s = screen_videos(args.videos, args.output, viewers=args.viewers, kind=args.viewer_kind,
                           seed=args.seed, epof=epof, artefacts=not args.no_artefacts,
-                          grids=args.grid, executor=args.executor, workers=args.workers,
+                          grids=args.grid, layout=args.layout, executor=args.executor, workers=args.workers,
                           cache_dir=args.cache_dir, progress=progress)  # fmt: skip
     finally:
         for bar in bars:

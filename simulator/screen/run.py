@@ -44,8 +44,9 @@ def _video_id(path: Path, taken: set[str]) -> str:
     return vid
 
 
-def _matching_grid(video: Path, grids: list[Path]) -> Path | None:
-    """The first of ``grids`` made of ``video`` (the content hash its meta records)."""
+def _matching_grid(video: Path, grids: list[Path], layout: str) -> Path | None:
+    """The first of ``grids`` made of ``video`` (the content hash its meta records) with
+    ``layout``."""
     import json
 
     import numpy as np
@@ -59,7 +60,7 @@ def _matching_grid(video: Path, grids: list[Path]) -> Path | None:
                 meta = json.loads(str(z["meta"]))
         except (OSError, ValueError, KeyError):
             raise InputError(f"{g}: not a vimsim grid file") from None
-        if meta.get("video", {}).get("content_hash") == want:
+        if meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout:
             return g
     return None
 
@@ -74,6 +75,7 @@ def screen_videos(
     epof: dict | None = None,
     artefacts: bool = True,
     grids=(),
+    layout: str = "mono",
     executor: str = "local",
     workers: int | None = None,
     cache_dir=None,
@@ -82,7 +84,8 @@ def screen_videos(
     """Screen ``videos`` into ``outdir``; returns the study summary with ``screen`` added.
 
     ``epof``: the ``[epof]`` options of a study manifest (opacity rule, FOV); ``grids``:
-    grid files the user already made (used for the video whose content they match).
+    grid files the user already made (used for the video whose content they match);
+    ``layout``: of every video (stereo: the left eye is screened).
     InputError (nothing written) for no video, a still image, a missing file, bad viewers.
     """
     check_viewers(viewers, kind)
@@ -96,16 +99,17 @@ def screen_videos(
         info = probe(p)
         if not info.is_video or info.n_frames < 2:
             raise InputError(f"{p}: is a still image; screen needs a video")
+        info.eye_size(layout)  # the layout must fit the frame (InputError naming the file)
     out = Path(outdir)
     taken: set[str] = set()
     specs, views, reused = [], [], {}
     for p in paths:
         vid = _video_id(p, taken)
-        g = _matching_grid(p, grid_files)
+        g = _matching_grid(p, grid_files, layout)
         if g is not None:
             reused[vid] = str(g)
-        specs.append(VideoSpec(id=vid, path=p.resolve(), method="sphere", grid_file=g,
-                               artefacts=artefacts))  # fmt: skip
+        specs.append(VideoSpec(id=vid, path=p.resolve(), layout=layout, method="sphere",
+                               grid_file=g, artefacts=artefacts))  # fmt: skip
     width = max(3, len(str(viewers)))
     for spec in specs:  # viewer k: the scripted head path of seed + k - 1 (study tasks make it)
         for k in range(1, viewers + 1):
