@@ -53,6 +53,7 @@ __all__ = [
     "load_artefacts",
     "no_artefacts",
     "save_artefacts",
+    "stored_artefacts",
 ]
 
 #: The kinds, in the order a frame carrying two is labelled (the first wins).
@@ -499,3 +500,13 @@ def load_artefacts(path) -> Artefacts:
     except (ValueError, KeyError, AssertionError, TypeError):
         raise InputError(f"{p}: not a vimsim artefacts file") from None
     return Artefacts(kind, tuple(d.get("events", ())), d.get("keyframe_period"), d.get("meta", {}))
+
+
+def stored_artefacts(grid) -> Artefacts | None:
+    """The artefacts a grid file's preprocessing stored (``preprocess --artefacts``, a
+    screening), or None: what ``render`` and ``frames`` hold the opacity through."""
+    d = grid.meta.get("artefacts")
+    if not isinstance(d, dict):
+        return None
+    art = artefacts_from_meta(d)
+    return art if len(art.kind) == grid.n_frames else None

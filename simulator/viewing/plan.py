@@ -20,6 +20,7 @@ from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.media.video import MediaInfo, probe
 from simulator.mitigation.grf import OpacityRule, grain_count
+from simulator.preprocess.artefacts import stored_artefacts
 from simulator.render.eye import RenderConfig
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
@@ -185,6 +186,7 @@ def plan_viewing(
             rule=rule,
             method=method,
             frames=(max(0, f0 - warm), f1) if ranged else None,
+            artefacts=stored_artefacts(grid),  # those preprocess --artefacts stored: held
         )
         epof_method = res.meta["method"]
         # Grid rows by video frame number (a grid may start later or lack the last frame).

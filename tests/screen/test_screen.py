@@ -142,3 +142,26 @@ def test_manifest_viewers_option(clips, tmp_path):
                  'viewers = { n = 2 }\n\n[epof]\nopacity_rule = "absolute"\nlow_dps = 9\nhigh_dps = 3\n')  # fmt: skip
     with pytest.raises(Exception, match="low_dps"):
         load_manifest(m)
+
+
+def test_preprocess_stores_artefacts_for_render(clips, tmp_path):
+    """preprocess --artefacts: found in the decoding pass, stored in the grid's meta, read
+    back by what render and frames use."""
+    from simulator.media.gridfile import load_grid
+    from simulator.preprocess.artefacts import stored_artefacts
+
+    out = tmp_path / "g.npz"
+    assert main(["preprocess", str(clips / "cut.mp4"), "-o", str(out), "--method", "sphere",
+                 "--artefacts", "--window-size", "64", "--no-progress"]) == 0  # fmt: skip
+    g = load_grid(out)
+    assert [e["kind"] for e in g.meta["artefacts"]["events"]] == ["cut"]
+    art = stored_artefacts(g)
+    assert art is not None and art.kind[10] == "cut" and sum(map(bool, art.kind)) == 1
+    assert stored_artefacts(load_grid(_plain(clips, tmp_path))) is None
+
+
+def _plain(clips, tmp_path):
+    out = tmp_path / "plain.npz"
+    assert main(["preprocess", str(clips / "calm.mp4"), "-o", str(out), "--method", "sphere",
+                 "--window-size", "64", "--no-progress"]) == 0  # fmt: skip
+    return out
