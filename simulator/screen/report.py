@@ -184,14 +184,7 @@ def _video_report(v, grid_path: Path, epofs: list, folder: Path, artefacts: bool
                ("frame", "time_s", "viewers", "mean_dps", "p10_dps", "p50_dps", "p90_dps", "artefact"),
                zip(frames, t, [e.shape[0]] * n, e.mean(axis=0), p10, p50, p90, kinds))  # fmt: skip
     yaw, pitch = g["yaw"], g["pitch"]
-    rows = []
-    for i in range(n):
-        for j, pv in enumerate(pitch):
-            rows.append(
-                [int(frames[i]), float(t[i]), float(pv), kinds[i], *map(float, g["pof"][i, j])]
-            )
-    _write_csv(folder / "map.csv", ("frame", "time_s", "pitch_deg", "artefact",
-               *(f"yaw_{y:g}" for y in yaw)), rows)  # fmt: skip
+    _write_map(folder / "map.csv", frames, t, pitch, yaw, kinds, g["pof"][:n])
     _write_csv(folder / "sphere_flow.csv", ("frame", "time_s", "sphere_mean_dps", "artefact"),
                zip(frames, t, g["sphere"][:n], kinds))  # fmt: skip
     p0 = int(np.argmin(np.abs(pitch)))
