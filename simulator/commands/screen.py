@@ -94,6 +94,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"vimsim screen: video {vid}: {vo['error']}", file=sys.stderr)
     for vid, g in s["screen"]["reused_grids"].items():
         print(f"vimsim screen: video {vid}: reused {g}", file=sys.stderr)
+    for g in s["screen"]["unused_grids"]:
+        print(f"vimsim screen: note: {g} is of none of the videos (content or layout): not used",
+              file=sys.stderr)  # fmt: skip
     for r in s["screen"]["rows"]:
         print(f"{r['video']}: mean {r['epof_mean_dps']:.2f} deg/s, p90 {r['epof_p90_dps']:.2f} "
               f"({r['band_p90']}), artefact frames {r['artefact_frames']}")  # fmt: skip

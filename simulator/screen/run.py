@@ -122,6 +122,9 @@ def screen_videos(
                         progress=progress, video_outputs=False)  # fmt: skip
     summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts)
     summary["screen"]["reused_grids"] = reused
+    summary["screen"]["unused_grids"] = [
+        str(g) for g in grid_files if str(g) not in reused.values()
+    ]
     summary["screen"]["viewers"] = {"n": viewers, "kind": kind, "seed": seed}
     summary["screen"]["artefacts"] = artefacts
     write_json(out / "screen" / "screen.json", {"format": "vimsim-screen", "version": 1,
