@@ -94,8 +94,20 @@ def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
         Path(tmp).write_text(buf.getvalue())
 
 
+def _sphere_mean(f) -> np.ndarray:
+    """Per frame, the solid-angle-weighted mean of a lon/lat field ``(T, n_lat, n_lon)``
+    (deg/s), 256 frames at a time."""
+    lat = (np.arange(f.shape[1]) + 0.5) / f.shape[1] * np.pi - np.pi / 2
+    w = np.cos(lat)[:, None] * np.ones(f.shape[2])
+    out = [(np.asarray(f[i : i + 256], np.float64) * w).sum(axis=(1, 2)) / w.sum()
+           for i in range(0, f.shape[0], 256)]  # fmt: skip
+    return np.concatenate(out)
+
+
 def _grid_arrays(path: Path) -> dict:
-    """Window matrix, axes, fps and (if any) the field's per-frame sphere mean of a grid."""
+    """Window matrix, axes, fps and per frame the sphere's mean flow (the field's, else the
+    windows'), its translational part and the camera's rotation speed (NaN where the grid
+    does not record them)."""
     with np.load(path, allow_pickle=False) as z:
         meta = json.loads(str(z["meta"]))
         d = {"pof": np.asarray(z["pof_dps"], np.float64), "yaw": z["yaw_deg"],
@@ -103,16 +115,14 @@ def _grid_arrays(path: Path) -> dict:
              "start": int(meta.get("start_frame", 0)),
              "hfov": float(meta["grid"]["hfov_deg"]), "vfov": float(meta["grid"]["vfov_deg"])}  # fmt: skip
         if "field_dps" in z.files:
-            sphere = []
-            f = z["field_dps"]
-            lat = (np.arange(f.shape[1]) + 0.5) / f.shape[1] * np.pi - np.pi / 2
-            w = np.cos(lat)[:, None] * np.ones(f.shape[2])
-            for i in range(0, f.shape[0], 256):
-                c = np.asarray(f[i : i + 256], np.float64)
-                sphere.append((c * w).sum(axis=(1, 2)) / w.sum())
-            d["sphere"] = np.concatenate(sphere)
+            d["sphere"] = _sphere_mean(z["field_dps"])
         else:  # no field: the windows' mean
             d["sphere"] = d["pof"].reshape(d["pof"].shape[0], -1).mean(axis=1)
+        nan = np.full(len(d["sphere"]), np.nan)
+        # the camera's rotation and the flow without it (grids that record them)
+        d["trans"] = _sphere_mean(z["field_trans_dps"]) if "field_trans_dps" in z.files else nan
+        om = z["ego_omega_dps"] if "ego_omega_dps" in z.files else None
+        d["rot"] = nan if om is None else np.linalg.norm(np.asarray(om, np.float64), axis=1)
     return d
 
 
@@ -185,8 +195,9 @@ def _video_report(v, grid_path: Path, epofs: list, folder: Path, artefacts: bool
                zip(frames, t, [e.shape[0]] * n, e.mean(axis=0), p10, p50, p90, kinds))  # fmt: skip
     yaw, pitch = g["yaw"], g["pitch"]
     _write_map(folder / "map.csv", frames, t, pitch, yaw, kinds, g["pof"][:n])
-    _write_csv(folder / "sphere_flow.csv", ("frame", "time_s", "sphere_mean_dps", "artefact"),
-               zip(frames, t, g["sphere"][:n], kinds))  # fmt: skip
+    _write_csv(folder / "sphere_flow.csv", ("frame", "time_s", "sphere_mean_dps",
+               "sphere_trans_mean_dps", "camera_rotation_dps", "artefact"),
+               zip(frames, t, g["sphere"][:n], g["trans"][:n], g["rot"][:n], kinds))  # fmt: skip
     p0 = int(np.argmin(np.abs(pitch)))
     m = g["pof"][:n, p0, :]
     moments = _moments(m, yaw, g["fps"], bad)

@@ -93,7 +93,18 @@ def test_screen_end_to_end(clips, tmp_path, capsys):
     for f in ("summary.png", "map.png", "map.csv", "epof_distribution.csv", "sphere_flow.csv",
               "moments.csv", "moment_1.png"):  # fmt: skip
         assert (out / "screen" / "cut" / f).is_file()
+    import csv
     import json
+
+    # The whole sphere's flow, its translational part and the camera's rotation (sphere
+    # mode records them): the rotating calm clip turns at 3 deg/s, mostly rotation.
+    with open(out / "screen" / "calm" / "sphere_flow.csv") as fh:
+        sf = [r for r in csv.DictReader(ln for ln in fh if not ln.startswith("#"))]
+    rot = np.array([float(r["camera_rotation_dps"]) for r in sf[1:]])
+    trans = np.array([float(r["sphere_trans_mean_dps"]) for r in sf[1:]])
+    whole = np.array([float(r["sphere_mean_dps"]) for r in sf[1:]])
+    assert np.all(np.isfinite(rot)) and 1.5 < np.median(rot) < 4.5, rot
+    assert np.median(trans) < np.median(whole), (trans, whole)
 
     rep = json.loads((out / "screen" / "screen.json").read_text())
     assert [e["kind"] for e in rep["videos"]["cut"]["artefacts"]] == ["cut"]
