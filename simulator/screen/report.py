@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
+import warnings
 from pathlib import Path
 
 import av
@@ -24,6 +24,8 @@ import numpy as np
 
 from simulator.core.fileio import atomic_output
 from simulator.epof.viewing import read_epof_csv
+from simulator.media.gridfile import load_grid
+from simulator.media.lazyfield import field_chunks
 from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
 from simulator.sphere.geometry import extract_view, split_eye
 
@@ -96,11 +98,10 @@ def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
 
 def _sphere_mean(f) -> np.ndarray:
     """Per frame, the solid-angle-weighted mean of a lon/lat field ``(T, n_lat, n_lon)``
-    (deg/s), 256 frames at a time."""
+    (deg/s), read chunk by chunk (a lazy grid field: memory flat in the video's length)."""
     lat = (np.arange(f.shape[1]) + 0.5) / f.shape[1] * np.pi - np.pi / 2
     w = np.cos(lat)[:, None] * np.ones(f.shape[2])
-    out = [(np.asarray(f[i : i + 256], np.float64) * w).sum(axis=(1, 2)) / w.sum()
-           for i in range(0, f.shape[0], 256)]  # fmt: skip
+    out = [(np.asarray(b, np.float64) * w).sum(axis=(1, 2)) / w.sum() for _, b in field_chunks(f)]
     return np.concatenate(out)
 
 
@@ -108,21 +109,23 @@ def _grid_arrays(path: Path) -> dict:
     """Window matrix, axes, fps and per frame the sphere's mean flow (the field's, else the
     windows'), its translational part and the camera's rotation speed (NaN where the grid
     does not record them)."""
-    with np.load(path, allow_pickle=False) as z:
-        meta = json.loads(str(z["meta"]))
-        d = {"pof": np.asarray(z["pof_dps"], np.float64), "yaw": z["yaw_deg"],
-             "pitch": z["pitch_deg"], "fps": float(meta["fps"]),
-             "start": int(meta.get("start_frame", 0)),
-             "hfov": float(meta["grid"]["hfov_deg"]), "vfov": float(meta["grid"]["vfov_deg"])}  # fmt: skip
-        if "field_dps" in z.files:
-            d["sphere"] = _sphere_mean(z["field_dps"])
-        else:  # no field: the windows' mean
-            d["sphere"] = d["pof"].reshape(d["pof"].shape[0], -1).mean(axis=1)
-        nan = np.full(len(d["sphere"]), np.nan)
-        # the camera's rotation and the flow without it (grids that record them)
-        d["trans"] = _sphere_mean(z["field_trans_dps"]) if "field_trans_dps" in z.files else nan
-        om = z["ego_omega_dps"] if "ego_omega_dps" in z.files else None
-        d["rot"] = nan if om is None else np.linalg.norm(np.asarray(om, np.float64), axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = load_grid(path)
+    meta = g.meta
+    d = {"pof": np.asarray(g.pof_dps, np.float64), "yaw": g.yaw_deg, "pitch": g.pitch_deg,
+         "fps": float(g.fps), "start": int(meta.get("start_frame", 0)),
+         "hfov": float(meta["grid"]["hfov_deg"]), "vfov": float(meta["grid"]["vfov_deg"])}  # fmt: skip
+    if g.field_dps is not None:
+        d["sphere"] = _sphere_mean(g.field_dps)
+    else:  # no field: the windows' mean
+        d["sphere"] = d["pof"].reshape(d["pof"].shape[0], -1).mean(axis=1)
+    nan = np.full(len(d["sphere"]), np.nan)
+    # the camera's rotation and the flow without it (grids that record them)
+    trans = getattr(g, "field_trans_dps", None)
+    d["trans"] = nan if trans is None else _sphere_mean(trans)
+    om = (g.extras or {}).get("ego_omega_dps")
+    d["rot"] = nan if om is None else np.linalg.norm(np.asarray(om, np.float64), axis=1)
     return d
 
 
