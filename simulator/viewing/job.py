@@ -280,7 +280,8 @@ def render_viewing(
     plan, vis = job.plan, job.visible
     settings = epof_settings(job)
     res = EpofResult(plan.frames, plan.times_s, *plan.angles_deg.T, plan.epof_dps,
-                     plan.opacity, plan.thresholds_dps, coverage=plan.coverage)  # fmt: skip
+                     plan.opacity, plan.thresholds_dps, coverage=plan.coverage,
+                     artefact=plan.artefact)  # fmt: skip
     write_epof_csv(
         out / "epof.csv",
         res,

@@ -68,6 +68,8 @@ class ViewingPlan:
     epof_eye: str = "left"
     epof_frustum: Frustum | None = None
     coverage: np.ndarray | None = None
+    #: the artefact kind of each frame (``""``: none) when the grid stores them, else None
+    artefact: tuple[str, ...] | None = None
 
     @property
     def right(self) -> str | None:
@@ -112,12 +114,13 @@ def _check_needs_grid(view: ViewSpec, grid) -> None:
 
 
 def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged):
-    """``(epof_dps, opacity, thresholds_dps, method, coverage)`` of the plan's ``frames``
-    (NaN, None, NaN, None, None without a grid): the EPOF over ``frustum``, the opacity of
-    ``view.rule`` and the covered share of the view (None for a full-sphere source)."""
+    """``(epof_dps, opacity, thresholds_dps, method, coverage, artefact)`` of the plan's
+    ``frames`` (NaN, None, NaN, None, None, None without a grid): the EPOF over ``frustum``,
+    the opacity of ``view.rule``, the covered share of the view (None for a full-sphere
+    source) and the artefact kinds the grid stores (None when it stores none)."""
     nf = len(frames)
     if grid is None:
-        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None, None
+        return np.full(nf, np.nan), None, (float("nan"), float("nan")), None, None, None
     rule, f0, f1 = view.rule, int(frames[0]), int(frames[-1]) + 1
     # A range: EPOF of its frames only, plus a warm-up before it so that smoothing
     # and easing have their state at the range's start (cost ~ the range).
@@ -142,6 +145,7 @@ def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps
         tuple(float(v) for v in res.thresholds_dps),
         res.meta["method"],
         None if res.coverage is None else res.coverage[rows].astype(float),
+        None if res.artefact is None else tuple(res.artefact[int(r)] for r in rows),
     )
 
 
@@ -209,7 +213,7 @@ def plan_viewing(
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
-    epof_dps, op_auto, thresholds, epof_method, coverage = _epof_rows(
+    epof_dps, op_auto, thresholds, epof_method, coverage, artefact = _epof_rows(
         grid, hp, view, epof_frustum, frames, info.fps, ranged
     )
     if not drawn:
@@ -237,4 +241,5 @@ def plan_viewing(
         epof_eye,
         epof_frustum,
         coverage,
+        artefact,
     )

@@ -160,6 +160,7 @@ def test_manifest_viewers_option(clips, tmp_path):
         load_manifest(m)
 
 
+@pytest.mark.gl
 def test_preprocess_stores_artefacts_for_render(clips, tmp_path):
     """preprocess --artefacts: found in the decoding pass, stored in the grid's meta, read
     back by what render and frames use."""
@@ -174,6 +175,14 @@ def test_preprocess_stores_artefacts_for_render(clips, tmp_path):
     art = stored_artefacts(g)
     assert art is not None and art.kind[10] == "cut" and sum(map(bool, art.kind)) == 1
     assert stored_artefacts(load_grid(_plain(clips, tmp_path))) is None
+    # render's epof.csv names the artefact frames too (their opacity held)
+    hp, r = tmp_path / "hp.csv", tmp_path / "r"
+    assert main(["headpath", "synth", "static", "-o", str(hp), "--seconds", "3"]) == 0
+    assert main(["render", str(clips / "cut.mp4"), str(hp), "-o", str(r), "--grid", str(out),
+                 "--eye-size", "64x64", "--no-audio", "--no-progress"]) == 0  # fmt: skip
+    rows = [ln for ln in (r / "epof.csv").read_text().splitlines() if not ln.startswith("#")]
+    assert rows[0].endswith(",artefact") and rows[11].endswith(",cut")
+    assert sum(ln.endswith(",cut") for ln in rows[1:]) == 1
 
 
 def _plain(clips, tmp_path):
