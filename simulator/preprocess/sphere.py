@@ -37,6 +37,7 @@ from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
+from simulator.preprocess.tiles import downscale, tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -169,9 +170,7 @@ class _TileGeometry:
         )  # fmt: skip
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        f = np.ascontiguousarray(frame)
-        for _ in range(self.level):
-            f = cv2.pyrDown(f)
+        f = downscale(frame, self.small_size)  # one area pass (pyrDown's sizes)
         out = cv2.remap(
             pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
         )
@@ -390,8 +389,10 @@ def field_from_video(
     if not info.is_video:
         raise InputError(f"{path}: sphere mode needs a video; got a still image")
     est = FieldEstimator(source.eye_size, info.fps, config, flow=flow)
-    frames = source.frames(fmt="gray", start=start, end=end)
-    tiles = prefetch((est.tiles(f) for f in frames), depth=4)
+    g = est._geo  # a non-equirect source: tiles straight from its frames (one resampling)
+    tiling = (g.size, est.config.tile_fov_deg, _CUBE, g.level)
+    frames, sample = tile_frames(source, est.tiles, tiling, start, end)
+    tiles = prefetch((sample(f) for f in frames), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
         mask = None if source.covered is None else cell_coverage(source.covered, config.cell_deg)
