@@ -37,7 +37,7 @@ from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
-from simulator.preprocess.tiles import downscale, tile_frames
+from simulator.preprocess.tiles import tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -170,7 +170,9 @@ class _TileGeometry:
         )  # fmt: skip
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        f = downscale(frame, self.small_size)  # one area pass (pyrDown's sizes)
+        f = np.ascontiguousarray(frame)
+        for _ in range(self.level):
+            f = cv2.pyrDown(f)
         out = cv2.remap(
             pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
         )

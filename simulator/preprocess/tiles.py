@@ -1,11 +1,11 @@
-"""Sphere-mode tile sampling helpers: one-pass downscaling, and tiles sampled straight from a frame of a non-equirect projection.
+"""Sphere-mode tiles sampled straight from a frame of a non-equirect projection (one resampling), and the area downscaling they use.
 
 Sphere mode samples its cube-face tiles from a frame lowered to the tiles' density
-(:class:`simulator.preprocess.sphere._TileGeometry`). :func:`downscale` lowers it in one
-area-averaging pass (at 8K three ``cv2.pyrDown`` passes cost 2.5x its CPU time).
-:class:`ProjectionTiles` samples the tiles of a cubemap, fisheye or VR180 frame with one
-``cv2.remap`` (tile pixel -> direction -> projection pixel, composed once), instead of
-converting every frame to the equirect working frame and resampling that.
+(:class:`simulator.preprocess.sphere._TileGeometry`). :class:`ProjectionTiles` samples
+the tiles of a cubemap, fisheye or VR180 frame with one ``cv2.remap`` (tile pixel ->
+direction -> projection pixel, composed once), instead of converting every frame to the
+equirect working frame and resampling that; :func:`downscale` lowers the stored frame
+(or its face atlas) by area averaging in exact halvings (OpenCV's fast 2x path).
 """
 
 from __future__ import annotations
@@ -25,10 +25,15 @@ __all__ = ["ProjectionTiles", "downscale", "tile_dirs", "tile_frames"]
 
 def downscale(frame: NDArray[np.uint8], size: tuple[int, int]) -> NDArray[np.uint8]:
     """``frame`` at ``size = (w, h)`` by area averaging (the frame itself when it already
-    is that size); pixel centres map as ``(x + 0.5) * w / W - 0.5``."""
-    if frame.shape[1] == size[0] and frame.shape[0] == size[1]:
-        return np.ascontiguousarray(frame)
-    return cv2.resize(frame, (int(size[0]), int(size[1])), interpolation=cv2.INTER_AREA)
+    is that size); pixel centres map as ``(x + 0.5) * w / W - 0.5``. Halvings first:
+    OpenCV's exact-2x area path is ~6x faster than one 8x area resize (the same means)."""
+    w, h = int(size[0]), int(size[1])
+    f = frame
+    while f.shape[1] >= 2 * w and f.shape[0] >= 2 * h:
+        f = cv2.resize(f, (f.shape[1] // 2, f.shape[0] // 2), interpolation=cv2.INTER_AREA)
+    if f.shape[1] != w or f.shape[0] != h:
+        f = cv2.resize(f, (w, h), interpolation=cv2.INTER_AREA)
+    return np.ascontiguousarray(f)
 
 
 def tile_dirs(size: int, fov_deg: float, faces) -> NDArray[np.float64]:
