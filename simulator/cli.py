@@ -37,11 +37,14 @@ COMMANDS: dict[str, str] = {
     "export": "export",
     "study": "study",
     "report": "report",
+    "screen": "screen",
 }
 
 
 #: Commands whose ``-o`` is a folder (the rest write one file).
-FOLDER_OUTPUTS = frozenset({"render", "analyze", "demo", "frames", "export", "study", "report"})
+FOLDER_OUTPUTS = frozenset(
+    {"render", "analyze", "demo", "frames", "export", "study", "report", "screen"}
+)
 #: Suffixes ``--plot`` / ``headpath plot -o`` may have (matplotlib writes these).
 PLOT_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".tif", ".tiff", ".webp", ".eps", ".ps")
 _OUTPUT_KEYS = ("output", "plot", "log")

@@ -140,15 +140,8 @@ def test_library_is_quiet():
 
 
 MAX_FUNCTION_LINES = 100
-#: Library functions over MAX_FUNCTION_LINES that other work owns; the integrator empties it.
-LONG_FUNCTIONS_ALLOWED = {
-    "analyze/data.py:read_study",
-    "analyze/report.py:analyze_study",
-    "export/unity.py:export_unity",
-    "preprocess/paper.py:preprocess_video",
-    "study/runner.py:_run",
-    "synth/clip.py:synthesize",
-}
+#: Library functions allowed over MAX_FUNCTION_LINES (none).
+LONG_FUNCTIONS_ALLOWED: set[str] = set()
 
 
 def _long_functions() -> dict[str, int]:
@@ -168,8 +161,7 @@ def _long_functions() -> dict[str, int]:
 
 
 def test_no_library_function_over_100_lines():
-    """Functions stay readable: none over 100 lines (docstring included) outside the CLI,
-    but for the allow-list of functions others are splitting (the integrator empties it)."""
+    """Functions stay readable: none over 100 lines (docstring included) outside the CLI."""
     long = _long_functions()
     over = {k: v for k, v in long.items() if k not in LONG_FUNCTIONS_ALLOWED}
     assert not over, f"library functions over {MAX_FUNCTION_LINES} lines: {over}"

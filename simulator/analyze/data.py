@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import difflib
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -208,6 +208,94 @@ def session_flow(path: str | Path, stat: str = "mean") -> float:
     return float({"mean": np.mean, "median": np.median, "sum": np.sum}[stat](a))
 
 
+def _row_ssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[SSQScores, str]:
+    """A row's SSQ scores and their source (``items`` or ``subscores``); InputError names
+    the problem."""
+    item_cells = [cell(c) for c in SSQ_ITEMS] if has["items"] else []
+    sub_cells = [cell(c) for c in _SSQ_SUBSCORE_COLUMNS] if has["subscores"] else []
+    if has["items"] and (all(item_cells) or not (sub_cells and all(sub_cells))):
+        blank = [c for c, t in zip(SSQ_ITEMS, item_cells) if not t]
+        if blank:
+            raise InputError(f"SSQ answers missing: {', '.join(blank)}")
+        ssq = ssq_scores([_rating(c, t) for c, t in zip(SSQ_ITEMS, item_cells)])
+        ssq_src = "items"
+    else:
+        blank = [c for c, t in zip(_SSQ_SUBSCORE_COLUMNS, sub_cells) if not t]
+        if blank:
+            raise InputError(f"SSQ subscores missing: {', '.join(blank)}")
+        vals = {c: _number(c, t) for c, t in zip(_SSQ_SUBSCORE_COLUMNS, sub_cells)}
+        tot = cell("ssq_total")
+        if tot:
+            vals["ssq_total"] = _number("ssq_total", tot)
+        else:  # Total = 3.74 x (N_raw + O_raw + D_raw)
+            vals["ssq_total"] = _SSQ_TOTAL_WEIGHT * (
+                vals["ssq_n"] / 9.54 + vals["ssq_o"] / 7.58 + vals["ssq_d"] / 13.92
+            )
+        for c, v in vals.items():
+            if not (0.0 <= v <= _SSQ_MAX[c] + 1e-6):
+                raise InputError(f"{c} = {v:g} outside 0..{_SSQ_MAX[c]:.2f}")
+        ssq = SSQScores(vals["ssq_n"], vals["ssq_o"], vals["ssq_d"], vals["ssq_total"])
+        ssq_src = "subscores"
+    return ssq, ssq_src
+
+
+def _row_mssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[MSSQScore, str]:
+    """A row's MSSQ-short score and its source (``answers`` or ``score``); InputError names
+    the problem."""
+    ans = [cell(c) for c in _MSSQ_CHILD + _MSSQ_ADULT] if has["answers"] else []
+    if ans and (all(ans) or not cell("mssq")):
+        blank = [c for c, t in zip(_MSSQ_CHILD + _MSSQ_ADULT, ans) if not t]
+        if blank:
+            raise InputError(f"MSSQ-short answers missing: {', '.join(blank)}")
+        vals_ = [_rating(c, t, allow_t=True) for c, t in zip(_MSSQ_CHILD + _MSSQ_ADULT, ans)]
+        for label, part in (("child", vals_[:9]), ("adult", vals_[9:])):
+            if all(v is None for v in part):
+                raise InputError(
+                    f"MSSQ-short {label} section: every answer is 't' (never "
+                    "experienced); the section cannot be scored"
+                )
+        ms = mssq_short_score(vals_[:9], vals_[9:])
+        ms_src = "answers"
+    else:
+        t = cell("mssq")
+        if not t:
+            raise InputError("mssq is blank")
+        v = _number("mssq", t)
+        if not 0.0 <= v <= _MSSQ_MAX:
+            raise InputError(f"mssq = {v:g} outside 0..54")
+        ms = MSSQScore(total=v)
+        ms_src = "score"
+    return ms, ms_src
+
+
+def _row_flow(
+    cell: Callable[[str], str],
+    has_epof: bool,
+    folder: Path,
+    flow_stat: str,
+    flow_cache: dict[Path, float],
+) -> tuple[float, str]:
+    """A row's flow and its source (``flow`` or the EPOF CSV's cell; the CSV's statistic is
+    read once per file through ``flow_cache``); InputError names the problem."""
+    ft, et = cell("flow"), cell("epof_csv")
+    if ft:
+        flow = _number("flow", ft)
+        if flow < 0:
+            raise InputError(f"flow = {ft} is negative")
+        flow_src = "flow"
+    elif et:
+        ep = Path(et)
+        if not ep.is_absolute():
+            ep = folder / ep
+        if ep not in flow_cache:
+            flow_cache[ep] = session_flow(ep, flow_stat)
+        flow = flow_cache[ep]
+        flow_src = et
+    else:
+        raise InputError("flow is blank" + (" and epof_csv is blank" if has_epof else ""))
+    return flow, flow_src
+
+
 def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
     """Read and score DATA.csv (one row per participant; see docs/analyze.md).
 
@@ -259,84 +347,17 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
 
         ssq = ssq_src = None
         try:
-            item_cells = [cell(c) for c in SSQ_ITEMS] if has["items"] else []
-            sub_cells = [cell(c) for c in _SSQ_SUBSCORE_COLUMNS] if has["subscores"] else []
-            if has["items"] and (all(item_cells) or not (sub_cells and all(sub_cells))):
-                blank = [c for c, t in zip(SSQ_ITEMS, item_cells) if not t]
-                if blank:
-                    raise InputError(f"SSQ answers missing: {', '.join(blank)}")
-                ssq = ssq_scores([_rating(c, t) for c, t in zip(SSQ_ITEMS, item_cells)])
-                ssq_src = "items"
-            else:
-                blank = [c for c, t in zip(_SSQ_SUBSCORE_COLUMNS, sub_cells) if not t]
-                if blank:
-                    raise InputError(f"SSQ subscores missing: {', '.join(blank)}")
-                vals = {c: _number(c, t) for c, t in zip(_SSQ_SUBSCORE_COLUMNS, sub_cells)}
-                tot = cell("ssq_total")
-                if tot:
-                    vals["ssq_total"] = _number("ssq_total", tot)
-                else:  # Total = 3.74 x (N_raw + O_raw + D_raw)
-                    vals["ssq_total"] = _SSQ_TOTAL_WEIGHT * (
-                        vals["ssq_n"] / 9.54 + vals["ssq_o"] / 7.58 + vals["ssq_d"] / 13.92
-                    )
-                for c, v in vals.items():
-                    if not (0.0 <= v <= _SSQ_MAX[c] + 1e-6):
-                        raise InputError(f"{c} = {v:g} outside 0..{_SSQ_MAX[c]:.2f}")
-                ssq = SSQScores(vals["ssq_n"], vals["ssq_o"], vals["ssq_d"], vals["ssq_total"])
-                ssq_src = "subscores"
+            ssq, ssq_src = _row_ssq(cell, has)
         except InputError as e:
             errs.append(str(e))
-
         ms = ms_src = None
         try:
-            ans = [cell(c) for c in _MSSQ_CHILD + _MSSQ_ADULT] if has["answers"] else []
-            if ans and (all(ans) or not cell("mssq")):
-                blank = [c for c, t in zip(_MSSQ_CHILD + _MSSQ_ADULT, ans) if not t]
-                if blank:
-                    raise InputError(f"MSSQ-short answers missing: {', '.join(blank)}")
-                vals_ = [
-                    _rating(c, t, allow_t=True) for c, t in zip(_MSSQ_CHILD + _MSSQ_ADULT, ans)
-                ]
-                for label, part in (("child", vals_[:9]), ("adult", vals_[9:])):
-                    if all(v is None for v in part):
-                        raise InputError(
-                            f"MSSQ-short {label} section: every answer is 't' (never "
-                            "experienced); the section cannot be scored"
-                        )
-                ms = mssq_short_score(vals_[:9], vals_[9:])
-                ms_src = "answers"
-            else:
-                t = cell("mssq")
-                if not t:
-                    raise InputError("mssq is blank")
-                v = _number("mssq", t)
-                if not 0.0 <= v <= _MSSQ_MAX:
-                    raise InputError(f"mssq = {v:g} outside 0..54")
-                ms = MSSQScore(total=v)
-                ms_src = "score"
+            ms, ms_src = _row_mssq(cell, has)
         except InputError as e:
             errs.append(str(e))
-
         flow = flow_src = None
         try:
-            ft, et = cell("flow"), cell("epof_csv")
-            if ft:
-                flow = _number("flow", ft)
-                if flow < 0:
-                    raise InputError(f"flow = {ft} is negative")
-                flow_src = "flow"
-            elif et:
-                ep = Path(et)
-                if not ep.is_absolute():
-                    ep = p.parent / ep
-                if ep not in flow_cache:
-                    flow_cache[ep] = session_flow(ep, flow_stat)
-                flow = flow_cache[ep]
-                flow_src = et
-            else:
-                raise InputError(
-                    "flow is blank" + (" and epof_csv is blank" if "epof_csv" in idx else "")
-                )
+            flow, flow_src = _row_flow(cell, "epof_csv" in idx, p.parent, flow_stat, flow_cache)
         except InputError as e:
             errs.append(str(e))
 

@@ -92,6 +92,107 @@ def _shapiro(values: NDArray[np.float64]) -> tuple[float, float, str]:
     return float(res.statistic), float(res.pvalue), ""
 
 
+def _pick_conditions(study: Study, conditions: Sequence[str] | None) -> tuple[str, str]:
+    """The two condition labels compared: ``conditions`` (checked) or the file's two."""
+    path = study.path
+    if conditions is not None:
+        conds = tuple(conditions)
+        if len(conds) != 2 or conds[0] == conds[1]:
+            raise InputError(
+                f"--conditions: expected two different labels, e.g. NR,GR; got {conds}"
+            )
+        absent = [c for c in conds if c not in study.conditions]
+        if absent:
+            raise InputError(
+                f"{path}: condition {absent[0]!r} (from --conditions) not found; "
+                f"conditions in the file: {list(study.conditions)}"
+            )
+    else:
+        if len(study.conditions) < 2:
+            raise InputError(
+                f"{path}: only one condition ({', '.join(map(repr, study.conditions)) or 'none'}); "
+                "expected two (e.g. GR and NR) to compare"
+            )
+        if len(study.conditions) > 2:
+            raise InputError(
+                f"{path}: {len(study.conditions)} conditions {list(study.conditions)}; expected "
+                "two: pick them with --conditions A,B"
+            )
+        conds = (study.conditions[0], study.conditions[1])
+    return conds
+
+
+def _split_participants(
+    study: Study, conds: tuple[str, str], exclude_below: float | None
+) -> tuple[list[Participant], list[tuple[str, str]]]:
+    """``(included, excluded)``: excluded as ``(id, reason)``, in the file's order."""
+    included: list[Participant] = []
+    excluded: list[tuple[str, str]] = []
+    for part in study.participants:
+        if part.condition not in conds:
+            excluded.append((part.id, f"condition {part.condition!r} not in {list(conds)}"))
+        elif part.flow <= 0:
+            excluded.append((part.id, f"flow {part.flow:g} <= 0 (K_OF divides by flow)"))
+        elif exclude_below is not None and part.flow < exclude_below:
+            excluded.append((part.id, f"flow {part.flow:g} < {exclude_below:g} (--exclude-below)"))
+        else:
+            included.append(part)
+    return included, excluded
+
+
+def _normality_rows(
+    label: str, vals: NDArray[np.float64], g_arr: NDArray, conds: tuple[str, str]
+) -> list[dict]:
+    """Shapiro-Wilk of one measure over all participants and per condition."""
+    normality: list[dict] = []
+    for grp in ("all", *conds):
+        v = vals if grp == "all" else vals[g_arr == grp]
+        w, pv, note = _shapiro(v)
+        normality.append(
+            {
+                "measure": label,
+                "group": grp,
+                "n": int(np.isfinite(v).sum()),
+                "W": w,
+                "p": pv,
+                "note": note,
+            }
+        )
+    return normality
+
+
+def _mann_whitney(
+    label: str, a: NDArray[np.float64], b: NDArray[np.float64], conds: tuple[str, str]
+) -> dict:
+    """The two-sided Mann-Whitney U row of one measure (condition a vs b; NaN scores dropped)."""
+    from scipy import stats
+
+    a, b = a[np.isfinite(a)], b[np.isfinite(b)]
+    row = {
+        "measure": label,
+        "condition_a": conds[0],
+        "condition_b": conds[1],
+        "n_a": int(a.size),
+        "n_b": int(b.size),
+        "mean_a": float(a.mean()) if a.size else math.nan,
+        "mean_b": float(b.mean()) if b.size else math.nan,
+        "median_a": float(np.median(a)) if a.size else math.nan,
+        "median_b": float(np.median(b)) if b.size else math.nan,
+        "U": math.nan,
+        "p": math.nan,
+        "note": "",
+    }
+    if a.size < _MIN_PER_GROUP or b.size < _MIN_PER_GROUP:
+        row["note"] = (
+            f"Mann-Whitney U not possible: n = {a.size} ({conds[0]}) and {b.size} "
+            f"({conds[1]}); needs >= {_MIN_PER_GROUP} per group"
+        )
+    else:
+        res = stats.mannwhitneyu(a, b, alternative="two-sided")
+        row["U"], row["p"] = float(res.statistic), float(res.pvalue)
+    return row
+
+
 def analyze_study(
     study: Study,
     *,
@@ -121,47 +222,11 @@ def analyze_study(
     InputError
         Not exactly two conditions, or no usable participant (nothing can be computed).
     """
-    from scipy import stats
-
-    path = study.path
-    if conditions is not None:
-        conds = tuple(conditions)
-        if len(conds) != 2 or conds[0] == conds[1]:
-            raise InputError(
-                f"--conditions: expected two different labels, e.g. NR,GR; got {conds}"
-            )
-        absent = [c for c in conds if c not in study.conditions]
-        if absent:
-            raise InputError(
-                f"{path}: condition {absent[0]!r} (from --conditions) not found; "
-                f"conditions in the file: {list(study.conditions)}"
-            )
-    else:
-        if len(study.conditions) < 2:
-            raise InputError(
-                f"{path}: only one condition ({', '.join(map(repr, study.conditions)) or 'none'}); "
-                "expected two (e.g. GR and NR) to compare"
-            )
-        if len(study.conditions) > 2:
-            raise InputError(
-                f"{path}: {len(study.conditions)} conditions {list(study.conditions)}; expected "
-                "two: pick them with --conditions A,B"
-            )
-        conds = (study.conditions[0], study.conditions[1])
+    conds = _pick_conditions(study, conditions)
     if not study.participants:
-        raise InputError(f"{path}: no usable participant row (every row has a problem)")
+        raise InputError(f"{study.path}: no usable participant row (every row has a problem)")
 
-    included: list[Participant] = []
-    excluded: list[tuple[str, str]] = []
-    for part in study.participants:
-        if part.condition not in conds:
-            excluded.append((part.id, f"condition {part.condition!r} not in {list(conds)}"))
-        elif part.flow <= 0:
-            excluded.append((part.id, f"flow {part.flow:g} <= 0 (K_OF divides by flow)"))
-        elif exclude_below is not None and part.flow < exclude_below:
-            excluded.append((part.id, f"flow {part.flow:g} < {exclude_below:g} (--exclude-below)"))
-        else:
-            included.append(part)
+    included, excluded = _split_participants(study, conds, exclude_below)
 
     notes = list(notes)
     groups = [q.condition for q in included]
@@ -184,45 +249,9 @@ def analyze_study(
     comparisons: list[dict] = []
     for col, label, _attr in _OF_MEASURES:
         vals = of_scores[col]
-        for grp in ("all", *conds):
-            v = vals if grp == "all" else vals[g_arr == grp]
-            w, pv, note = _shapiro(v)
-            normality.append(
-                {
-                    "measure": label,
-                    "group": grp,
-                    "n": int(np.isfinite(v).sum()),
-                    "W": w,
-                    "p": pv,
-                    "note": note,
-                }
-            )
-        a = vals[g_arr == conds[0]]
-        b = vals[g_arr == conds[1]]
-        a, b = a[np.isfinite(a)], b[np.isfinite(b)]
-        row = {
-            "measure": label,
-            "condition_a": conds[0],
-            "condition_b": conds[1],
-            "n_a": int(a.size),
-            "n_b": int(b.size),
-            "mean_a": float(a.mean()) if a.size else math.nan,
-            "mean_b": float(b.mean()) if b.size else math.nan,
-            "median_a": float(np.median(a)) if a.size else math.nan,
-            "median_b": float(np.median(b)) if b.size else math.nan,
-            "U": math.nan,
-            "p": math.nan,
-            "note": "",
-        }
-        if a.size < _MIN_PER_GROUP or b.size < _MIN_PER_GROUP:
-            row["note"] = (
-                f"Mann-Whitney U not possible: n = {a.size} ({conds[0]}) and {b.size} "
-                f"({conds[1]}); needs >= {_MIN_PER_GROUP} per group"
-            )
-        else:
-            res = stats.mannwhitneyu(a, b, alternative="two-sided")
-            row["U"], row["p"] = float(res.statistic), float(res.pvalue)
-        comparisons.append(row)
+        normality += _normality_rows(label, vals, g_arr, conds)
+        a, b = vals[g_arr == conds[0]], vals[g_arr == conds[1]]
+        comparisons.append(_mann_whitney(label, a, b, conds))
     n_a = sum(g == conds[0] for g in groups)
     n_b = sum(g == conds[1] for g in groups)
     if n_a < _MIN_PER_GROUP or n_b < _MIN_PER_GROUP:

@@ -4,14 +4,15 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.commands._types import percentile, seconds
+from simulator.commands._types import nonneg_float, percentile, seconds
 from simulator.core.choices import OPACITY_SOURCES
 
 __all__ = ["add_opacity_arguments", "rule_from_args"]
 
 
 def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES) -> None:
-    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule``;
+    """``--low-pct --high-pct --opacity-source --smooth --ease-in --ease-out --opacity-rule
+    --low-dps --high-dps``;
     ``sources``: the ``--opacity-source`` values the command can use (export: grid only)."""
     g = p.add_argument_group("GRF opacity rule (EPOF -> opacity)")
     g.add_argument(
@@ -37,10 +38,26 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
     )
     g.add_argument(
         "--opacity-rule",
-        choices=("comfort", "paper"),
+        choices=("comfort", "paper", "absolute"),
         default="comfort",
         help="comfort (default): eased, see --ease-in/--ease-out; paper: the paper's rule, "
-        "opacity follows the EPOF frame by frame (no smoothing, no easing)",
+        "opacity follows the EPOF frame by frame (no smoothing, no easing); absolute: eased "
+        "as comfort, opacity 0 at --low-dps and 1 at --high-dps deg/s whatever the video "
+        "(comfort and paper are relative: percentiles of this video's flow)",
+    )
+    g.add_argument(
+        "--low-dps",
+        type=nonneg_float,
+        default=None,
+        metavar="A",
+        help="absolute rule: opacity 0 at A deg/s (default 5, the vection band's lower edge)",
+    )
+    g.add_argument(
+        "--high-dps",
+        type=nonneg_float,
+        default=None,
+        metavar="B",
+        help="absolute rule: opacity 1 at B deg/s (default 30, the provocative band's lower edge)",
     )
     g.add_argument(
         "--smooth",

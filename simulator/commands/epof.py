@@ -65,6 +65,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "sphere-mode grid with the per-frame camera rotation",
     )
     add_opacity_arguments(p)
+    p.add_argument(
+        "--artefacts",
+        action="store_true",
+        help="detect codec keyframes, hard cuts, fades and static overlays appearing (from the "
+        "grid's video when it is there, else from the flow), leave them out of the opacity "
+        "percentiles, hold the opacity through them and name them in an artefact column",
+    )
     add_reader_options(p)
     p.set_defaults(func=run)
 
@@ -105,6 +112,11 @@ def run(args: argparse.Namespace) -> int:
         rule = rule_from_args(args)
         grid = load_grid(args.grid)
     hp = load_headpath_args(args, args.headpath, "vimsim epof")
+    art = None
+    if args.artefacts:
+        from simulator.preprocess.artefacts import artefacts_for_grid
+
+        art = artefacts_for_grid(grid)
     res = compute_epof(
         grid,
         hp,
@@ -114,6 +126,7 @@ def run(args: argparse.Namespace) -> int:
         hold=args.hold_last,
         method=args.method,
         flow_weights=weights,
+        artefacts=art,
     )
     if args.method == "auto" and args.top_k is not None and grid.field_dps is not None:
         print(

@@ -109,6 +109,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="sphere mode: field cell size in degrees, dividing 180 (default 4)",
     )
     p.add_argument(
+        "--artefacts",
+        action="store_true",
+        help="sphere mode: also detect codec keyframes, cuts, fades and overlays appearing in "
+        "the same decoding pass and store them in the grid (epof --artefacts, screen use them)",
+    )
+    p.add_argument(
         "--resume",
         action="store_true",
         help="continue an interrupted run from GRID.npz.partial.npz (same video and options)",
@@ -150,6 +156,8 @@ def run(args: argparse.Namespace) -> int:
     )
     if args.threads is not None and args.threads < 1:
         raise InputError(f"--threads must be >= 1; got {args.threads}")
+    if args.artefacts and args.method != "sphere":
+        raise InputError("--artefacts needs --method sphere (detected in its decoding pass)")
     if args.method == "sphere":
         from simulator.preprocess import SphereConfig, preprocess_sphere
 
@@ -170,6 +178,7 @@ def run(args: argparse.Namespace) -> int:
                 start_s=args.start,
                 end_s=args.end,
                 progress=bar,
+                artefacts=args.artefacts,
             )
         print(f"wrote {out}")
         return 0

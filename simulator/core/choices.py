@@ -22,6 +22,7 @@ __all__ = [
     "LAYOUTS",
     "MITIGATIONS",
     "MITIGATION_HELP",
+    "OPACITY_RULES",
     "OPACITY_SOURCES",
     "PREPROCESS_METHODS",
     "PROJECTIONS",
@@ -88,6 +89,10 @@ MITIGATIONS: tuple[str, ...] = tuple(MITIGATION_HELP)
 
 #: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
 OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")
+
+#: Opacity rules: ``comfort`` (eased) and ``paper`` are relative (percentiles of the video's
+#: flow); ``absolute`` is eased, between fixed deg/s (``low_dps``/``high_dps``).
+OPACITY_RULES: tuple[str, ...] = ("comfort", "paper", "absolute")
 
 #: Scripted head paths (:func:`simulator.traces.path.synth`).
 SYNTH_KINDS: tuple[str, ...] = ("static", "sweep", "sine", "look-around", "keyframes")

@@ -26,7 +26,9 @@ from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, view
 from simulator.media.coverage import coverage_masks, fade
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
+from simulator.mitigation.bands import draw_bands
 from simulator.mitigation.grf import OpacityRule
+from simulator.preprocess.artefacts import Artefacts
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 
@@ -64,6 +66,9 @@ class EpofResult:
     ``epof_rot_dps``, ``epof_trans_dps``: the EPOF's rotational and translational parts
     (:mod:`simulator.epof.parts`; sphere-mode grids with the per-frame camera rotation),
     else None; with ``--flow-weights rot=A,trans=B``, ``epof_dps = A rot + B trans``.
+    ``artefact``: the artefact kind of each row (``""`` = none;
+    :mod:`simulator.preprocess.artefacts`), or None when artefacts were not looked for (the
+    CSV then has no ``artefact`` column).
     """
 
     frame: NDArray[np.int64]
@@ -78,9 +83,12 @@ class EpofResult:
     coverage: NDArray[np.float64] | None = None
     epof_rot_dps: NDArray[np.float64] | None = None
     epof_trans_dps: NDArray[np.float64] | None = None
+    artefact: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         n = len(self.frame)
+        if self.artefact is not None and len(self.artefact) != n:
+            raise ValueError(f"EpofResult: artefact has {len(self.artefact)} rows; frame has {n}")
         for c in EPOF_COLUMNS:
             if len(getattr(self, c)) != n:
                 raise ValueError(
@@ -101,6 +109,7 @@ def compute_epof(
     frustum: Frustum | None = None,
     frames: tuple[int, int] | None = None,
     flow_weights: tuple[float, float] | None = None,
+    artefacts: Artefacts | None = None,
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -130,6 +139,11 @@ def compute_epof(
     Sphere-mode EPOF of a grid with the per-frame camera rotation also gives its parts
     (:mod:`simulator.epof.parts`); ``flow_weights = (A, B)``: the EPOF (and opacity) is
     ``A rot + B trans``, InputError for a grid without the parts (re-run preprocess).
+
+    ``artefacts`` (:class:`simulator.preprocess.artefacts.Artefacts`, one kind per grid
+    row): artefact frames are left out of the opacity percentiles (both sources), their
+    opacity is held from the previous clean frame, and the result's ``artefact`` column
+    names their kind; their EPOF is kept as measured.
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -161,8 +175,7 @@ def compute_epof(
         grid, (yaw, pitch, roll), view, rows, sel_rows, sphere, flow_weights,
         (hfov_deg, vfov_deg, top_k, frustum),
     )  # fmt: skip
-    thr = rule.fit(grid, e)
-    op = rule(e, thr, fps=grid.fps)
+    thr, op, kinds = _opacity(rule, grid, e, rows, artefacts)
     meta = {
         "hfov_deg": h,
         "vfov_deg": v,
@@ -180,8 +193,36 @@ def compute_epof(
         meta["coverage_rule"] = grid.meta["coverage"]["rule"]
     return EpofResult(
         frames, t, yaw, pitch, roll, e, op, thr, meta, cov,
-        *(parts if parts is not None else (None, None)),
+        *(parts if parts is not None else (None, None)), kinds,
     )  # fmt: skip
+
+
+def _opacity(rule: OpacityRule, grid: GridFile, e, rows, artefacts: Artefacts | None):
+    """``(thresholds, opacity, kinds)`` of a viewing's EPOF ``e`` (grid rows ``rows``):
+    artefact frames left out of the percentiles and the opacity held through them."""
+    if artefacts is None:
+        thr = rule.fit(grid, e)
+        return thr, rule(e, thr, fps=grid.fps), None
+    if len(artefacts.kind) != grid.n_frames:
+        raise InputError(f"artefacts: {len(artefacts.kind)} frames; the grid has {grid.n_frames}")
+    kinds = tuple(artefacts.kind[int(r)] for r in rows)
+    bad = np.array([k != "" for k in kinds], bool)
+    keep = ~bad if rule.source == "viewing" else ~artefacts.mask
+    thr = rule.fit(grid, e, keep=keep if keep.any() else None)
+    return thr, rule(_held(e, bad), thr, fps=grid.fps), kinds
+
+
+def _held(e: NDArray, bad: NDArray) -> NDArray[np.float64]:
+    """``e`` with each flagged sample replaced by the last clean one before it (the first
+    clean one for a leading run): the opacity holds through an artefact."""
+    out = np.array(e, np.float64)
+    if not bad.any() or bad.all():
+        return out
+    idx = np.where(~bad, np.arange(out.size), -1)
+    np.maximum.accumulate(idx, out=idx)
+    first = int(np.flatnonzero(~bad)[0])
+    idx[idx < 0] = first
+    return out[idx]
 
 
 def _covered_epof(grid, e, sphere: bool, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum):
@@ -306,7 +347,9 @@ def write_epof_csv(
     settings: dict | None = None,
 ) -> None:
     """Write ``frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity`` atomically, then
-    the ``extra`` columns (name -> array of one value per row), if any, in order.
+    the parts (``epof_rot_dps``, ``epof_trans_dps``), the ``extra`` columns (name -> array
+    of one value per row), if any, in order, ``coverage``, then ``artefact`` (the kind,
+    empty for a clean frame) when the result has one.
 
     The settings that produced it come first as ``# key: JSON value`` comment lines
     (``settings``, default :func:`epof_settings` of ``result`` when it has ``meta``):
@@ -319,11 +362,13 @@ def write_epof_csv(
         settings = epof_settings(result)
     for k, v in (settings or {}).items():
         buf.write(f"# {k}: {_json_value(v)}\n")
-    buf.write(",".join((*EPOF_COLUMNS, *extra)) + "\n")
+    art = result.artefact
+    buf.write(",".join((*EPOF_COLUMNS, *extra, *(("artefact",) if art is not None else ()))) + "\n")
     cols = [np.round(getattr(result, c), 9) + 0.0 for c in EPOF_COLUMNS[1:]]
     cols += [np.round(np.asarray(v, float), 9) + 0.0 for v in extra.values()]
     for i, fr in enumerate(result.frame):
-        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + "\n")
+        tail = f",{art[i]}" if art is not None else ""
+        buf.write(f"{int(fr)}," + ",".join(f"{c[i]:.10g}" for c in cols) + tail + "\n")
     with atomic_output(path) as tmp:
         Path(tmp).write_text(buf.getvalue())
 
@@ -344,7 +389,7 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
     ``#`` lines are comments; those of the form ``# key: JSON`` (the settings
     :func:`write_epof_csv` records) come back in ``meta["settings"]``. Extra columns after
     the EPOF columns (e.g. ``vimsim render``'s visible flow) are ignored, but for the
-    parts ``epof_rot_dps``, ``epof_trans_dps`` when present."""
+    parts ``epof_rot_dps``, ``epof_trans_dps`` and the ``artefact`` kinds when present."""
     p = check_input_file(path, "EPOF")
     lines, settings = [], {}
     for ln in p.read_text(encoding="utf-8", errors="replace").splitlines():
@@ -367,13 +412,17 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         raise InputError(f"{p}: columns {cols}; expected {','.join(EPOF_COLUMNS)}")
     if len(lines) < 2:
         raise InputError(f"{p}: EPOF file has a header but no rows")
+    ai = cols.index("artefact") if "artefact" in cols else None
+    rows_ = [ln.split(",") for ln in lines[1:]]
+    if any(len(r) != len(cols) for r in rows_):
+        raise InputError(f"{p}: every row needs {len(cols)} fields")
+    kinds = tuple(r[ai].strip() for r in rows_) if ai is not None else None
     try:
-        data = np.array([[float(v) for v in ln.split(",")] for ln in lines[1:]])
+        data = np.array([[float(v) for j, v in enumerate(r) if j != ai] for r in rows_])
     except ValueError:
         raise InputError(f"{p}: non-numeric value in an EPOF row") from None
-    if data.ndim != 2 or data.shape[1] != len(cols):
-        raise InputError(f"{p}: every row needs {len(cols)} fields")
-    parts = {c: data[:, cols.index(c)] for c in PART_COLUMNS if c in cols}
+    num = [c for j, c in enumerate(cols) if j != ai]  # the numeric columns, in order
+    parts = {c: data[:, num.index(c)] for c in PART_COLUMNS if c in num}
     data = data[:, : len(EPOF_COLUMNS)]
     if not np.all(np.isfinite(data)) or not all(np.all(np.isfinite(v)) for v in parts.values()):
         raise InputError(f"{p}: EPOF file has NaN or infinite values")
@@ -386,8 +435,9 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
     except (TypeError, ValueError):
         thr = (math.nan, math.nan)
     return EpofResult(
-        **arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {}, **parts
-    )
+        **arrs, thresholds_dps=thr, meta={"settings": settings} if settings else {}, **parts,
+        artefact=kinds,
+    )  # fmt: skip
 
 
 def break_at_wraps(t, yaw_deg) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -416,6 +466,13 @@ def plot_epof(path: str | os.PathLike, result: EpofResult, *, title: str = "") -
     )
     ax.plot(t, result.epof_dps, color="tab:blue", lw=1.0)
     ax.set_ylabel("EPOF (deg/s)")
+    ax.set_ylim(0, max(float(np.max(result.epof_dps)) * 1.05, 1.0))
+    draw_bands(ax, labels=False)  # the named flow bands (mitigation/bands), deg/s
+    if result.artefact is not None:  # artefact frames: grey, their opacity held
+        half = 0.5 / (result.meta.get("fps") or 30)
+        for k, a_ in enumerate(result.artefact):
+            if a_:
+                ax.axvspan(t[k] - half, t[k] + half, color="0.5", alpha=0.35, lw=0)
     lo, hi = result.thresholds_dps
     for v, name in ((lo, "opacity 0"), (hi, "opacity 1")):
         if math.isfinite(v):

@@ -30,9 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.core.choices import OPACITY_SOURCES
+from simulator.core.choices import OPACITY_RULES, OPACITY_SOURCES
 from simulator.core.errors import InputError
 from simulator.media.gridfile import GridFile
+from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 
 __all__ = [
     "COMFORT_EASE_IN_S",
@@ -274,6 +275,11 @@ class OpacityRule:
     ``ease_out_s`` (a slew-rate limit, as the ease-in / ease-out times of Unity XR
     Interaction Toolkit's tunneling vignette); 0 = no limit. All zero (the default) is
     the paper's rule, unsmoothed; :func:`comfort_rule` is the CLI's default.
+
+    ``low_dps`` and ``high_dps`` (both or neither) make the rule **absolute**: opacity 0 at
+    ``low_dps``, 1 at ``high_dps`` deg/s whatever the video (the named bands of
+    :mod:`simulator.mitigation.bands`); the percentiles and ``source`` are then unused.
+    The paper's rule is relative: every video gets grains in its own top tenth of flow.
     """
 
     low_pct: float = 10.0
@@ -282,8 +288,20 @@ class OpacityRule:
     smoothing_s: float = 0.0
     ease_in_s: float = 0.0
     ease_out_s: float = 0.0
+    low_dps: float | None = None
+    high_dps: float | None = None
 
     def __post_init__(self) -> None:
+        if (self.low_dps is None) != (self.high_dps is None):
+            raise InputError("absolute opacity rule needs both --low-dps and --high-dps")
+        if self.low_dps is not None:
+            lo, hi = self.low_dps, self.high_dps
+            if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo):
+                raise InputError(
+                    f"--low-dps / --high-dps must be finite deg/s >= 0; got {lo}, {hi}"
+                )
+            if not lo < hi:
+                raise InputError(f"--low-dps ({lo:g}) must be below --high-dps ({hi:g}) deg/s")
         if not (0.0 <= self.low_pct < self.high_pct <= 100.0):
             raise InputError(
                 f"opacity percentiles must satisfy 0 <= low < high <= 100; got {self.low_pct}, {self.high_pct}"
@@ -295,6 +313,11 @@ class OpacityRule:
         for name, v in (("ease-in", self.ease_in_s), ("ease-out", self.ease_out_s)):
             if not (v >= 0.0 and math.isfinite(v)):
                 raise InputError(f"opacity {name} time must be >= 0 seconds; got {v}")
+
+    @property
+    def is_absolute(self) -> bool:
+        """True when the thresholds are fixed deg/s (``low_dps``/``high_dps``)."""
+        return self.low_dps is not None
 
     @property
     def is_paper(self) -> bool:
@@ -311,16 +334,31 @@ class OpacityRule:
             "ease_in_s": self.ease_in_s,
             "ease_out_s": self.ease_out_s,
             "rule": "paper" if self.is_paper else "eased",
+            **(
+                {"scale": "absolute", "low_dps": self.low_dps, "high_dps": self.high_dps}
+                if self.is_absolute
+                else {}
+            ),
         }
 
-    def fit(self, grid: GridFile | None, epof_dps) -> tuple[float, float]:
-        """``(lo, hi)`` thresholds in deg/s from the grid's flow or this viewing's EPOF."""
+    def fit(self, grid: GridFile | None, epof_dps, *, keep=None) -> tuple[float, float]:
+        """``(lo, hi)`` thresholds in deg/s: the absolute ones, or percentiles of the grid's
+        flow or of this viewing's EPOF. ``keep`` (bool, one per grid row for source
+        ``grid``, one per EPOF sample for ``viewing``) leaves rows out, e.g. artefacts."""
+        if self.is_absolute:
+            return float(self.low_dps), float(self.high_dps)
         if self.source == "grid":
             if grid is None:
                 raise InputError("opacity source 'grid' needs the grid file")
-            vals = np.array(grid.pof_dps, np.float64).ravel()  # our own copy
+            pof = grid.pof_dps
+            if keep is not None and len(keep) == len(pof) and not np.all(keep):
+                pof = np.asarray(pof)[np.asarray(keep, bool)]
+            vals = np.array(pof, np.float64).ravel()  # our own copy
         else:
-            vals = np.array(epof_dps, np.float64).ravel()
+            vals = np.asarray(epof_dps, np.float64)
+            if keep is not None and len(keep) == len(vals):
+                vals = vals[np.asarray(keep, bool)]
+            vals = np.array(vals, np.float64).ravel()
         finite = np.isfinite(vals)
         if not finite.all():
             vals = vals[finite]
@@ -393,13 +431,17 @@ RULE_OPTIONS = (
     "smooth",
     "ease_in",
     "ease_out",
+    "low_dps",
+    "high_dps",
 )
 
 
 def rule_from_options(get, label) -> OpacityRule:
     """The one opacity-rule builder from options: the eased comfort rule by default
     (:func:`comfort_rule`'s easing unless ``ease_in``/``ease_out`` are given),
-    ``opacity_rule = "paper"`` the paper's unsmoothed rule.
+    ``opacity_rule = "paper"`` the paper's unsmoothed rule, ``"absolute"`` the eased rule
+    between ``low_dps`` and ``high_dps`` deg/s (defaults: the bands' :data:`ABSOLUTE_LOW_DPS`,
+    :data:`ABSOLUTE_HIGH_DPS`; given with another rule they are refused).
 
     get : ``get(name)`` -> the option's value or None (not given), for the names of
         :data:`RULE_OPTIONS`; label : ``label(name)`` -> the option as the caller spells it
@@ -423,9 +465,21 @@ def rule_from_options(get, label) -> OpacityRule:
         )
     source, kind = get("opacity_source") or "grid", get("opacity_rule") or "comfort"
     for name, v, choices in (("opacity_source", source, OPACITY_SOURCES),
-                             ("opacity_rule", kind, ("comfort", "paper"))):  # fmt: skip
+                             ("opacity_rule", kind, OPACITY_RULES)):  # fmt: skip
         if v not in choices:
             raise InputError(f"{label(name)}: expected one of {', '.join(choices)}; got {v!r}")
+    lo_dps, hi_dps = value("low_dps", None), value("high_dps", None)
+    if kind != "absolute" and (lo_dps is not None or hi_dps is not None):
+        given = label("low_dps" if lo_dps is not None else "high_dps")
+        raise InputError(f"{given} needs {label('opacity_rule')} absolute")
+    if kind == "absolute":
+        lo_dps = ABSOLUTE_LOW_DPS if lo_dps is None else lo_dps
+        hi_dps = ABSOLUTE_HIGH_DPS if hi_dps is None else hi_dps
+        if not lo_dps < hi_dps:
+            raise InputError(
+                f"{label('low_dps')} ({lo_dps:g}) must be below {label('high_dps')} "
+                f"({hi_dps:g}) deg/s"
+            )
     smooth, ease_in, ease_out = (value(n, None) for n in ("smooth", "ease_in", "ease_out"))
     if kind == "paper":
         given = [label(n) for n, v in (("smooth", smooth), ("ease_in", ease_in),
@@ -443,4 +497,6 @@ def rule_from_options(get, label) -> OpacityRule:
         smooth or 0.0,
         COMFORT_EASE_IN_S if ease_in is None else ease_in,
         COMFORT_EASE_OUT_S if ease_out is None else ease_out,
+        low_dps=lo_dps,
+        high_dps=hi_dps,
     )

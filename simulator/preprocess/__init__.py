@@ -6,7 +6,7 @@ submodule says what it holds.
 
 from __future__ import annotations
 
-from simulator.preprocess.common import PreprocessInterrupted
+from simulator.preprocess.common import PreprocessInterrupted, field_meta
 from simulator.preprocess.paper import (
     WindowFlowReducer,
     checkpoint_path,
@@ -18,7 +18,6 @@ from simulator.preprocess.sphere import (
     SphereConfig,
     field_from_frames,
     field_from_video,
-    field_meta,
     preprocess_sphere,
 )
 from simulator.sphere.cells import window_pof

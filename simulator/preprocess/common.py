@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import math
 import os
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from simulator.core.errors import InputError
+from simulator.media.gridfile import content_hash
 
-__all__ = ["PreprocessInterrupted"]
+__all__ = ["PreprocessInterrupted", "field_meta", "sphere_meta"]
 
 
 class PreprocessInterrupted(KeyboardInterrupt):
@@ -119,4 +121,37 @@ def common_meta(
             "n_frames": info.n_frames,
             "content_hash": content_hash,
         },
+    }
+
+
+def field_meta(config, dtype: str = "float16") -> dict:
+    """The ``meta["field"]`` entry of a grid file holding a field."""
+    return {
+        "method": "sphere",
+        "units": "deg/s",
+        "dtype": dtype,
+        "cell_deg": float(config.cell_deg),
+        "layout": "lonlat: row 0 = north (lat centre 90 - (i + 0.5) * cell_deg), column 0 = lon -180 (centre -180 + (j + 0.5) * cell_deg); cell = solid-angle mean speed of content at frame t-1, flow t-1 -> t",
+        "tiles": config.to_dict(),
+    }
+
+
+def sphere_meta(source, T, start_f, desc, cov, config, default_stride, field_dtype) -> dict:
+    """The meta of a sphere-mode grid file (:func:`simulator.preprocess.sphere.preprocess_sphere`)."""
+    return {
+        "method": "sphere",
+        **common_meta(
+            source,
+            n_rows=T,
+            start_frame=start_f,
+            flow=desc,
+            content_hash=content_hash(source.path),
+            units={
+                "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
+                "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
+                "field_dps": "deg/s of visual angle",
+            },
+        ),
+        **({} if cov is None else {"coverage": cov}),
+        "field": field_meta(replace(config, stride=config.stride or default_stride), field_dtype),
     }

@@ -24,8 +24,8 @@ scalars:
 Frame ``t = 0`` repeats ``t = 1`` (SPEC.md). The result is written with
 :func:`simulator.media.gridfile.save_grid` (atomic: the grid file appears only when complete).
 
-Pipeline: a background thread decodes frame t+1 and extracts its windows (into a recycled
-buffer) while a thread pool computes pair t; for thread-safe backends each worker runs the
+Pipeline (:mod:`simulator.preprocess.pairs`): a background thread decodes frame t+1 and
+extracts its windows (into a recycled buffer) while a thread pool computes pair t; for thread-safe backends each worker runs the
 flow and the reduction of one window at a time (the flow is reduced while in cache), and
 two frame pairs are in flight so both cores stay busy across frame boundaries. Results do
 not depend on threads or chunking (bit-identical to the one-thread batch path).
@@ -41,16 +41,11 @@ naming the difference.
 
 from __future__ import annotations
 
-import collections
-import itertools
 import json
 import math
 import os
-import queue
-import time
 import warnings
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -58,20 +53,19 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
-from simulator.core.progress import Counter, Progress
+from simulator.core.progress import Progress
 from simulator.flow.base import FlowBackend, make_backend, native_stride
 from simulator.flow.rays import RayAngles
 from simulator.media.coverage import coverage_masks, coverage_meta
 from simulator.media.gridfile import content_hash, save_grid
-from simulator.media.source import as_source
-from simulator.media.video import prefetch
+from simulator.media.source import Source, as_source
 from simulator.preprocess.common import (
-    PreprocessInterrupted,
     check_output_dir,
     common_meta,
     flow_rate_scale,
     frame_range,
 )
+from simulator.preprocess.pairs import PairPipeline
 from simulator.sphere.geometry import perspective_rays
 from simulator.sphere.windows import WindowExtractor, WindowGrid
 
@@ -233,6 +227,68 @@ def _load_checkpoint(path: Path, identity: dict) -> tuple[list, list]:
     return list(dps), list(px)
 
 
+def _identity(
+    source: Source, grid: WindowGrid, backend: FlowBackend, stride: int, span: tuple[int, int]
+) -> dict:
+    """What a checkpoint must match to be resumed: the video, the grid, the flow and the range."""
+    info = source.info
+    return {
+        "video": {
+            "width": info.width,
+            "height": info.height,
+            "sar": round(info.sar, 9),
+            "fps": info.fps,
+            "n_frames": info.n_frames,
+            "content_hash": content_hash(source.path),
+        },
+        "grid": grid.to_dict(),
+        "grid_shape": list(grid.shape),
+        "flow": backend.describe(),
+        "reduce_stride": stride,
+        "window_interp": _INTERP,
+        "layout": source.layout,
+        "eye": source.eye,
+        "start_frame": span[0],
+        "end_frame": span[1],
+    }
+
+
+def _grid_arrays(
+    source: Source,
+    grid: WindowGrid,
+    backend: FlowBackend,
+    identity: dict,
+    rows: tuple[list, list],
+    start_f: int,
+    stride: int,
+) -> tuple[NDArray, NDArray, dict]:
+    """``(pof_dps, pof_px, meta)`` of the finished rows: frame-rate scale and coverage applied."""
+    dps_rows, px_rows = rows
+    n_rows = len(dps_rows)
+    meta = common_meta(
+        source,
+        n_rows=n_rows,
+        start_frame=start_f,
+        flow=backend.describe(),
+        content_hash=identity["video"]["content_hash"],
+        units={
+            "pof_dps": "deg/s of visual angle (solid-angle-weighted mean)",
+            "pof_px": "window px/frame (mean magnitude)",
+        },
+    )
+    meta["reduce_stride"] = stride
+    meta["window_interp"] = _INTERP
+    dps_all, px_all = np.stack(dps_rows), np.stack(px_rows)
+    scale = flow_rate_scale(source.info, start_f, n_rows)
+    if scale is not None:  # variable frame rate: deg/s over each row's true interval
+        dps_all = dps_all * scale[:, None, None].astype(np.float32)
+    cov = coverage_meta(source.covered, grid, None)
+    if cov is not None:  # windows outside the projection: no flow measured
+        meta["coverage"] = cov
+        dps_all, px_all = (a * coverage_masks(meta)[0] for a in (dps_all, px_all))
+    return dps_all, px_all, meta
+
+
 def preprocess_video(
     video: str | os.PathLike,
     output: str | os.PathLike,
@@ -272,7 +328,7 @@ def preprocess_video(
     :class:`PreprocessInterrupted` on Ctrl-C (after saving a checkpoint).
     """
     source = as_source(video)
-    src, info, video = source.path, source.info, source.path
+    src, info = source.path, source.info
     if not info.is_video:
         raise InputError(
             f"{src}: is a still image; preprocess needs a video with at least 2 frames"
@@ -285,25 +341,7 @@ def preprocess_video(
     backend = flow if isinstance(flow, FlowBackend) else make_backend(flow, size=grid.size)
     ckpt = checkpoint_path(out)
     stride = reduce_stride(backend)
-    identity = {
-        "video": {
-            "width": info.width,
-            "height": info.height,
-            "sar": round(info.sar, 9),
-            "fps": info.fps,
-            "n_frames": info.n_frames,
-            "content_hash": content_hash(video),
-        },
-        "grid": grid.to_dict(),
-        "grid_shape": list(grid.shape),
-        "flow": backend.describe(),
-        "reduce_stride": stride,
-        "window_interp": _INTERP,
-        "layout": source.layout,
-        "eye": source.eye,
-        "start_frame": start_f,
-        "end_frame": end_f,
-    }
+    identity = _identity(source, grid, backend, stride, (start_f, end_f))
     dps_rows: list[NDArray] = []
     px_rows: list[NDArray] = []
     if ckpt.exists():
@@ -318,155 +356,29 @@ def preprocess_video(
 
     extractor = WindowExtractor(grid, (eye_w, eye_h), cache=cache)
     reducer = WindowFlowReducer(grid.size, grid.hfov_deg, grid.vfov_deg, stride=stride)
-    P, Y = grid.shape
-    n_win = P * Y
-    w, h = grid.size
-    fps = info.fps
-    k_dps = math.degrees(1.0) * float(fps)
-    n_threads = max(1, int(threads or os.cpu_count() or 1))
-    fused = backend.thread_safe
-    n_chunks = n_threads * 4 if fused and n_threads > 1 else 1
-    bounds = np.linspace(0, n_win, min(n_chunks, n_win) + 1).astype(int)
-    chunks = [(int(a), int(b)) for a, b in itertools.pairwise(bounds) if b > a]
-
-    def work(prev: NDArray, cur: NDArray, a: int, b: int):
-        # Flow and reduction of one window at a time in the same worker: the window's
-        # flow (512 KB at 256 px) is reduced while still in this core's cache, and no
-        # (N, h, w, 2) batch is allocated and copied. Same values as reducer(backend(...)).
-        dps = np.empty(b - a)
-        px = np.empty(b - a)
-        npx = reducer._npx
-        for i, k in enumerate(range(a, b)):
-            s_ang, s_px = reducer._one(backend.pair(prev[k], cur[k]))
-            dps[i] = s_ang * k_dps
-            px[i] = s_px / npx
-        return dps, px
-
-    # Window stacks are written into recycled buffers (no 17 MB allocation per frame at
-    # the default grid): the decoding thread takes one from `free` or makes one; a stack
-    # goes back once the last flow pair that reads it has finished.
-    free: queue.SimpleQueue = queue.SimpleQueue()
-
-    def extract(f: NDArray) -> NDArray:
-        try:
-            buf = free.get_nowait().reshape(P, Y, h, w)
-        except queue.Empty:
-            buf = np.empty((P, Y, h, w), np.uint8)
-        return extractor(f, interp=_INTERP, out=buf).reshape(n_win, h, w)
-
-    done = len(dps_rows)
+    PairPipeline(
+        source,
+        grid,
+        backend,
+        reducer,
+        extractor,
+        interp=_INTERP,
+        span=(start_f, end_f),
+        rows=(dps_rows, px_rows),
+        threads=threads,
+        checkpoint=lambda: _save_checkpoint(ckpt, identity, dps_rows, px_rows),
+        ckpt=ckpt,
+        checkpoint_every_s=checkpoint_every_s,
+        progress=progress,
+        on_frame=on_frame,
+    ).run()
     total = end_f - start_f
-    # Row r (r >= 1) is the flow from video frame start_f + r - 1 to start_f + r; row 0
-    # repeats row 1 and is stored when row 1 is known.
-    first_row = max(done, 1)
-    decode_from = start_f + first_row - 1
-    bar = Counter(progress, total, done)
-    last_ckpt = time.monotonic()
-    prev_win: NDArray | None = None
-    frames = windows = None
-    row = first_row - 1
-    pool = ThreadPoolExecutor(n_threads) if len(chunks) > 1 or not fused else None
-    # Frame pairs in flight, oldest first: (row, futures or parts, stack to recycle).
-    # Two pairs in flight keep both workers busy across frame boundaries (the workers
-    # start on pair t+1 while the last chunks of pair t finish).
-    inflight: collections.deque = collections.deque()
-
-    def finish() -> None:
-        nonlocal last_ckpt
-        r, pending, old = inflight.popleft()
-        parts = [f.result() for f in pending] if pool is not None and fused else pending
-        d = np.concatenate([p[0] for p in parts]).astype(np.float32).reshape(P, Y)
-        x = np.concatenate([p[1] for p in parts]).astype(np.float32).reshape(P, Y)
-        if not (np.all(np.isfinite(d)) and np.all(np.isfinite(x))):
-            raise InputError(
-                f"{src}: flow backend {backend.name} gave non-finite flow at frame {start_f + r}"
-            )
-        if r == 1:
-            dps_rows.append(d)
-            px_rows.append(x)
-            bar.update(1)
-        dps_rows.append(d)
-        px_rows.append(x)
-        bar.update(1)
-        free.put(old)
-        if on_frame is not None:
-            on_frame(r)
-        now = time.monotonic()
-        if now - last_ckpt >= checkpoint_every_s:
-            _save_checkpoint(ckpt, identity, dps_rows, px_rows)
-            last_ckpt = now
-
-    try:
-        frames = source.frames(fmt="gray", start=decode_from, end=end_f)
-        # Decoding and window extraction of frame t+1 overlap the flow of frame t.
-        windows = prefetch((extract(f) for f in frames), depth=2)
-        for win in windows:
-            if prev_win is None:
-                prev_win = win
-                continue
-            row += 1
-            if pool is not None and fused:
-                pending = [pool.submit(work, prev_win, win, a, b) for a, b in chunks]
-            elif pool is not None:
-                fl = backend(prev_win, win)
-                rb = np.linspace(0, n_win, min(2 * n_threads, n_win) + 1).astype(int)
-                futs = [
-                    pool.submit(reducer, fl[a:b], fps) for a, b in itertools.pairwise(rb) if b > a
-                ]
-                pending = [f.result() for f in futs]
-            else:
-                pending = [reducer(backend(prev_win, win), fps)]
-            inflight.append((row, pending, prev_win))
-            prev_win = win
-            # The first row is delivered at once (start-up latency), later ones one pair late.
-            while len(inflight) > (1 if pool is not None and fused and row > first_row else 0):
-                finish()
-        while inflight:
-            finish()
-    except KeyboardInterrupt:
-        bar.close()
-        if dps_rows:
-            _save_checkpoint(ckpt, identity, dps_rows, px_rows)
-            raise PreprocessInterrupted(
-                f"interrupted after {len(dps_rows)} of {total} frames; checkpoint saved to {ckpt}; "
-                "run the same command with --resume to continue"
-            ) from None
-        raise PreprocessInterrupted(
-            "interrupted before the first frame pair; nothing saved"
-        ) from None
-    finally:
-        bar.close()
-        if windows is not None:
-            windows.close()  # stops the decoding thread now, not when garbage-collected
-        if frames is not None:
-            frames.close()  # closes the video file
-        if pool is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
-
     n_rows = len(dps_rows)
     if n_rows < 2:
         raise InputError(f"{src}: only {n_rows} frame(s) could be decoded; flow needs at least 2")
-    meta = common_meta(
-        source,
-        n_rows=n_rows,
-        start_frame=start_f,
-        flow=backend.describe(),
-        content_hash=identity["video"]["content_hash"],
-        units={
-            "pof_dps": "deg/s of visual angle (solid-angle-weighted mean)",
-            "pof_px": "window px/frame (mean magnitude)",
-        },
+    dps_all, px_all, meta = _grid_arrays(
+        source, grid, backend, identity, (dps_rows, px_rows), start_f, stride
     )
-    meta["reduce_stride"] = stride
-    meta["window_interp"] = _INTERP
-    dps_all, px_all = np.stack(dps_rows), np.stack(px_rows)
-    scale = flow_rate_scale(info, start_f, n_rows)
-    if scale is not None:  # variable frame rate: deg/s over each row's true interval
-        dps_all = dps_all * scale[:, None, None].astype(np.float32)
-    cov = coverage_meta(source.covered, grid, None)
-    if cov is not None:  # windows outside the projection: no flow measured
-        meta["coverage"] = cov
-        dps_all, px_all = (a * coverage_masks(meta)[0] for a in (dps_all, px_all))
     if n_rows != total:
         warnings.warn(f"{src}: expected {total} frames, decoded {n_rows}", stacklevel=2)
     save_grid(out, dps_all, px_all, grid, meta)

@@ -20,7 +20,7 @@ import functools
 import math
 import warnings
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import cv2
 import numpy as np
@@ -32,10 +32,11 @@ from simulator.core.progress import Counter, Progress
 from simulator.flow.base import FlowBackend, make_backend, native_stride
 from simulator.flow.rays import RayAngles
 from simulator.media.coverage import COVERED_SHARE, cell_coverage, coverage_masks, coverage_meta
-from simulator.media.gridfile import FieldSpool, content_hash, save_grid
+from simulator.media.gridfile import FieldSpool, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
-from simulator.preprocess.common import check_output_dir, common_meta, flow_rate_scale, frame_range
+from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
+from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
 from simulator.preprocess.tiles import tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
@@ -53,7 +54,6 @@ __all__ = [
     "SphereConfig",
     "field_from_frames",
     "field_from_video",
-    "field_meta",
     "preprocess_sphere",
 ]
 
@@ -378,12 +378,15 @@ def field_from_video(
     progress: Callable[[int], None] | None = None,
     sink: FieldSpool | None = None,
     ego: EgoRows | None = None,
+    on_frame: Callable[[NDArray[np.uint8]], None] | None = None,
 ) -> tuple[NDArray[np.float32], object]:
     """Fields ``(T, n_lat, n_lon)`` float32 deg/s of a video file, and its ``MediaInfo``.
 
     ``source``: a :class:`simulator.media.source.Source` (its eye) or a path (mono
     equirect). Decodes the Y plane only; decoding and tile extraction run in a background thread
     while flow and splatting run in the caller's. Frames ``start <= k < end``.
+    ``on_frame(gray)`` sees every decoded frame first (in the decoding thread), as an
+    equirect working frame (a non-equirect source is then converted before tiling).
     """
 
     source = as_source(source)
@@ -393,8 +396,9 @@ def field_from_video(
     est = FieldEstimator(source.eye_size, info.fps, config, flow=flow)
     g = est._geo  # a non-equirect source: tiles straight from its frames (one resampling)
     tiling = (g.size, est.config.tile_fov_deg, _CUBE, g.level)
-    frames, sample = tile_frames(source, est.tiles, tiling, start, end)
-    tiles = prefetch((sample(f) for f in frames), depth=4)
+    frames, sample = tile_frames(source, est.tiles, tiling, start, end, on_frame is not None)
+    seen = frames if on_frame is None else (on_frame(f) or f for f in frames)
+    tiles = prefetch((sample(f) for f in seen), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
         mask = None if source.covered is None else cell_coverage(source.covered, config.cell_deg)
@@ -408,18 +412,6 @@ def field_from_video(
         frames.close()  # closes the video file
 
 
-def field_meta(config: SphereConfig, dtype: str = "float16") -> dict:
-    """The ``meta["field"]`` entry of a grid file holding a field."""
-    return {
-        "method": "sphere",
-        "units": "deg/s",
-        "dtype": dtype,
-        "cell_deg": float(config.cell_deg),
-        "layout": "lonlat: row 0 = north (lat centre 90 - (i + 0.5) * cell_deg), column 0 = lon -180 (centre -180 + (j + 0.5) * cell_deg); cell = solid-angle mean speed of content at frame t-1, flow t-1 -> t",
-        "tiles": config.to_dict(),
-    }
-
-
 def preprocess_sphere(
     video,
     output,
@@ -431,6 +423,7 @@ def preprocess_sphere(
     end_s: float | None = None,
     field_dtype: str = "float16",
     progress: Progress | None = None,
+    artefacts: bool = False,
 ):
     """``vimsim preprocess --method sphere``: the field of a video and, derived from it,
     the window matrix of ``grid``, written as one grid file (atomic).
@@ -438,7 +431,9 @@ def preprocess_sphere(
     The grid file holds everything a paper-mode grid holds (``pof_dps``, ``pof_px`` of
     ``grid``, any preset and FOV; ``pof_px`` approximate, see :func:`window_pof`) plus
     ``field_dps`` (T, n_lat, n_lon) and ``meta["field"]`` (:func:`field_meta`).
-    No checkpoints: sphere mode runs at tens of frames per second.
+    No checkpoints: sphere mode runs at tens of frames per second. ``artefacts``: also
+    detect codec keyframes, cuts, fades and overlays in the same decoding pass
+    (:mod:`simulator.preprocess.artefacts`) and store them as ``meta["artefacts"]``.
 
     Every check (video, range, output directory, flow backend) runs before any work; the
     backend is built once (a ``torch:MODEL.pt`` is loaded and validated once).
@@ -467,11 +462,12 @@ def preprocess_sphere(
     # the field streams to an unnamed temporary file: memory flat in the video's length
     spool = FieldSpool(cells.shape, out.parent if str(out.parent) else ".")
     ego = EgoRows(FieldSpool(cells.shape, out.parent if str(out.parent) else "."))
+    col = SignalCollector() if artefacts else None
     try:
         try:
             field_from_video(
                 source, config, start=start_f, end=end_f,
-                flow=backend, progress=tick, sink=spool, ego=ego,
+                flow=backend, progress=tick, sink=spool, ego=ego, on_frame=col and col.add,
             )  # fmt: skip
         finally:
             bar.close()
@@ -486,25 +482,9 @@ def preprocess_sphere(
         T = spool.n_rows
         if T != end_f - start_f:
             warnings.warn(f"{src}: expected {end_f - start_f} frames, decoded {T}", stacklevel=2)
-        meta = {
-            "method": "sphere",
-            **common_meta(
-                source,
-                n_rows=T,
-                start_frame=start_f,
-                flow=desc,
-                content_hash=content_hash(video),
-                units={
-                    "pof_dps": "deg/s of visual angle (solid-angle-weighted mean), derived from field_dps",
-                    "pof_px": "window px/frame (mean magnitude), derived from field_dps assuming isotropic flow directions per cell (approximate)",
-                    "field_dps": "deg/s of visual angle",
-                },
-            ),
-            **({} if cov is None else {"coverage": cov}),
-            "field": field_meta(
-                replace(config, stride=config.stride or default_stride), field_dtype
-            ),
-        }
+        meta = sphere_meta(source, T, start_f, desc, cov, config, default_stride, field_dtype)
+        if col is not None:
+            meta["artefacts"] = artefacts_meta(detect_artefacts(col.result(fps, src), dps))
         meta["ego"] = EGO_META
         save_grid(
             out, dps, px, grid, meta, field_dps=(spool, field_dtype),

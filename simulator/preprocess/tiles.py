@@ -79,12 +79,15 @@ def _projection_tiles(conv, size, fov_deg, faces, level) -> ProjectionTiles:
     return ProjectionTiles(conv, size, fov_deg, faces, level)
 
 
-def tile_frames(source, equirect_tiles, tiling, start: int, end: int | None):
+def tile_frames(
+    source, equirect_tiles, tiling, start: int, end: int | None, equirect: bool = False
+):
     """(gray frames, their tile sampler) of a :class:`simulator.media.source.Source`: an
     equirect source's frames and ``equirect_tiles``; another projection's frames as stored
-    and a :class:`ProjectionTiles` of ``tiling = (size, fov_deg, faces, level)``."""
+    and a :class:`ProjectionTiles` of ``tiling = (size, fov_deg, faces, level)``, unless
+    ``equirect`` (a caller that must see the equirect working frames: converted ones)."""
     conv = source.converter
-    if conv is None or (conv.name == "eac" and tiling[3] > 0):
+    if conv is None or equirect or (conv.name == "eac" and tiling[3] > 0):
         # eac has no face atlas: lowering its frame would mix faces; convert it first
         return source.frames(fmt="gray", start=start, end=end), equirect_tiles
     sample = _projection_tiles(conv, *tiling)

@@ -11,25 +11,25 @@ Paths in the manifest are relative to its folder. The format, with a full exampl
 from __future__ import annotations
 
 import csv
-import glob
 import re
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, PROJECTIONS
+from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
+from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.study.entry import Entry, user_numbers
+from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import FORMATS, n_users
 from simulator.viewing.spec import ViewSpec
 
-__all__ = ["Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
+__all__ = ["SCRIPTED", "VIEWER_KINDS", "Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
 
 _LAYOUTS = ("mono", "top-bottom", "side-by-side")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
-_GLOB_CHARS = re.compile(r"[*?\[]")
 
 _TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", "grf")
 _STUDY_KEYS = ("name", "cache")
@@ -43,12 +43,13 @@ _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", 
                 "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
 #: Render options a viewing may set for itself (over [render] and [grf]); cpus is the study's.
 _VIEWING_RENDER_KEYS = (*(k for k in _RENDER_KEYS if k != "cpus"), *_GRF_KEYS)
-_VIEWING_KEYS = ("id", "video", "trace", "format", "user", "participant", "condition",
-                 "render", "plot", *_VIEWING_RENDER_KEYS)  # fmt: skip
+_VIEWING_KEYS = ("id", "video", "trace", "viewers", "format", "user", "participant",
+                 "condition", "render", "plot", *_VIEWING_RENDER_KEYS)  # fmt: skip
 _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
-    "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule",
+    "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule", "low_dps", "high_dps",
+    "artefacts",
 )  # fmt: skip
 _PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
@@ -70,6 +71,10 @@ class VideoSpec:
     cell_deg: float = 4.0
     projection: str = "equirect"
     lens_fov_deg: float | None = None
+    #: A grid the user already made of this video (checked to match); None: the cache's.
+    grid_file: Path | None = None
+    #: Detect artefacts while preprocessing (sphere mode; not part of the cache key).
+    artefacts: bool = False
 
     def options(self) -> dict:
         """The preprocessing options (what the grid cache key is made of, besides the video)."""
@@ -90,11 +95,11 @@ class VideoSpec:
 
 @dataclass(frozen=True)
 class ViewingSpec:
-    """One viewing: a video watched along one trace (one user of a multi-user file)."""
+    """One viewing: a video along a trace (one user of a file) or a scripted viewer's path."""
 
     id: str
     video: str
-    trace: Path
+    trace: Path | None
     format: str = "auto"
     user: int | None = None
     participant: str = ""
@@ -126,7 +131,8 @@ class Manifest:
 
     def input_files(self) -> list[Path]:
         """Every file the study reads (for the never-overwrite-an-input check)."""
-        files = [self.path, *(v.path for v in self.videos), *(w.trace for w in self.viewings)]
+        files = [self.path, *(v.path for v in self.videos)]
+        files += [w.trace for w in self.viewings if w.trace is not None]
         if self.questionnaires:
             files.append(self.questionnaires["path"])
         return files
@@ -234,17 +240,6 @@ def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict
     return opts
 
 
-def _expand_traces(e: Entry, pattern: str, base: Path) -> list[Path]:
-    pat = str(Path(pattern).expanduser())
-    pat = pat if Path(pat).is_absolute() else str(base / pat)
-    if not _GLOB_CHARS.search(pattern):
-        return [Path(pat)]
-    traces = [Path(p) for p in sorted(glob.glob(pat)) if Path(p).is_file()]
-    if not traces:
-        e.fail(f"trace glob {pattern!r} matches no file (relative to {base})")
-    return traces
-
-
 def _viewing_ids(e: Entry, trace: Path, u, n: int, vid: str, condition: str) -> tuple[str, str]:
     """(viewing id, participant) of one user of a trace, from the entry's templates."""
     f = _stem_fields(trace, u, n)
@@ -281,6 +276,12 @@ def _viewings(
         vid = e.get("video", (str,), required=True)
         if vid not in ids:
             e.fail(f"video {vid!r} is not a [[videos]] id; known: {', '.join(sorted(ids))}")
+        if "viewers" in e.t:  # scripted viewers (simulator.study.viewers): no trace file
+            ropts, cond = _viewing_render_opts(e, m, where, data, render), e.get("condition", (str,), "")
+            r, plot = e.get("render", (bool,), False), e.get("plot", (bool,), False)
+            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot)
+                    for i, p, s, k in scripted_viewers(e, vid, seen, where, _ID_RE)]  # fmt: skip
+            continue
         pattern = e.get("trace", (str,), required=True)
         fmt = e.get("format", (str,), "auto", choices=("auto", *FORMATS))
         user = e.get("user", (int, str, list))
@@ -290,7 +291,7 @@ def _viewings(
         render_spec = e.get("render", (bool, int, str, list), False)
         plot = e.get("plot", (bool,), False)
         ropts = _viewing_render_opts(e, m, where, data, render)
-        for trace in _expand_traces(e, pattern, base):
+        for trace in expand_traces(e, pattern, base):
             users, n = _users_of(e, trace, fmt, user)
             rendered = _render_users(e, render_spec, users)
             for u in users:
@@ -336,6 +337,10 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
 
 def _epof(m: Path, t) -> dict:
     e = Entry(m, "[epof]", t or {}, _EPOF_KEYS)
+    rule = e.get("opacity_rule", (str,), "comfort", choices=OPACITY_RULES)
+    dps = [e.number(k, None, lo=0.0) for k in ("low_dps", "high_dps")]
+    if rule == "absolute":  # the defaults: the named bands' edges (rule_from_options checks)
+        dps = [d if v is None else v for v, d in zip(dps, (ABSOLUTE_LOW_DPS, ABSOLUTE_HIGH_DPS))]
     h, v = e.fov((None, None))
     low = e.number("low_pct", 10.0, lo=0.0, hi=100.0)
     high = e.number("high_pct", 90.0, lo=0.0, hi=100.0)
@@ -354,9 +359,13 @@ def _epof(m: Path, t) -> dict:
         "opacity_source": e.get("opacity_source", (str,), "grid", choices=("grid", "viewing")),
         "smooth_s": e.number("smooth", 0.0, lo=0.0),
         # As vimsim epof: the eased comfort rule by default, the paper's one option away.
-        "opacity_rule": e.get("opacity_rule", (str,), "comfort", choices=("comfort", "paper")),
+        "opacity_rule": rule,
         "ease_in_s": e.number("ease_in", None, lo=0.0),
         "ease_out_s": e.number("ease_out", None, lo=0.0),
+        "low_dps": dps[0],  # the absolute rule's (None with another rule)
+        "high_dps": dps[1],
+        # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
+        "artefacts": e.get("artefacts", (bool,), False),
     }
 
 
@@ -439,7 +448,7 @@ _VIEW_KEYS = {
                "mitigation", "aperture_min", "feather", "vignette_color"),
     "grf": _GRF_KEYS,
     "epof": ("method", "low_pct", "high_pct", "opacity_source", "smooth", "ease_in",
-             "ease_out", "opacity_rule"),
+             "ease_out", "opacity_rule", "low_dps", "high_dps"),
 }  # fmt: skip
 
 
@@ -462,7 +471,8 @@ def _view(m: Path, data: dict, own: dict | None = None, own_where: str = "") -> 
     for k in own.keys() & set(_VIEW_KEYS["render"] + _VIEW_KEYS["grf"]):
         options[k], where[k] = own[k], own_where
     try:
-        ViewSpec.from_options(options, label=lambda k: f"{where.get(k, '[render]')} {k}")
+        deflt = {k: "[epof]" for k in _VIEW_KEYS["epof"]}  # a key not given: its own table
+        ViewSpec.from_options(options, label=lambda k: f"{where.get(k, deflt.get(k, '[render]'))} {k}")
     except InputError as e:
         raise InputError(f"{m}: {e}") from None
     return options
@@ -486,12 +496,14 @@ def load_manifest(path) -> Manifest:
     render = _render(m, data.get("render"))  # checked first: viewings build on it
     render["view"] = _view(m, data)
     viewings = _viewings(m, base, data.get("viewings"), videos, data, render)
+    epof = _epof(m, data.get("epof"))  # artefacts: detected in the sphere-mode preprocessing
+    videos = tuple(replace(v, artefacts=True) for v in videos) if epof["artefacts"] else videos
     return Manifest(
         path=m.resolve(),
         name=st.get("name", (str,), m.stem),
         videos=videos,
         viewings=viewings,
-        epof=_epof(m, data.get("epof")),
+        epof=epof,
         render=render,
         grf=_grf(m, data.get("grf")),
         questionnaires=_questionnaires(m, base, data.get("questionnaires")),

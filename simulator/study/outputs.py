@@ -32,6 +32,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.media.source import Source
+from simulator.mitigation.bands import draw_bands
 from simulator.sphere.geometry import extract_view
 
 __all__ = [
@@ -207,6 +208,8 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         ax.legend(loc="upper right", fontsize=8)
     ax.set_xlabel("time (s)")
     ax.set_ylabel("EPOF (deg/s)")
+    ax.set_ylim(bottom=0)
+    draw_bands(ax)  # the named flow bands (docs/screen.md)
     ax.set_title(f"{v.id}: EPOF across {len(epofs)} viewers")
     fig.tight_layout()
     with atomic_output(folder / "epof_viewers.png") as tmp:

@@ -24,7 +24,8 @@ from simulator.core.mapcache import cache_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
 from simulator.media.video import probe
-from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
+from simulator.study.manifest import SCRIPTED, Manifest, VideoSpec, ViewingSpec
+from simulator.traces.path import synth
 from simulator.traces.readers import TraceFile, load_headpath
 
 #: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).
@@ -76,7 +77,8 @@ def _grid_key(v: VideoSpec) -> str:
 def viewing_key(m: Manifest, w: ViewingSpec, grid: Path, memo: dict) -> str:
     """The hash of everything a viewing's outputs depend on (its resume record's key)."""
     return _sha({
-        "grid": grid.name, "trace": _file_sha(w.trace, memo), "format": w.format,
+        "grid": grid.name, "trace": "" if w.trace is None else _file_sha(w.trace, memo),
+        "format": w.format,
         "user": w.user, "epof": m.epof, "vimsim": __version__,
         "render": [w.render_opts, m.grf] if w.render else None, "plot": w.plot,
     })  # fmt: skip
@@ -116,10 +118,11 @@ class Plan:
 def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
     """The plan of ``m`` into ``out`` with the grid cache ``cache`` (reads no video frame)."""
     memo: dict = {}
-    grids = {v.id: cache / "grids" / f"{_grid_key(v)[:32]}.npz" for v in m.videos}
+    grids = {v.id: _grid_path(v, cache) for v in m.videos}
     plan = Plan(grids, {k: p.is_file() for k, p in grids.items()}, {}, {}, [])
     for v in m.videos:  # an entry is checked before use (format, video, options)
-        why = cache_problem(grids[v.id], v) if plan.hits[v.id] else None
+        mine = grids[v.id] == v.grid_file  # the user's grid: checked already, never removed
+        why = cache_problem(grids[v.id], v) if plan.hits[v.id] and not mine else None
         if why is not None:
             plan.hits[v.id] = False
             plan.stale[v.id] = f"rebuilt: {why}"
@@ -139,8 +142,19 @@ def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
     return plan
 
 
-def _trace_of(w: ViewingSpec, parsed: dict):
-    """The head path of a viewing, a multi-user file parsed once (``parsed`` memo)."""
+def _grid_path(v: VideoSpec, cache: Path) -> Path:
+    """The grid of video ``v``: the user's own (``grid_file``) when it can serve it
+    (:func:`cache_problem`), else the cache's entry (the user's file is never removed)."""
+    if v.grid_file is not None and cache_problem(v.grid_file, v) is None:
+        return v.grid_file
+    return cache / "grids" / f"{_grid_key(v)[:32]}.npz"
+
+
+def _trace_of(w: ViewingSpec, parsed: dict, length_s: float):
+    """The head path of a viewing, a multi-user file parsed once (``parsed`` memo); a
+    scripted viewer's covers the video (``length_s``), as the EPOF task makes it."""
+    if w.trace is None and w.format.startswith(SCRIPTED):
+        return synth(w.format[len(SCRIPTED) :], length_s, seed=int(w.user or 0))
     if w.user is None:
         return load_headpath(w.trace, w.format)
     key = (str(w.trace), w.format)
@@ -171,7 +185,7 @@ def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
         try:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
-                hp = _trace_of(w, parsed)  # with this viewing's warnings only
+                hp = _trace_of(w, parsed, length_s)  # with this viewing's warnings only
             found[w.id] = sorted({" ".join(str(c.message).split()) for c in caught})
             hp.check_covers(last_s, hold=m.epof["hold_last"], video=str(m.video(w.video).path))
             r = w.render_opts or {}
@@ -295,6 +309,6 @@ def base_row(w: ViewingSpec) -> dict:
         "participant": w.participant,
         "condition": w.condition,
         "video": w.video,
-        "trace": str(w.trace),
+        "trace": "" if w.trace is None else str(w.trace),
         "user": "" if w.user is None else w.user,
     }

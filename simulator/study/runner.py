@@ -53,12 +53,13 @@ WARNING_SEP = " | "
 def _video_dict(v: VideoSpec) -> dict:
     d = asdict(v)
     d["path"] = str(v.path)
+    d["grid_file"] = None if v.grid_file is None else str(v.grid_file)
     return d
 
 
 def _item(w: ViewingSpec) -> dict:
-    return {"id": w.id, "trace": str(w.trace), "format": w.format, "user": w.user,
-            "plot": w.plot}  # fmt: skip
+    return {"id": w.id, "trace": "" if w.trace is None else str(w.trace), "format": w.format,
+            "user": w.user, "plot": w.plot}  # fmt: skip
 
 
 #: Runs of a task whose worker process died before it is failed (a task's own errors
@@ -83,8 +84,12 @@ def run_study(
     cache_dir=None,
     resume: bool = True,
     progress=None,
+    video_outputs: bool = True,
 ) -> dict:
     """Run ``manifest`` into ``outdir``; returns the ``study.json`` summary.
+
+    ``video_outputs=False`` skips ``OUTDIR/videos/`` (a caller writing its own, e.g. a
+    screening).
 
     ``progress(done, failed, total)`` is called as tasks finish (units: a preprocess, a
     viewing's EPOF, a render). Failed viewings do not stop the study: their row's
@@ -98,7 +103,7 @@ def run_study(
     check_videos(manifest)  # a [[videos]] path that is not a video: a manifest error
     ex = make_executor(executor, workers)  # Ray address checked here, before any work
     try:
-        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start))
+        return _run(manifest, out, cache, ex, resume, progress, (t_start, c_start), video_outputs)
     except BaseException:
         ex.close(cancel=True)
         raise
@@ -121,7 +126,7 @@ def _prepare(manifest: Manifest, out: Path, cache: Path, ex) -> OutputFolder:
     return folder
 
 
-def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
+def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) -> dict:
     t_start, c_start = start
     timings: dict[str, float] = {}
     folder = _prepare(manifest, out, cache, ex)
@@ -148,7 +153,11 @@ def _run(manifest, out, cache, ex, resume, progress, start) -> dict:
     t0 = time.perf_counter()
     table = [rows[w.id] for w in manifest.viewings]
     outputs.write_viewings_csv(out / "viewings.csv", table, VIEWING_COLUMNS)
-    report = outputs.write_study_outputs(manifest, out, plan.grids, table)
+    report = (
+        outputs.write_study_outputs(manifest, out, plan.grids, table)
+        if video_outputs
+        else {"videos": {}}
+    )
     timings["outputs"] = time.perf_counter() - t0
     ex.join()
     timings["total"] = time.perf_counter() - t_start

@@ -28,12 +28,14 @@ from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
+from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
 from simulator.preprocess.paper import preprocess_video
 from simulator.preprocess.sphere import SphereConfig, preprocess_sphere
 from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
-from simulator.traces.path import HeadPath
+from simulator.study.viewers import SCRIPTED
+from simulator.traces.path import HeadPath, synth
 from simulator.traces.readers import TraceFile, load_headpath
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec
@@ -44,6 +46,7 @@ __all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
 _GRIDS: dict[tuple, GridFile] = {}
 _TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
+_ARTEFACTS: dict[tuple, Artefacts] = {}
 
 #: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
 WEIGHT_CACHE_BYTES = 192 << 20
@@ -90,9 +93,22 @@ def _grid(path: str) -> GridFile:
     return _GRIDS[key]
 
 
-def _trace(path: str, fmt: str, user: int | None) -> HeadPath:
+def _artefacts(path: str, grid: GridFile) -> Artefacts:
+    """The artefacts of a grid's video, detected once per worker and grid."""
+    key = _file_key(path)
+    if key not in _ARTEFACTS:
+        _ARTEFACTS.clear()
+        _ARTEFACTS[key] = artefacts_for_grid(grid)
+    return _ARTEFACTS[key]
+
+
+def _trace(path: str, fmt: str, user: int | None, grid: GridFile | None = None) -> HeadPath:
     """The head path of one viewing, with its own warnings (the file's and its user's
-    sampling): a multi-user file is parsed once per worker."""
+    sampling): a multi-user file is parsed once per worker. A scripted viewer (``fmt``
+    ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+    if fmt.startswith(SCRIPTED):
+        end = (int(grid.meta.get("start_frame", 0)) + grid.n_frames + 1) / grid.fps
+        return synth(fmt[len(SCRIPTED) :], end, seed=int(user or 0))
     if user is None:
         return load_headpath(path, fmt)
     key = (*_file_key(path), fmt)
@@ -125,6 +141,7 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
                     config=SphereConfig(cell_deg=video["cell_deg"]),
                     flow=video["flow"],
                     progress=False,
+                    artefacts=bool(video.get("artefacts")),
                 )
             else:
                 preprocess_video(
@@ -162,7 +179,8 @@ def viewing_stats(epof_dps, opacity) -> dict:
 def _rule(opts: dict) -> OpacityRule:
     """The opacity rule of the ``[epof]`` table, by ``vimsim epof``'s one builder
     (:func:`simulator.mitigation.grf.rule_from_options`: the eased comfort rule by default;
-    ``opacity_rule = "paper"``: the paper's unsmoothed rule)."""
+    ``opacity_rule = "paper"``: the paper's unsmoothed rule; ``"absolute"``: between
+    ``low_dps`` and ``high_dps``)."""
     names = {"smooth": "smooth_s", "ease_in": "ease_in_s", "ease_out": "ease_out_s"}
 
     def get(k):
@@ -185,6 +203,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
         rule = _rule(opts)
         # As vimsim epof: a headset's exact per-eye frustum, else the FOVs (the grid's)
         frustum = Frustum.from_headset(opts["headset"]) if opts.get("headset") else None
+        art = _artefacts(grid_path, grid) if opts.get("artefacts") else None
         if grid.field_dps is not None and opts["method"] != "paper":
             # One worker serves every viewing of this video: let exact EPOF keep the
             # weights of more orientation bins (bounded, not growing with the video).
@@ -205,7 +224,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 try:
-                    hp = _trace(it["trace"], it["format"], it["user"])
+                    hp = _trace(it["trace"], it["format"], it["user"], grid)
                     res = compute_epof(
                         grid,
                         hp,
@@ -216,6 +235,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                         rule=rule,
                         hold=opts["hold_last"],
                         method=opts["method"],
+                        artefacts=art,
                     )
                 finally:  # a failed viewing keeps the warnings of its input too
                     rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
@@ -254,8 +274,8 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
         view = ViewSpec.from_options(opts["view"])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            hp = _trace(item["trace"], item["format"], item["user"])
             grid = _grid(grid_path)
+            hp = _trace(item["trace"], item["format"], item["user"], grid)
         s = render_viewing(
             dataclasses.replace(_source(video), eye="left"),
             hp,

@@ -20,6 +20,7 @@ from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, requi
 from simulator.media.source import Source, as_source
 from simulator.media.video import MediaInfo
 from simulator.mitigation.grf import grain_count
+from simulator.preprocess.artefacts import stored_artefacts
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 from simulator.traces.readers import load_headpath
@@ -131,6 +132,7 @@ def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps
         rule=rule,
         method=view.method,
         frames=(max(0, f0 - warm), f1) if ranged else None,
+        artefacts=stored_artefacts(grid),  # those preprocess --artefacts stored: held
     )
     # Grid rows by video frame number (a grid may start later or lack the last frame).
     rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)

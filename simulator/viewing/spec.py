@@ -61,6 +61,8 @@ VIEW_OPTIONS: dict[str, object] = {
     "smooth": None,
     "ease_in": None,
     "ease_out": None,
+    "low_dps": None,
+    "high_dps": None,
     "seed": 0,
     "grain_size": 1.5,
     "density": 0.5,

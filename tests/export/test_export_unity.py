@@ -464,3 +464,14 @@ def test_csharp_loader_errors_name_file_and_problem(tmp_path, harness):
         kind, path, msg, _field = r.stdout.strip().split("|")
         assert kind == "VimsimLoadException" and path.endswith(name) and problem in msg, msg
     assert _mono(harness, "load", tmp_path / "x").stdout.strip() == "ok sphere"
+
+
+def test_absolute_rule_carried_into_the_header(tmp_path):
+    """--opacity-rule absolute: the header holds the fixed deg/s, the same for any video."""
+    from simulator.mitigation.grf import OpacityRule
+
+    grid = _paper_grid(tmp_path / "g.npz", T=20)
+    export_unity(grid, tmp_path / "x", rule=OpacityRule(low_dps=5.0, high_dps=30.0))
+    h, _ = read_export(tmp_path / "x")
+    assert (h["opacity"]["low_dps"], h["opacity"]["high_dps"]) == (5.0, 30.0)
+    assert h["opacity"]["scale"] == "absolute"

@@ -62,6 +62,8 @@ def test_projection_tiles_match_the_equirect_tiles(name, size, opts, tile_size):
         frames, sample = tile_frames(_Src(conv), est.tiles, (g.size, 100.0, _CUBE, g.level), 0, 1)
         assert sample == est.tiles and frames["convert"]
         return
+    frames, sample = tile_frames(_Src(conv), est.tiles, (g.size, 100.0, _CUBE, g.level), 0, 1, True)
+    assert sample == est.tiles and frames["convert"]  # a caller that must see equirect frames
     pt = ProjectionTiles(conv, g.size, cfg.tile_fov_deg, _CUBE, g.level)
     gray = np.ascontiguousarray(src[..., 0])
     tiles = pt(gray)

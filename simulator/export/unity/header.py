@@ -71,7 +71,11 @@ def _opacity_section(rule: OpacityRule, lo: float, hi: float) -> dict:
         "ease_out_s": float(rule.ease_out_s),
         "low_pct": float(rule.low_pct),
         "high_pct": float(rule.high_pct),
-        "source": "grid: every window of every frame of pof_dps",
+        "source": "absolute: fixed deg/s (--opacity-rule absolute), the same for every video"
+        if rule.is_absolute
+        else "grid: every window of every frame of pof_dps",
+        # relative: low/high_dps are percentiles of this video's flow; absolute: fixed deg/s
+        "scale": "absolute" if rule.is_absolute else "relative",
         "low_dps": lo,
         "high_dps": hi,
         "smoothing_s": float(rule.smoothing_s),

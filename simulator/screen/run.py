@@ -1,0 +1,153 @@
+"""``vimsim screen``: a study whose viewers are scripted, then the screening report of each video.
+
+Each video is preprocessed in sphere mode through the study's grid cache (or a grid the
+user already made of it, when its video's content hash matches), watched by ``n``
+scripted viewers (:func:`simulator.traces.path.synth`, seeds ``seed .. seed + n - 1``,
+made in the study's EPOF tasks as a manifest's ``viewers = {kind, n, seed}`` are),
+with artefacts (:mod:`simulator.preprocess.artefacts`) detected and left out. The study
+writes ``viewings.csv``, ``epof/`` and ``videos/``; :mod:`simulator.screen.report` adds
+``screen/<video>/`` and ``screen/comparison.csv``.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from pathlib import Path
+
+from simulator.core.errors import InputError
+from simulator.core.fileio import check_input_file
+from simulator.media.gridfile import content_hash
+from simulator.media.video import probe
+from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
+from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
+from simulator.study.runner import run_study
+from simulator.study.tasks import write_json
+
+__all__ = ["SCREEN_COLUMNS", "VIEWER_KINDS", "check_viewers", "screen_videos"]
+
+
+def check_viewers(n, kind: str) -> None:
+    """InputError unless ``n`` >= 1 scripted viewers of a known kind."""
+    if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= 100_000:
+        raise InputError(f"--viewers must be an integer in 1..100000; got {n!r}")
+    if kind not in VIEWER_KINDS:
+        raise InputError(f"unknown viewer kind {kind!r}; expected one of {', '.join(VIEWER_KINDS)}")
+
+
+def _video_id(path: Path, taken: set[str]) -> str:
+    base = re.sub(r"[^A-Za-z0-9._-]", "_", path.stem).lstrip("._-") or "video"
+    vid, k = base, 2
+    while vid in taken:
+        vid, k = f"{base}-{k}", k + 1
+    taken.add(vid)
+    return vid
+
+
+def _matching_grid(video: Path, grids: list[Path], layout: str) -> Path | None:
+    """The first of ``grids`` made of ``video`` (the content hash its meta records) with
+    ``layout``."""
+    import json
+
+    import numpy as np
+
+    if not grids:
+        return None
+    want = content_hash(video)
+    for g in grids:
+        try:
+            with np.load(g, allow_pickle=False) as z:
+                meta = json.loads(str(z["meta"]))
+        except (OSError, ValueError, KeyError):
+            raise InputError(f"{g}: not a vimsim grid file") from None
+        if meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout:
+            return g
+    return None
+
+
+def screen_videos(
+    videos,
+    outdir,
+    *,
+    viewers: int = 30,
+    kind: str = "look-around",
+    seed: int = 0,
+    epof: dict | None = None,
+    artefacts: bool = True,
+    grids=(),
+    layout: str = "mono",
+    executor: str = "local",
+    workers: int | None = None,
+    cache_dir=None,
+    progress=None,
+) -> dict:
+    """Screen ``videos`` into ``outdir``; returns the study summary with ``screen`` added.
+
+    ``epof``: the ``[epof]`` options of a study manifest (opacity rule, FOV); ``grids``:
+    grid files the user already made (used for the video whose content they match);
+    ``layout``: of every video (stereo: the left eye is screened).
+    InputError (nothing written) for no video, a still image, a missing file, bad viewers.
+    """
+    check_viewers(viewers, kind)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise InputError(f"--seed must be an integer >= 0; got {seed!r}")
+    paths = [check_input_file(v, "video") for v in videos]
+    if not paths:
+        raise InputError("screen needs at least one video")
+    grid_files = [check_input_file(g, "grid") for g in grids]
+    for p in paths:
+        info = probe(p)
+        if not info.is_video or info.n_frames < 2:
+            raise InputError(f"{p}: is a still image; screen needs a video")
+        info.eye_size(layout)  # the layout must fit the frame (InputError naming the file)
+    out = Path(outdir)
+    taken: set[str] = set()
+    specs, views, reused = [], [], {}
+    for p in paths:
+        vid = _video_id(p, taken)
+        g = _matching_grid(p, grid_files, layout)
+        if g is not None:
+            reused[vid] = str(g)
+        specs.append(VideoSpec(id=vid, path=p.resolve(), layout=layout, method="sphere",
+                               grid_file=g, artefacts=artefacts))  # fmt: skip
+    width = max(3, len(str(viewers)))
+    for spec in specs:  # viewer k: the scripted head path of seed + k - 1 (study tasks make it)
+        for k in range(1, viewers + 1):
+            views.append(ViewingSpec(f"{spec.id}-viewer{k:0{width}d}", spec.id, None,
+                                     SCRIPTED + kind, seed + k - 1, f"viewer{k:0{width}d}"))  # fmt: skip
+    opts = _epof_options(epof or {}, artefacts)
+    m = Manifest(path=(out / "screen.toml").resolve(), name="screen", videos=tuple(specs),
+                 viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip
+    summary = run_study(m, out, executor=executor, workers=workers, cache_dir=cache_dir,
+                        progress=progress, video_outputs=False)  # fmt: skip
+    summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts)
+    summary["screen"]["reused_grids"] = reused
+    summary["screen"]["unused_grids"] = [
+        str(g) for g in grid_files if str(g) not in reused.values()
+    ]
+    summary["screen"]["viewers"] = {"n": viewers, "kind": kind, "seed": seed}
+    summary["screen"]["artefacts"] = artefacts
+    write_json(out / "screen" / "screen.json", {"format": "vimsim-screen", "version": 1,
+               "study": "study.json", **summary["screen"]})  # fmt: skip
+    return summary
+
+
+#: A screening renders nothing; the study runner still reads these.
+_RENDER = {"cpus": 1}
+
+
+def _epof_options(given: dict, artefacts: bool) -> dict:
+    """The study's ``[epof]`` options of a screening: as ``vimsim study`` defaults, the
+    last pose held (a scripted path covers the video anyway), ``artefacts`` as asked."""
+    d = {
+        "hfov_deg": None, "vfov_deg": None, "method": "auto", "top_k": None, "hold_last": True,
+        "low_pct": 10.0, "high_pct": 90.0, "opacity_source": "grid", "smooth_s": 0.0,
+        "opacity_rule": "comfort", "ease_in_s": None, "ease_out_s": None,
+    }  # fmt: skip
+    d.update(given)
+    d["artefacts"] = bool(artefacts)
+    for k in ("low_dps", "high_dps"):
+        v = d.get(k)
+        if v is not None and not math.isfinite(v):
+            raise InputError(f"--{k.replace('_', '-')} must be finite; got {v}")
+    return d
