@@ -4,8 +4,10 @@ Usage: .venv/bin/python bench/projection_flow.py [--seconds 2] [--size 1024x512]
 
 A synthetic rotating clip (``vimsim synth --scene rotate``, equirect) is converted by
 ffmpeg's ``v360`` to each projection (eac, c3x2, c6x1, dfisheye at a 190 deg lens,
-hequirect = VR180's one eye); ``vimsim preprocess --method sphere`` of each against that
-of the equirect clip, in the same run:
+hequirect = VR180's one eye) and re-encoded as equirect with the same encoder settings
+(x264 crf 10: the reference decodes at the same cost per bit as the projections);
+``vimsim preprocess --method sphere`` of each against that of the equirect clip, in the
+same run:
 
 - flow: the sphere-mode field of each projection vs the equirect field, per covered cell
   and frame: median relative difference (goal <= 3%), and the same for the window matrix;
@@ -51,7 +53,7 @@ def _cases(w: int, h: int):
 
 
 def _convert(src: Path, out: Path, name: str, size, opts: str) -> None:
-    vf = f"v360=e:{name}:w={size[0]}:h={size[1]}:interp=cubic{opts}"
+    vf = "null" if name == "e" else f"v360=e:{name}:w={size[0]}:h={size[1]}:interp=cubic{opts}"
     cmd = [ffmpeg_exe(), "-v", "error", "-y", "-i", str(src), "-vf", vf, "-c:v", "libx264",
            "-crf", "10", "-preset", "veryfast", str(out)]  # fmt: skip
     subprocess.run(cmd, check=True)
@@ -72,7 +74,9 @@ def main() -> None:
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
     d = Path(tempfile.mkdtemp(prefix="vimsim-proj-"))
-    eq, _ = synthesize(SynthConfig("rotate", seconds=a.seconds, fps=30.0, size=(w, h)), d / "e.mp4")
+    syn, _ = synthesize(SynthConfig("rotate", seconds=a.seconds, fps=30.0, size=(w, h)), d / "s.mp4")
+    eq = d / "e.mp4"  # the reference: encoded as the projections are (same decode cost per bit)
+    _convert(syn, eq, "e", (w, h), "")
     grid = grid_preset("default")
     cfg = SphereConfig(cell_deg=4.0)
     hp = synth_path("look-around", a.seconds + 0.5, rate_hz=60.0, seed=1)
@@ -100,7 +104,7 @@ def main() -> None:
           "preprocess ratio wall / CPU  render ratio wall / CPU")  # fmt: skip
     for name, size, opts in _cases(w, h):
         path = d / f"{name}.mp4"
-        _convert(eq, path, name, size, opts)
+        _convert(syn, path, name, size, opts)
         g, t_pre, t_ren = run(name, path, LENS if name == "dfisheye" else None)
         f = np.asarray(g.field_dps[:], float)[1:]
         wins, cells = coverage_masks(g.meta)

@@ -6,7 +6,8 @@ Encodes up to 60 frames of an H.264 clip once (ffmpeg ``testsrc2`` panned, ultra
 loops it by stream copy to each frame count N. In the same run:
 
 - throughput: ``vimsim preprocess --method sphere`` frames/s over decoding alone (the same
-  frames, the Y plane as sphere mode decodes it) -- goal >= 0.8;
+  frames, the Y plane as sphere mode decodes it), at the smallest and the largest N (a
+  short clip's ratio includes the fixed setup: tile maps, window matrices) -- goal >= 0.8;
 - memory: the peak RSS of a fresh process preprocessing N frames, for each N, and their
   ratio (largest / smallest; goal <= 1.2x), with the absolute peak.
 
@@ -73,12 +74,13 @@ def main() -> None:
     print(f"made {len(counts)} clips of {a.size} ({', '.join(map(str, counts))} frames) "
           f"in {time.perf_counter() - t0:.0f} s")  # fmt: skip
     n0 = counts[0]
-    dec = child("decode", clips[n0], d / "x.npz")
+    decs = {n: child("decode", clips[n], d / "x.npz") for n in (n0, counts[-1])}
     pre = {n: child("preprocess", clips[n], d / f"g{n}.npz") for n in counts}
-    fps_dec = dec["n"] / dec["s"]
-    fps_pre = pre[n0]["n"] / pre[n0]["s"]
-    print(f"{n0} frames: decode alone {fps_dec:.2f} frames/s, sphere preprocess "
-          f"{fps_pre:.2f} frames/s: ratio {fps_pre / fps_dec:.2f} (goal >= 0.8)")  # fmt: skip
+    dec = decs[n0]
+    for n, dn in decs.items():  # per count: a short clip's ratio includes the fixed setup
+        fps_dec, fps_pre = dn["n"] / dn["s"], pre[n]["n"] / pre[n]["s"]
+        print(f"{n} frames: decode alone {fps_dec:.2f} frames/s, sphere preprocess "
+              f"{fps_pre:.2f} frames/s: ratio {fps_pre / fps_dec:.2f} (goal >= 0.8)")  # fmt: skip
     for n in counts:
         print(
             f"{n} frames: peak RSS {pre[n]['rss_mb']:.0f} MB ({pre[n]['n'] / pre[n]['s']:.2f} frames/s)"

@@ -217,14 +217,16 @@ class Source:
         start: int = 0,
         end: int | None = None,
         threads: int | None = None,
+        convert: bool = True,
     ) -> Iterator[NDArray[np.uint8]]:
         """One eye's equirect frames ``start <= i < end`` (``eye``: default ``self.eye``),
-        one at a time; views into decoder buffers where possible (copy one to keep it)."""
+        one at a time; views into decoder buffers where possible (copy one to keep it);
+        ``convert=False``: in the source's projection, as stored."""
         eye = self.eye if eye is None else eye
         it = self._decode(self.file_of(eye), fmt, start, end, threads)
         try:
             for f in it:
-                yield self.eye_view(f, eye)
+                yield self.eye_view(f, eye, convert=convert)
         finally:
             it.close()
 

@@ -38,6 +38,7 @@ from simulator.media.video import prefetch
 from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
+from simulator.preprocess.tiles import tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -384,7 +385,8 @@ def field_from_video(
     ``source``: a :class:`simulator.media.source.Source` (its eye) or a path (mono
     equirect). Decodes the Y plane only; decoding and tile extraction run in a background thread
     while flow and splatting run in the caller's. Frames ``start <= k < end``.
-    ``on_frame(gray)`` sees every decoded frame first (in the decoding thread).
+    ``on_frame(gray)`` sees every decoded frame first (in the decoding thread), as an
+    equirect working frame (a non-equirect source is then converted before tiling).
     """
 
     source = as_source(source)
@@ -392,9 +394,11 @@ def field_from_video(
     if not info.is_video:
         raise InputError(f"{path}: sphere mode needs a video; got a still image")
     est = FieldEstimator(source.eye_size, info.fps, config, flow=flow)
-    frames = source.frames(fmt="gray", start=start, end=end)
+    g = est._geo  # a non-equirect source: tiles straight from its frames (one resampling)
+    tiling = (g.size, est.config.tile_fov_deg, _CUBE, g.level)
+    frames, sample = tile_frames(source, est.tiles, tiling, start, end, on_frame is not None)
     seen = frames if on_frame is None else (on_frame(f) or f for f in frames)
-    tiles = prefetch((est.tiles(f) for f in seen), depth=4)
+    tiles = prefetch((sample(f) for f in seen), depth=4)
     last = info.n_frames if end is None else min(int(end), info.n_frames)
     try:
         mask = None if source.covered is None else cell_coverage(source.covered, config.cell_deg)

@@ -132,8 +132,10 @@ _C6X1 = _CubeLayout(6, 1, tuple((k, 0) for k in range(6)))
 _EAC = _CubeLayout(3, 2, ((2, 0), (0, 0), (2, 1), (0, 1), (1, 0), (1, 1)), (0, 0, 270, 270, 0, 90))
 
 
-def _cube_to_image(layout: _CubeLayout, dirs: NDArray, w: int, h: int, eac: bool = False):
-    dirn, u, v = _cube_uv(dirs)
+def _cube_to_image(
+    layout: _CubeLayout, dirs: NDArray, w: int, h: int, eac: bool = False, cube=None
+):
+    dirn, u, v = _cube_uv(dirs) if cube is None else cube
     x = np.empty_like(u)
     y = np.empty_like(v)
     for k in range(6):
@@ -268,8 +270,11 @@ class EquirectConverter:
 
     PAD = 3  # atlas border of a cubemap face, pixels (bicubic reaches 2)
 
-    def __init__(self, name: str, size: tuple[int, int], lens_fov_deg: float | None = None):
+    def __init__(
+        self, name: str, size: tuple[int, int], lens_fov_deg: float | None = None, pad: int = 3
+    ):
         p = PROJECTIONS[name]
+        self.PAD = max(self.PAD, int(pad))  # wider for a source downscaled after the atlas
         w, h = int(size[0]), int(size[1])
         problem = p.check(w, h)
         if problem:
@@ -286,12 +291,16 @@ class EquirectConverter:
         """``cv2.remap`` maps (float32) of world directions ``(..., 3)`` into the frame (or
         its face atlas), and the bool mask of the covered ones (others map off the frame)."""
         w, h = self.size
-        x, y, ok = self._p.to_image(dirs, w, h, self.lens_fov_deg)
+        cube = _cube_uv(dirs) if self._atlas is not None else None  # once, not twice
+        if cube is None:
+            x, y, ok = self._p.to_image(dirs, w, h, self.lens_fov_deg)
+        else:
+            x, y, ok = _cube_to_image(self._p.cube, dirs, w, h, cube=cube)
         ok = np.asarray(np.broadcast_to(ok, np.shape(x)), bool)
         lim_w, lim_h = w - 1, h - 1
-        if self._atlas is not None:
+        if cube is not None:
             lay, P = self._p.cube, self.PAD
-            dirn = _cube_uv(dirs)[0]
+            dirn = cube[0]
             x = x + (2 * np.asarray([c for c, _ in lay.cell])[dirn] + 1) * P
             y = y + (2 * np.asarray([r for _, r in lay.cell])[dirn] + 1) * P
             lim_h, lim_w = (n - 1 for n in self._atlas[0].shape)
@@ -317,6 +326,11 @@ class EquirectConverter:
             ax[row * A : (row + 1) * A, col * A : (col + 1) * A] = np.clip(np.rint(sx), 0, w - 1)
             ay[row * A : (row + 1) * A, col * A : (col + 1) * A] = np.clip(np.rint(sy), 0, h - 1)
         return ax, ay
+
+    def atlas(self, frame: NDArray) -> NDArray:
+        """``frame`` as :meth:`maps` index it: the padded face atlas of a cubemap, else the
+        frame itself (contiguous)."""
+        return self._source(frame)
 
     def _source(self, frame: NDArray) -> NDArray:
         if frame.shape[1] != self.size[0] or frame.shape[0] != self.size[1]:
