@@ -27,11 +27,12 @@ Measured, each against the analytic truth (same cell grid, same viewport integra
    deg/s, frame by frame and on 5-frame means;
 5. cost: sphere-mode preprocess seconds, after / today, same clips, same run.
 
-"today" = the code before this change (``--today /work/old``: run through its CLI with
+"today" = the code before this change (``--today DIR``, a checkout of it; by default commit
+``TODAY_COMMIT`` unpacked with ``git archive`` into a temporary folder: run through its CLI with
 ``PYTHONPATH``); "after" = this worktree. Both run as subprocesses
 (``python -m simulator preprocess --method sphere``), timed the same way.
 
-    .venv/bin/python bench/flow_at_speed.py [--seconds 2] [--size 512x256] [--today /work/old]
+    .venv/bin/python bench/flow_at_speed.py [--seconds 2] [--size 512x256] [--today DIR]
         [--only NAME,...] [--no-real] [--after-flow dis:ultrafast+refine5]
 """
 
@@ -43,6 +44,7 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -272,16 +274,25 @@ def measure_clip(name, traj, room, kind, size, today) -> tuple[dict, dict]:
     return row, cost
 
 
+#: The last commit before the flow-at-speed change (same flow algorithms as main had then).
+TODAY_COMMIT = "35875b5"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seconds", type=float, default=2.0)
     ap.add_argument("--size", default="512x256")
-    ap.add_argument("--today", default="/work/old")
+    ap.add_argument("--today", default=None, help=f"a checkout of 'today' (default: {TODAY_COMMIT})")
     ap.add_argument("--only", default="")
     ap.add_argument("--no-real", action="store_true")
     ap.add_argument("--real-frames", type=int, default=0, help="0: the whole real clip")
     ap.add_argument("--after-flow", default="", help="--flow of 'after' (default: its default)")
     a = ap.parse_args()
+    if a.today is None:  # the code before this change, from this repository's history
+        a.today = tempfile.mkdtemp(prefix="vimsim-today-")
+        arch = subprocess.run(["git", "-C", str(REPO), "archive", TODAY_COMMIT],
+                              check=True, capture_output=True).stdout  # fmt: skip
+        subprocess.run(["tar", "-x", "-C", a.today], input=arch, check=True)
     if a.after_flow:
         AFTER_FLOW[:] = ["--flow", a.after_flow]
     size = tuple(int(v) for v in a.size.split("x"))
