@@ -258,7 +258,8 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     T = m.shape[0]
     lo_yaw, hi_yaw = grid.yaw_deg[0] - step / 2, grid.yaw_deg[-1] + step / 2
     # Colour scale to the 99.5th percentile: a scene cut's single frame would flatten the rest.
-    vmax = max(float(np.percentile(m, 99.5)), 1e-6)
+    # (artefact frames left out of it too).
+    vmax = max(float(np.percentile(m[~bad] if (~bad).any() else m, 99.5)), 1e-6)
     im = ax.imshow(m.T, origin="lower", aspect="auto", cmap="magma", vmin=0, vmax=vmax,
                    extent=(0, T / fps, lo_yaw, hi_yaw), interpolation="nearest")  # fmt: skip
     fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)", extend="max")
@@ -278,7 +279,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     ax.set_xlabel("time (s)")
     ax.set_ylabel("yaw (deg, + right)")
     for f in art:  # artefact frames greyed: left out of the ranking
-        ax.axvspan(f / fps, (f + 1) / fps, color="0.6", alpha=0.8, lw=0)
+        ax.axvspan(f / fps, (f + 1) / fps, color="0.6", lw=0)
     left = f"; {len(art)} artefact frames (grey) left out" if art else ""
     ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots{left})")
     fig.tight_layout()
