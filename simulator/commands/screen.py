@@ -22,7 +22,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "video the EPOF across viewers over time, the time x yaw map, the most provocative "
         "moments with thumbnails, the whole sphere's flow and a one-page summary.png, and a "
         "comparison table across videos (OUTDIR/screen/comparison.csv) with the share of "
-        "time in each named flow band (docs/screen.md). Codec keyframes, hard cuts, fades "
+        "time in each named flow band, all on one offline page OUTDIR/screen/index.html "
+        "(docs/screen.md). Codec keyframes, hard cuts, fades "
         "and static overlays appearing are detected and left out (--no-artefacts: kept).",
     )
     p.add_argument("videos", nargs="+", metavar="VIDEO", help="the videos (mono equirect)")
@@ -101,5 +102,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"{r['video']}: mean {r['epof_mean_dps']:.2f} deg/s, p90 {r['epof_p90_dps']:.2f} "
               f"({r['band_p90']}), artefact frames {r['artefact_frames']}")  # fmt: skip
     print(f"vimsim screen: {len(s['screen']['rows'])} video(s), {s['timings_s']['total']:.1f} s "
-          f"-> {args.output}/screen/comparison.csv")  # fmt: skip
+          f"-> {args.output}/screen/comparison.csv, index.html")  # fmt: skip
     return 3 if s["counts"]["failed"] else 0

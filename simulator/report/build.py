@@ -203,6 +203,9 @@ def _video_data(
     epof = s["settings"]["epof"]
     grid = Path(vinfo.get("grid", ""))
     res = {"id": vid, "export": None, "copy": None, "plots": [], "moments": []}
+    made = ((s.get("outputs") or {}).get("videos") or {}).get(vid) or {}
+    res["artefacts_left_out"] = int(made.get("artefact_frames_left_out") or 0)
+    res["artefact_kinds"] = dict(made.get("artefact_kinds") or {})
     if grid.is_file():
         # The export's formats are in the key: a report made before a format change is
         # exported again, not copied.

@@ -148,7 +148,11 @@ class Site:
                      _e(m.get("pitch_deg", "")), _e(m.get("pof_dps", "")),
                      (f'<img class="thumb" src="media/{_e(vid)}/{_e(m["thumbnail"])}" alt="moment">'
                       if m.get("thumbnail") else "")] for m in ms]  # fmt: skip
+            n_art = int(d.get("artefacts_left_out") or 0)
+            kinds = ", ".join(f"{k}: {c}" for k, c in (d.get("artefact_kinds") or {}).items())
             parts += ["<h2>Most provocative moments</h2>",
+                      (f'<p class="artefacts">{n_art} frames left out as artefacts'
+                      f"{f' ({_e(kinds)})' if kinds else ''}.</p>"),
                       _table(["rank", "time (s)", "yaw (deg)", "pitch (deg)", "POF (deg/s)", "view"], rows)]  # fmt: skip
         mine = [r for r in self.rows if r.get("video") == vid]
         parts += ["<h2>Viewings</h2>", "<ul>" + "".join(

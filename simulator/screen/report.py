@@ -8,7 +8,8 @@ greyed), ``sphere_flow.csv`` (the whole sphere's mean flow per frame), ``moments
 ``moment_<k>.png`` (the most provocative instants, artefacts left out, peaks at one
 instant merged, each thumbnail captioned), ``summary.png`` (one page). Across videos:
 ``OUTDIR/screen/comparison.csv`` (:data:`SCREEN_COLUMNS`, the bands and their sources in
-``#`` lines). Units: deg/s, seconds, degrees.
+``#`` lines) and ``OUTDIR/screen/index.html`` (the one-page browser summary,
+:mod:`simulator.screen.page`). Units: deg/s, seconds, degrees.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from simulator.epof.viewing import read_epof_csv
 from simulator.media.gridfile import load_grid
 from simulator.media.lazyfield import field_chunks
 from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
+from simulator.screen.page import write_screen_page
 from simulator.sphere.geometry import extract_view, split_eye
 
 __all__ = ["SCREEN_COLUMNS", "write_screen_outputs"]
@@ -382,4 +384,5 @@ def write_screen_outputs(manifest, out: Path, summary: dict, *, artefacts: bool)
     comments.append("EPOF statistics over all viewers and frames, artefact frames left out")
     _write_csv(folder / "comparison.csv", SCREEN_COLUMNS,
                [[r[c] for c in SCREEN_COLUMNS] for r in report["rows"]], comments)  # fmt: skip
+    write_screen_page(folder, report, SCREEN_COLUMNS)  # index.html, last
     return report

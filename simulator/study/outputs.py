@@ -5,7 +5,8 @@ viewer, faint, with the median and the 10-90 % band across viewers), ``provocati
 (the time x yaw map of the flow of the windows on the horizon row -- pitch nearest 0 --
 of the grid, deg/s, with the viewers' yaw as dots and the most provocative moments
 numbered), ``moments.csv`` (rank, time, frame, yaw, pitch, POF) and ``moment_<k>.png`` (the
-viewport of each moment, the grid's window FOV). With ``[questionnaires]``:
+viewport of each moment, the grid's window FOV). Frames the viewings' EPOF CSVs mark as
+artefacts (their ``artefact`` column) are left out of the ranking and greyed on the map. With ``[questionnaires]``:
 ``OUTDIR/analysis/`` holds the ``vimsim analyze`` report of the study, each participant's
 session flow taken from their EPOF (``DATA.csv`` there is what was analysed).
 """
@@ -36,6 +37,7 @@ from simulator.mitigation.bands import draw_bands
 from simulator.sphere.geometry import extract_view
 
 __all__ = [
+    "artefact_frames",
     "confound_notes",
     "provocative_moments",
     "versions",
@@ -92,19 +94,41 @@ def write_viewings_csv(path, rows: list[dict], columns) -> None:
 def _load_epof(path: Path) -> np.ndarray:
     """(T, 7) array of an EPOF CSV (frame, time_s, yaw, pitch, roll, epof_dps, opacity),
     read by :func:`simulator.epof.read_epof_csv`."""
+    return _read_epof(path)[0]
+
+
+def _read_epof(path: Path) -> tuple[np.ndarray, tuple[str, ...] | None]:
+    """:func:`_load_epof`'s array and the artefact kind of each row (None: no column)."""
     r = read_epof_csv(path)
-    return np.column_stack([getattr(r, c) for c in EPOF_COLUMNS]).astype(np.float64)
+    return np.column_stack([getattr(r, c) for c in EPOF_COLUMNS]).astype(np.float64), r.artefact
+
+
+def artefact_frames(epofs: dict[str, tuple[np.ndarray, tuple[str, ...] | None]]) -> dict[int, str]:
+    """``{frame: kind}`` of the frames any viewing's EPOF CSV marks as an artefact (its
+    ``artefact`` column; the frame from its ``frame`` column)."""
+    out: dict[int, str] = {}
+    for a, kinds in epofs.values():
+        for f, k in zip(a[:, 0], kinds or ()):
+            if k:
+                out.setdefault(int(f), k)
+    return out
 
 
 def provocative_moments(pof_ty, yaw_deg, fps: float, *, n: int = N_MOMENTS,
-                        sep_s: float = MOMENT_SEP_S, sep_deg: float = MOMENT_SEP_DEG) -> list[dict]:  # fmt: skip
+                        sep_s: float = MOMENT_SEP_S, sep_deg: float = MOMENT_SEP_DEG,
+                        exclude=None) -> list[dict]:  # fmt: skip
     """The ``n`` largest entries of a (T, Y) time x yaw flow map (deg/s), each at least
-    ``sep_s`` seconds or ``sep_deg`` degrees of yaw (wrapped) from every larger one."""
+    ``sep_s`` seconds or ``sep_deg`` degrees of yaw (wrapped) from every larger one;
+    the rows ``exclude`` (a length-T bool array: artefact frames) never ranked."""
     m = np.asarray(pof_ty, np.float64)
+    if exclude is not None:
+        m = np.where(np.asarray(exclude, bool)[:, None], -np.inf, m)
     order = np.argsort(m, axis=None)[::-1]
     picked: list[tuple[int, int]] = []
     for flat in order:
         t, y = divmod(int(flat), m.shape[1])
+        if not np.isfinite(m[t, y]):
+            break
         ok = True
         for t2, y2 in picked:
             dyaw = abs((yaw_deg[y] - yaw_deg[y2] + 180.0) % 360.0 - 180.0)
@@ -182,7 +206,8 @@ def _grid_map(path: Path) -> _GridMap:
                         float(meta["grid"]["hfov_deg"]), float(meta["grid"]["vfov_deg"]))  # fmt: skip
 
 
-def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Path) -> dict:
+def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Path,
+                   artefacts: dict[int, str] | None = None) -> dict:  # fmt: skip
     import matplotlib
 
     matplotlib.use("Agg")
@@ -221,7 +246,10 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     p0 = int(np.argmin(np.abs(grid.pitch_deg)))
     pitch0 = float(grid.pitch_deg[p0])
     m = np.asarray(grid.pof_dps[:, p0, :], np.float64)
-    moments = provocative_moments(m, grid.yaw_deg, fps)
+    art = {f: k for f, k in (artefacts or {}).items() if 0 <= f < m.shape[0]}
+    bad = np.zeros(m.shape[0], bool)
+    bad[list(art)] = True
+    moments = provocative_moments(m, grid.yaw_deg, fps, exclude=bad)
     for mo in moments:
         mo["pitch_deg"] = pitch0
     _thumbnails(Source.open(v.path, layout=v.layout, eye=v.eye), moments, grid.hfov_deg, grid.vfov_deg, folder)
@@ -230,7 +258,8 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     T = m.shape[0]
     lo_yaw, hi_yaw = grid.yaw_deg[0] - step / 2, grid.yaw_deg[-1] + step / 2
     # Colour scale to the 99.5th percentile: a scene cut's single frame would flatten the rest.
-    vmax = max(float(np.percentile(m, 99.5)), 1e-6)
+    # (artefact frames left out of it too).
+    vmax = max(float(np.percentile(m[~bad] if (~bad).any() else m, 99.5)), 1e-6)
     im = ax.imshow(m.T, origin="lower", aspect="auto", cmap="magma", vmin=0, vmax=vmax,
                    extent=(0, T / fps, lo_yaw, hi_yaw), interpolation="nearest")  # fmt: skip
     fig.colorbar(im, ax=ax, label=f"POF at pitch {pitch0:g} deg (deg/s)", extend="max")
@@ -249,7 +278,10 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
                     ha="center", va="center", weight="bold", path_effects=halo)  # fmt: skip
     ax.set_xlabel("time (s)")
     ax.set_ylabel("yaw (deg, + right)")
-    ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots)")
+    for f in art:  # artefact frames greyed: left out of the ranking
+        ax.axvspan(f / fps, (f + 1) / fps, color="0.6", lw=0)
+    left = f"; {len(art)} artefact frames (grey) left out" if art else ""
+    ax.set_title(f"{v.id}: where the video is provocative (viewers' yaw as dots{left})")
     fig.tight_layout()
     with atomic_output(folder / "provocative.png") as tmp:
         fig.savefig(tmp)
@@ -264,7 +296,11 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     with atomic_output(folder / "moments.csv") as tmp:
         Path(tmp).write_text(buf.getvalue())
     written += ["moments.csv", *(mo["thumbnail"] for mo in moments if "thumbnail" in mo)]
-    return {"files": written, "moments": moments}
+    kinds: dict[str, int] = {}
+    for k in art.values():
+        kinds[k] = kinds.get(k, 0) + 1
+    return {"files": written, "moments": moments, "artefact_frames_left_out": len(art),
+            "artefact_kinds": kinds}  # fmt: skip
 
 
 def _analysis(manifest, out: Path, table: list[dict]) -> dict:
@@ -349,11 +385,13 @@ def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list
     report: dict = {"videos": {}}
     for v in manifest.videos:
         mine = [r for r in table if r["video"] == v.id and r["status"] == "ok"]
-        epofs = {r["viewing"]: _load_epof(out / "epof" / f"{r['viewing']}.csv") for r in mine}
+        read = {r["viewing"]: _read_epof(out / "epof" / f"{r['viewing']}.csv") for r in mine}
+        epofs = {k: a for k, (a, _) in read.items()}
         try:
             if not grids[v.id].is_file():
                 raise InputError(f"video {v.id}: no grid (its preprocessing failed)")
-            report["videos"][v.id] = _video_outputs(v, grids[v.id], epofs, out / "videos" / v.id)
+            report["videos"][v.id] = _video_outputs(v, grids[v.id], epofs, out / "videos" / v.id,
+                                                    artefact_frames(read))  # fmt: skip
         except InputError as e:
             report["videos"][v.id] = {"error": str(e)}
     if manifest.questionnaires:

@@ -72,12 +72,20 @@ def clips(tmp_path_factory):
     return d
 
 
-def test_screen_end_to_end(clips, tmp_path, capsys):
-    out, cache = tmp_path / "o", tmp_path / "cache"
+@pytest.fixture(scope="module")
+def screened(clips, tmp_path_factory):
+    """The screening of the calm and the cut clip (3 viewers), its output folder."""
+    d = tmp_path_factory.mktemp("screened")
+    out, cache = d / "o", d / "cache"
     rc = main(["screen", str(clips / "calm.mp4"), str(clips / "cut.mp4"), "-o", str(out),
                "--viewers", "3", "--cache-dir", str(cache), "--workers", "1", "--no-progress",
                "--opacity-rule", "absolute"])  # fmt: skip
     assert rc == 0
+    return out
+
+
+def test_screen_end_to_end(clips, screened, tmp_path, capsys):
+    out = screened
     table = [ln for ln in (out / "screen" / "comparison.csv").read_text().splitlines()]
     assert any(ln.startswith("# band provocative: 30 to 60 deg/s") for ln in table)
     rows = [ln.split(",") for ln in table if not ln.startswith("#")]
@@ -205,3 +213,63 @@ def test_a_users_grid_that_does_not_match_is_left_alone(tmp_path):
     got = _grid_path(VideoSpec(id="v", path=video, grid_file=mine), tmp_path / "cache")
     assert got != mine and got.parent == tmp_path / "cache" / "grids"
     assert mine.read_bytes() == b"not a grid"
+
+
+def _page_links(path):
+    """Every ``src`` and ``href`` of an HTML file (the standard library's parser)."""
+    from html.parser import HTMLParser
+
+    links: list[str] = []
+
+    class P(HTMLParser):
+        def handle_starttag(self, tag, attrs):
+            links.extend(v for k, v in attrs if k in ("src", "href") and v is not None)
+
+    P().feed(path.read_text(encoding="utf-8"))
+    return links
+
+
+def test_screen_page_is_self_contained(screened):
+    """screen/index.html: every link a file inside the screen folder; every video, its
+    plots, moments (thumbnails and captions) and artefacts; the bands with their sources."""
+    from urllib.parse import unquote, urlsplit
+
+    folder = screened / "screen"
+    page = folder / "index.html"
+    text = page.read_text(encoding="utf-8")
+    links = _page_links(page)
+    files = []
+    for ln in links:
+        u = urlsplit(ln)
+        if ln.startswith("#") or (u.scheme == "data"):
+            continue
+        assert not u.scheme and not u.netloc and not ln.startswith("/"), ln  # no CDN, relative
+        f = (folder / unquote(u.path)).resolve()
+        assert f.is_relative_to(folder.resolve()) and f.is_file(), ln
+        files.append(unquote(u.path))
+    for vid in ("calm", "cut"):
+        assert f'id="v-{vid}"' in text and f'href="#v-{vid}"' in text
+        for name in ("summary.png", "map.png", "moment_1.png", "moments.csv"):
+            assert f"{vid}/{name}" in files
+    assert "comparison.csv" in files and "screen.json" in files
+    assert "vection" in text and "Nesti" in text  # a band and its source
+    cut = text[text.index('id="v-cut"'):]
+    assert "<td>cut</td><td>10-10</td>" in cut  # the cut listed, frame 10
+    assert "#1: " in cut and "deg/s" in cut  # a moment's caption
+    assert not list(folder.glob("*.tmp*")) and not list(folder.glob(".*"))  # nothing half-written
+
+
+@pytest.mark.browser
+def test_screen_page_loads_clean(browser, screened):
+    """The page loads from the file system with no console error and no failed image."""
+    page = screened / "screen" / "index.html"
+    browser.get(page.as_uri())
+    console, urls = browser.drain()
+    assert not [c for c in console if c["level"] == "SEVERE"], console
+    assert not [u for u in urls if u.startswith(("http:", "https:"))], urls  # offline, no CDN
+    assert any(u.endswith("/screen/cut/summary.png") for u in urls), urls
+    broken = browser.driver.execute_script(
+        "return [...document.images].filter(i => !i.complete || i.naturalWidth === 0).length"
+    )
+    assert broken == 0
+    assert browser.driver.execute_script("return document.images.length") >= 4

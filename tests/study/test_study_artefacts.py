@@ -1,0 +1,68 @@
+"""A study whose video has a hard cut: the cut's frames are left out of its provocative moments."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+from simulator.cli import main
+
+
+@pytest.fixture(scope="module")
+def cut_clip(tmp_path_factory):
+    """A calm rotating clip with a hard cut at frame 10 to a slow walk through another scene
+    (as tests/screen, but calm on both sides: the cut's own frame is the hottest)."""
+    from simulator.synth import SynthConfig, synthesize
+    from simulator.testing.reference import ffmpeg_exe
+
+    d = tmp_path_factory.mktemp("cutstudy")
+    synthesize(
+        SynthConfig("rotate", seconds=2.0, fps=10, size=(128, 64), omega_dps=3.0), d / "calm.mp4"
+    )
+    synthesize(SynthConfig("forward", seconds=2.0, fps=10, size=(128, 64), speed_mps=0.05),
+               d / "ride.mp4")  # fmt: skip
+    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", "-i", str(d / "calm.mp4"), "-i",
+                    str(d / "ride.mp4"), "-filter_complex",
+                    ("[0:v]trim=end_frame=10,setpts=PTS-STARTPTS[a];[1:v]trim=start_frame=10,"
+                    "setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]"), "-map", "[v]",
+                    "-c:v", "libx264", "-crf", "12", "-pix_fmt", "yuv420p", str(d / "cut.mp4")],
+                   check=True)  # fmt: skip
+    return d / "cut.mp4"
+
+
+def test_provocative_moments_exclude_rows():
+    from simulator.study.outputs import provocative_moments
+
+    m = np.ones((20, 4))
+    m[10, 2] = 100.0  # the cut: by far the largest
+    yaw = np.array([-135.0, -45.0, 45.0, 135.0])
+    assert provocative_moments(m, yaw, 10.0, n=1)[0]["frame"] == 10
+    bad = np.zeros(20, bool)
+    bad[10] = True
+    got = provocative_moments(m, yaw, 10.0, n=100, exclude=bad)
+    assert got and all(mo["frame"] != 10 for mo in got)
+    assert len(got) <= 19 * 4  # never an excluded (-inf) entry as a filler
+    assert provocative_moments(m, yaw, 10.0, exclude=np.ones(20, bool)) == []
+
+
+def test_study_moments_leave_out_artefacts(cut_clip, tmp_path):
+    m = tmp_path / "s.toml"
+    m.write_text(f'[[videos]]\nid = "cut"\npath = "{cut_clip}"\nmethod = "sphere"\n\n'
+                 '[[viewings]]\nvideo = "cut"\nviewers = { n = 2, seed = 3 }\n\n'
+                 '[epof]\nartefacts = true\nopacity_rule = "absolute"\n')  # fmt: skip
+    out = tmp_path / "o"
+    assert main(["study", str(m), "-o", str(out), "--cache-dir", str(tmp_path / "c"),
+                 "--workers", "1", "--no-progress"]) == 0  # fmt: skip
+    s = json.loads((out / "study.json").read_text())
+    made = s["outputs"]["videos"]["cut"]
+    assert made["artefact_frames_left_out"] >= 1 and made["artefact_kinds"].get("cut") == 1
+    rows = (out / "videos" / "cut" / "moments.csv").read_text().splitlines()
+    frames = [int(r.split(",")[2]) for r in rows[1:]]
+    assert frames and 10 not in frames  # the cut (the hottest frame) never ranked
+    # The report's video page says how many frames were left out (vimsim report).
+    assert main(["report", str(out)]) == 0
+    page = next((out / "report").glob("video*cut*.html")).read_text()
+    assert "frames left out as artefacts (cut: 1)" in page
