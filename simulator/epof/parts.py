@@ -29,7 +29,7 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.epof.exact import viewport_epof
 from simulator.media.gridfile import require_field
-from simulator.media.lazyfield import field_chunks, take_rows
+from simulator.media.lazyfield import LazyField, take_rows
 from simulator.sphere.cells import CellGrid, Frustum
 from simulator.sphere.geometry import lonlat_to_dir
 
@@ -113,6 +113,13 @@ def rotation_share(
     return share.astype(np.float32).reshape(np.shape(field))
 
 
+def _rows(field, i0: int, i1: int) -> NDArray[np.float32]:
+    """Rows ``i0 <= i < i1`` of a field, lazy or in memory, as float32."""
+    if isinstance(field, LazyField):
+        return field.block(i0, i1).astype(np.float32, copy=False)
+    return np.asarray(field[i0:i1], np.float32)
+
+
 def viewport_parts(
     grid,
     yaw_deg,
@@ -145,8 +152,11 @@ def viewport_parts(
     )
     total = np.empty(T)
     rot = np.empty(T)
-    for (i0, f), (_, ft) in zip(field_chunks(field), field_chunks(trans)):
-        i1 = i0 + len(f)
+    # the same rows of both fields at a time (either may be lazy, the other in memory)
+    n = min([x.chunk_rows for x in (field, trans) if isinstance(x, LazyField)] or [max(T, 1)])
+    for i0 in range(0, T, n):
+        i1 = min(T, i0 + n)
+        f, ft = _rows(field, i0, i1), _rows(trans, i0, i1)
         part = f * rotation_share(f, ft, omega[i0:i1], cells)
         sl = slice(i0, i1)
         kw = {"frustum": fr}

@@ -95,6 +95,21 @@ def test_parts_add_up_and_follow_the_definition(tmp_path):
     assert np.allclose(t0, 0, atol=1e-6) and np.all(r0 > 1)
 
 
+def test_parts_of_a_field_in_memory_beside_a_lazy_one(tmp_path):
+    """A study worker holds the field in memory while the translational field stays lazy
+    (read chunk by chunk): the parts are the same as with both lazy, in small chunks too."""
+    import dataclasses
+
+    path, _, _ = _grid(tmp_path / "g.npz")
+    yaw, pitch, roll = np.linspace(-90, 90, T), np.linspace(-30, 30, T), np.zeros(T)
+    want = viewport_parts(load_grid(path), yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+    g = load_grid(path)
+    g.field_trans_dps.chunk_rows = 2  # several chunks of the lazy field
+    mixed = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, np.float32))
+    got = viewport_parts(mixed, yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+    assert np.allclose(got[0], want[0], rtol=1e-9) and np.allclose(got[1], want[1], rtol=1e-9)
+
+
 def _path(tmp_path):
     p = tmp_path / "p.csv"
     p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,30,10,0\n")
