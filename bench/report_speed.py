@@ -38,8 +38,12 @@ def _study() -> Path:
     OUT.mkdir(parents=True, exist_ok=True)
     video = OUT / "pano_loop.mp4"
     if not video.is_file():
+        # Re-encoded with fresh timestamps (as bench/study_48users.py: a stream-copied loop
+        # repeats a timestamp at each seam, which vimsim refuses).
         subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-v", "error", "-stream_loop", "22",
-                        "-i", str(PANO), "-c", "copy", "-frames:v", "4120", str(video)], check=True)  # fmt: skip
+                        "-i", str(PANO), "-frames:v", "4120", "-vf", "setpts=N/FRAME_RATE/TB",
+                        "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18", str(video)],
+                       check=True)  # fmt: skip
     manifest = OUT / "study.toml"
     manifest.write_text(f"""[[videos]]
 id = "sandwich-loop"

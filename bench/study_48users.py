@@ -59,8 +59,11 @@ def main() -> int:
     video = OUT / "pano_loop.mp4"
     if not video.is_file():
         ff = imageio_ffmpeg.get_ffmpeg_exe()
-        subprocess.run([ff, "-y", "-v", "error", "-stream_loop", "22", "-i", str(PANO), "-c", "copy",
-                        "-frames:v", "4120", str(video)], check=True)  # fmt: skip
+        # Re-encoded with fresh timestamps: a stream copy of the loop repeats a timestamp at
+        # each seam (the real clip hides one frame behind its edit list), which vimsim refuses.
+        subprocess.run([ff, "-y", "-v", "error", "-stream_loop", "22", "-i", str(PANO),
+                        "-frames:v", "4120", "-vf", "setpts=N/FRAME_RATE/TB", "-c:v", "libx264",
+                        "-preset", "ultrafast", "-crf", "18", str(video)], check=True)  # fmt: skip
     manifest = OUT / "study.toml"
     manifest.write_text(f"""[[videos]]
 id = "sandwich-loop"
