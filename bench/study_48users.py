@@ -86,7 +86,8 @@ user = "all"
     warm = run([*VIMSIM, "study", str(manifest), "-o", str(OUT / "warm"), "--cache-dir",
                 str(cache), "--no-progress"])  # fmt: skip
     s = json.loads((OUT / "warm" / "study.json").read_text())
-    assert s["counts"] == {"viewings": 48, "ok": 48, "failed": 0, "resumed": 0, "renders": 0}, s[
+    assert s["counts"] == {"viewings": 48, "ok": 48, "with_warnings": 0, "failed": 0, "resumed": 0,
+                           "renders": 0}, s[
         "counts"
     ]
     grid = next((cache / "grids").glob("*.npz"))

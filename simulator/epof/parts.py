@@ -40,6 +40,7 @@ __all__ = [
     "require_parts",
     "rotation_share",
     "viewport_parts",
+    "viewport_parts_total",
 ]
 
 #: ``--flow-weights`` default: the EPOF itself.
@@ -104,13 +105,36 @@ def rotation_share(
     angular velocity ``omega_dps`` (T, 3) (module docstring; ``field`` unused but for
     its shape)."""
     lon, lat = cells.centres_lonlat()
-    d = lonlat_to_dir(*np.meshgrid(lon, lat))  # (n_lat, n_lon, 3)
+    d = lonlat_to_dir(*np.meshgrid(lon, lat)).reshape(-1, 3)  # (cells, 3)
     om = np.asarray(omega_dps, np.float64).reshape(-1, 3)
-    sr = np.linalg.norm(np.cross(om[:, None, None, :], d[None]), axis=-1)
-    st = np.asarray(trans, np.float64)
-    tot = sr + st
-    share = np.where(tot > 0, sr / np.where(tot > 0, tot, 1.0), 0.5)
-    return share.astype(np.float32).reshape(np.shape(field))
+    # |omega x d| = sqrt(|omega|^2 - (omega . d)^2) for unit d: one matrix product
+    dot = om @ d.T  # (T, cells)
+    sr = np.sqrt(np.maximum((om * om).sum(axis=1)[:, None] - dot * dot, 0.0))
+    sr = sr.astype(np.float32).reshape(np.shape(field))
+    tot = sr + np.asarray(trans, np.float32)
+    share = np.divide(sr, tot, out=np.full_like(sr, 0.5), where=tot > 0)
+    return share.astype(np.float32, copy=False)
+
+
+#: The rotational part of the last in-memory field (a study worker asks for it once per
+#: viewing of the same grid): ``(id(field), id(trans), array)``.
+_HELD: list = []
+
+
+def _held_rot_field(field, trans, omega, cells: CellGrid) -> NDArray[np.float32] | None:
+    """``field * rotation_share`` of fields held in memory (both ndarrays), computed once and
+    kept for the next call on the same arrays; None for a lazy field (read chunk by chunk,
+    memory flat in the video's length)."""
+    if not (isinstance(field, np.ndarray) and isinstance(trans, np.ndarray)):
+        return None
+    if _HELD and _HELD[0][0] is field and _HELD[0][1] is trans:
+        return _HELD[0][2]
+    out = np.empty(field.shape, np.float32)
+    for i0 in range(0, len(field), 256):
+        f = np.asarray(field[i0 : i0 + 256], np.float32)
+        out[i0 : i0 + 256] = f * rotation_share(f, trans[i0 : i0 + 256], omega[i0 : i0 + 256], cells)
+    _HELD[:] = [(field, trans, out)]
+    return out
 
 
 def _rows(field, i0: int, i1: int) -> NDArray[np.float32]:
@@ -131,8 +155,26 @@ def viewport_parts(
     vfov_deg: float | None = None,
     rows=None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(epof_rot_dps, epof_trans_dps)`` (T,) of a sphere-mode grid with the parts, for
-    the head orientation of each frame (degrees; ``rows``: only these grid rows).
+    """``(epof_rot_dps, epof_trans_dps)`` (T,): :func:`viewport_parts_total` without the
+    total."""
+    rot, trans, _ = viewport_parts_total(grid, yaw_deg, pitch_deg, roll_deg, frustum=frustum,
+                                         hfov_deg=hfov_deg, vfov_deg=vfov_deg, rows=rows)  # fmt: skip
+    return rot, trans
+
+
+def viewport_parts_total(
+    grid,
+    yaw_deg,
+    pitch_deg,
+    roll_deg=0.0,
+    *,
+    frustum: Frustum | None = None,
+    hfov_deg: float | None = None,
+    vfov_deg: float | None = None,
+    rows=None,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """``(epof_rot_dps, epof_trans_dps, epof_dps)`` (T,) of a sphere-mode grid with the
+    parts, for the head orientation of each frame (degrees; ``rows``: only these grid rows).
 
     Their sum is the exact EPOF :func:`simulator.epof.exact.viewport_epof` gives for the
     same viewport. InputError (naming the fix: re-run preprocess) for a grid without the
@@ -152,14 +194,18 @@ def viewport_parts(
     )
     total = np.empty(T)
     rot = np.empty(T)
+    held = _held_rot_field(field, trans, omega, cells)  # fields in memory: once per grid
     # the same rows of both fields at a time (either may be lazy, the other in memory)
-    n = min([x.chunk_rows for x in (field, trans) if isinstance(x, LazyField)] or [max(T, 1)])
+    n = min([x.chunk_rows for x in (field, trans) if isinstance(x, LazyField)] or [256])
     for i0 in range(0, T, n):
         i1 = min(T, i0 + n)
-        f, ft = _rows(field, i0, i1), _rows(trans, i0, i1)
-        part = f * rotation_share(f, ft, omega[i0:i1], cells)
+        f = _rows(field, i0, i1)
+        if held is not None:
+            part = held[i0:i1]
+        else:
+            part = f * rotation_share(f, _rows(trans, i0, i1), omega[i0:i1], cells)
         sl = slice(i0, i1)
         kw = {"frustum": fr}
         total[sl] = viewport_epof(f, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
         rot[sl] = viewport_epof(part, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
-    return rot, total - rot
+    return rot, total - rot, total

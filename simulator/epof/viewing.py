@@ -22,7 +22,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
-from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, viewport_parts
+from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, viewport_parts_total
 from simulator.media.coverage import coverage_masks, fade
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
@@ -257,6 +257,8 @@ def _epof_values(grid, angles, view: Frustum, rows, sel_rows, sphere: bool, flow
     if parts is not None and tuple(flow_weights or DEFAULT_WEIGHTS) != DEFAULT_WEIGHTS:
         a, b = flow_weights
         e = a * parts[0] + b * parts[1]
+    elif parts is not None:  # the same integration gave the whole EPOF
+        e = parts[2]
     elif sphere:
         field, cells = require_field(grid)
         if sel_rows is not None:
@@ -266,6 +268,7 @@ def _epof_values(grid, angles, view: Frustum, rows, sel_rows, sphere: bool, flow
         e = epof_from_grid(
             grid, yaw, pitch, roll, rows, hfov_deg=hfov_deg, vfov_deg=vfov_deg, top_k=top_k
         )
+    parts = None if parts is None else parts[:2]
     e_cov, cov = _covered_epof(grid, e, sphere, yaw, pitch, roll, hfov_deg, vfov_deg, top_k, frustum)
     if cov is not None and parts is not None:  # the parts scaled as their sum was
         k = np.where(e > 0, e_cov / np.maximum(e, 1e-12), 0.0)
@@ -301,7 +304,7 @@ def _parts(grid, angles, view: Frustum, rows, sphere: bool, flow_weights):
             )
     if not (sphere and has_parts(grid)):
         return None
-    return viewport_parts(grid, *angles, frustum=view, rows=rows)
+    return viewport_parts_total(grid, *angles, frustum=view, rows=rows)
 
 
 def epof_settings(result: EpofResult) -> dict:

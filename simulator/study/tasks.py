@@ -89,6 +89,8 @@ def _grid(path: str) -> GridFile:
             # video's field at a time (one grid cached), the price of not decompressing it
             # again for every viewing of the video (the single commands stay lazy).
             g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
+        if g.field_trans_dps is not None:  # the same for the field without the rotation
+            g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
         _GRIDS[key] = g
     return _GRIDS[key]
 
