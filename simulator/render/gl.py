@@ -1,6 +1,6 @@
 """The one place an OpenGL context is made (EGL, moderngl), and shader loading with readable errors.
 
-Shaders live in ``simulator/render/shaders/*.vert|*.frag`` (package data); defines are injected
+Shaders live in ``simulator/shaders/*.vert|*.frag`` (package data); defines are injected
 after the ``#version`` line followed by ``#line 2`` so compiler line numbers match the file.
 """
 
@@ -44,12 +44,12 @@ def create_context():
 
 
 def load_shader_source(name: str, defines: dict[str, object] | None = None) -> str:
-    """Source of ``simulator/render/shaders/<name>`` with ``#define``s injected after ``#version``.
+    """Source of ``simulator/shaders/<name>`` with ``#define``s injected after ``#version``.
 
     The injected block is followed by ``#line 2`` so that compiler line numbers match
     the file's.
     """
-    src = importlib.resources.files("simulator").joinpath("render", "shaders", name).read_text()
+    src = importlib.resources.files("simulator").joinpath("shaders", name).read_text()
     first, _, rest = src.partition("\n")
     if not first.startswith("#version"):
         raise ShaderError(f"shaders/{name}:1: first line must be #version; got {first!r}")
