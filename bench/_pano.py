@@ -24,3 +24,35 @@ def pano_grid() -> Path:
                "--method", "paper"]  # fmt: skip
         subprocess.run(cmd, check=True)
     return gp
+
+
+#: The real head-trace file of the 48-user benches (360VidStr, users 1-48).
+USERS48 = REAL / "headtraces" / "aggregated_360vidstr" / "AggregatedDataset" / "33.txt"
+
+
+def loop_study(out: Path) -> Path:
+    """``out/study.toml``: the 48 users of :data:`USERS48` watching :data:`VIDEO` looped to
+    4120 frames (``out/pano_loop.mp4``, made the first time). The loop is re-encoded with
+    fresh timestamps: a stream copy repeats a timestamp at each seam (the real clip hides one
+    frame behind its edit list), which vimsim refuses."""
+    import imageio_ffmpeg
+
+    out.mkdir(parents=True, exist_ok=True)
+    video = out / "pano_loop.mp4"
+    if not video.is_file():
+        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-v", "error", "-stream_loop", "22",
+                        "-i", str(VIDEO), "-frames:v", "4120", "-vf", "setpts=N/FRAME_RATE/TB",
+                        "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18", str(video)],
+                       check=True)  # fmt: skip
+    manifest = out / "study.toml"
+    manifest.write_text(f"""[[videos]]
+id = "sandwich-loop"
+path = "{video}"
+method = "sphere"
+
+[[viewings]]
+video = "sandwich-loop"
+trace = "{USERS48}"
+user = "all"
+""")
+    return manifest

@@ -22,39 +22,17 @@ import sys
 import time
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
+from _pano import loop_study  # bench/_pano.py: the looped clip and its 48-user manifest
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
-REAL = REPO.parent / "shared" / "data" / "real"
-TRACE = REAL / "headtraces" / "aggregated_360vidstr" / "AggregatedDataset" / "33.txt"
-PANO = REAL / "equirect" / "threejs" / "pano.mp4"
 OUT = REPO / "bench" / "_out" / "report_48users"
 VIMSIM = str(Path(sys.executable).with_name("vimsim"))
 
 
 def _study() -> Path:
-    OUT.mkdir(parents=True, exist_ok=True)
-    video = OUT / "pano_loop.mp4"
-    if not video.is_file():
-        # Re-encoded with fresh timestamps (as bench/study_48users.py: a stream-copied loop
-        # repeats a timestamp at each seam, which vimsim refuses).
-        subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-v", "error", "-stream_loop", "22",
-                        "-i", str(PANO), "-frames:v", "4120", "-vf", "setpts=N/FRAME_RATE/TB",
-                        "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18", str(video)],
-                       check=True)  # fmt: skip
-    manifest = OUT / "study.toml"
-    manifest.write_text(f"""[[videos]]
-id = "sandwich-loop"
-path = "{video}"
-method = "sphere"
-
-[[viewings]]
-video = "sandwich-loop"
-trace = "{TRACE}"
-user = "all"
-""")
+    manifest = loop_study(OUT)
     out = OUT / "study"
     if not (out / "study.json").is_file():
         subprocess.run([VIMSIM, "study", str(manifest), "-o", str(out), "--cache-dir",

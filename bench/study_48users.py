@@ -22,8 +22,8 @@ import sys
 import time
 from pathlib import Path
 
-import imageio_ffmpeg
 import numpy as np
+from _pano import USERS48, loop_study  # bench/_pano.py: the looped clip and its 48-user manifest
 
 
 def _epof_rows(path) -> np.ndarray:
@@ -33,9 +33,7 @@ def _epof_rows(path) -> np.ndarray:
 
 
 REPO = Path(__file__).resolve().parents[1]
-REAL = REPO.parent / "shared" / "data" / "real"
-TRACE = REAL / "headtraces" / "aggregated_360vidstr" / "AggregatedDataset" / "33.txt"
-PANO = REAL / "equirect" / "threejs" / "pano.mp4"
+TRACE = USERS48
 OUT = REPO / "bench" / "_out" / "study_48users"
 VIMSIM = [str(Path(sys.executable).with_name("vimsim"))]
 
@@ -55,26 +53,7 @@ def run(argv: list[str], name: str = "") -> float:
 
 
 def main() -> int:
-    OUT.mkdir(parents=True, exist_ok=True)
-    video = OUT / "pano_loop.mp4"
-    if not video.is_file():
-        ff = imageio_ffmpeg.get_ffmpeg_exe()
-        # Re-encoded with fresh timestamps: a stream copy of the loop repeats a timestamp at
-        # each seam (the real clip hides one frame behind its edit list), which vimsim refuses.
-        subprocess.run([ff, "-y", "-v", "error", "-stream_loop", "22", "-i", str(PANO),
-                        "-frames:v", "4120", "-vf", "setpts=N/FRAME_RATE/TB", "-c:v", "libx264",
-                        "-preset", "ultrafast", "-crf", "18", str(video)], check=True)  # fmt: skip
-    manifest = OUT / "study.toml"
-    manifest.write_text(f"""[[videos]]
-id = "sandwich-loop"
-path = "{video}"
-method = "sphere"
-
-[[viewings]]
-video = "sandwich-loop"
-trace = "{TRACE}"
-user = "all"
-""")
+    manifest = loop_study(OUT)
     cache = OUT / "cache"
     cold = None
     if not any((cache / "grids").glob("*.npz")) if (cache / "grids").is_dir() else True:
