@@ -144,22 +144,10 @@ def _rows(field, i0: int, i1: int) -> NDArray[np.float32]:
     return np.asarray(field[i0:i1], np.float32)
 
 
-def viewport_parts(
-    grid,
-    yaw_deg,
-    pitch_deg,
-    roll_deg=0.0,
-    *,
-    frustum: Frustum | None = None,
-    hfov_deg: float | None = None,
-    vfov_deg: float | None = None,
-    rows=None,
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """``(epof_rot_dps, epof_trans_dps)`` (T,): :func:`viewport_parts_total` without the
-    total."""
-    rot, trans, _ = viewport_parts_total(grid, yaw_deg, pitch_deg, roll_deg, frustum=frustum,
-                                         hfov_deg=hfov_deg, vfov_deg=vfov_deg, rows=rows)  # fmt: skip
-    return rot, trans
+def viewport_parts(grid, yaw_deg, pitch_deg, roll_deg=0.0, **kw):
+    """``(epof_rot_dps, epof_trans_dps)`` (T,): :func:`viewport_parts_total` (same
+    arguments) without the total."""
+    return viewport_parts_total(grid, yaw_deg, pitch_deg, roll_deg, **kw)[:2]
 
 
 def viewport_parts_total(
