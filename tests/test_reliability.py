@@ -362,20 +362,27 @@ CASES: list[tuple] = [
 ]  # fmt: skip
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
-def test_corpus(case, base, tmp_path, capsys, monkeypatch):
-    _cid, setup, argv, status, fragment, outputs = case
+def run_case(case, base, tmp_path, capsys, monkeypatch, snapshot=None):
+    """Run one corpus case in a copy of ``base``: ``(rc, captured, before, folder)`` with
+    ``before`` the folder's ``snapshot`` (default :func:`_snapshot`) before the command."""
+    _cid, setup, argv, _status, _fragment, _outputs = case
     monkeypatch.setenv("VIMSIM_MEMORY_LIMIT", str(8 * 10**9))  # same refusals on any machine
     d = tmp_path / "c"
     shutil.copytree(base, d)
     if setup is not None:
         setup(d)
-    before = _snapshot(d)
+    before = (snapshot or _snapshot)(d)
     try:
         rc = main([a.replace("{d}", str(d)) for a in argv])
     except SystemExit as e:  # usage errors from argparse: one line, exit 2
         rc = e.code
-    cap = capsys.readouterr()
+    return rc, capsys.readouterr(), before, d
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_corpus(case, base, tmp_path, capsys, monkeypatch):
+    status, fragment, outputs = case[3:]
+    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch)
     err = cap.err
     assert rc == status, err
     assert fragment in err + cap.out, err + cap.out

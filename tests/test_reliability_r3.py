@@ -12,12 +12,11 @@ issue: cases correct per contract, by class, before and after).
 
 from __future__ import annotations
 
-import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
-from test_reliability import EPOF, HPC, RENDER, _copy, _mkdir, _text, base  # noqa: F401
+from test_reliability import EPOF, HPC, RENDER, _copy, _mkdir, _text, base, run_case  # noqa: F401
 
 from simulator.cli import main
 
@@ -209,18 +208,8 @@ def case_class(cid: str) -> str:
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_corpus_r3(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
-    _cid, setup, argv, status, fragment, outputs = case
-    monkeypatch.setenv("VIMSIM_MEMORY_LIMIT", str(8 * 10**9))  # same refusals on any machine
-    d = tmp_path / "c"
-    shutil.copytree(base, d)
-    if setup is not None:
-        setup(d)
-    before = _snapshot(d)
-    try:
-        rc = main([a.replace("{d}", str(d)) for a in argv])
-    except SystemExit as e:  # usage errors from argparse: one line, exit 2
-        rc = e.code
-    cap = capsys.readouterr()
+    status, fragment, outputs = case[3:]
+    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
     err = cap.err
     assert rc == status, err[:2000]
     if fragment.startswith("!"):
