@@ -1,4 +1,4 @@
-"""The options that say what a source is (``--projection``, ``--lens-fov``; ``--seconds``/``--fps`` of a still) and the :class:`simulator.media.source.Source` they open."""
+"""The options that say what a source is (``--projection``, ``--lens-fov``, ``--ignore-orientation``; ``--seconds``/``--fps`` of a still) and the :class:`simulator.media.source.Source` they open."""
 
 from __future__ import annotations
 
@@ -11,7 +11,8 @@ __all__ = ["add_source_arguments", "source_from_args"]
 
 
 def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> None:
-    """Add ``--projection`` and ``--lens-fov`` (and with ``still``, ``--seconds``/``--fps``)."""
+    """Add ``--projection``, ``--lens-fov`` and ``--ignore-orientation`` (and with ``still``,
+    ``--seconds``/``--fps``)."""
     p.add_argument(
         "--projection",
         choices=PROJECTIONS,
@@ -27,6 +28,13 @@ def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> 
         default=None,
         metavar="DEG",
         help="dual fisheye: each lens's field of view in degrees, in (180, 360) (default 190)",
+    )
+    p.add_argument(
+        "--ignore-orientation",
+        action="store_true",
+        help="ignore the initial orientation of the file's spherical metadata (sv3d prhd "
+        "yaw/pitch/roll; default: applied, head yaw/pitch/roll 0 looks where it says; "
+        "docs/sources.md)",
     )
     if still:
         p.add_argument(
@@ -67,6 +75,7 @@ def source_from_args(
         lens_fov_deg=args.lens_fov,
         still=still,
         layout_default=layout_default,
+        orientation=not getattr(args, "ignore_orientation", False),
     )
     for note in src.notes:
         print(f"vimsim: note: {note}", file=sys.stderr)

@@ -100,6 +100,10 @@ def run(args: argparse.Namespace) -> int:
     check_fits(args.size[0] * args.size[1] * 120, f"--size {args.size[0]}x{args.size[1]}")
     source = source_from_args(args, args.src, layout=args.layout, eye=args.eye)
     info, (w, h) = source.info, source.eye_size
+    # the view in the frame: the head's angles turned by the file's initial orientation
+    args.yaw, args.pitch, args.roll = (
+        float(v) for v in source.view_angles_deg(args.yaw, args.pitch, args.roll)
+    )
     if info.is_video and args.frame >= info.n_frames:
         raise InputError(
             f"{args.src}: has {info.n_frames} frames; --frame {args.frame} is beyond the last"

@@ -26,6 +26,7 @@ from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, view
 from simulator.media.coverage import coverage_masks, fade
 from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import take_rows
+from simulator.media.spherical import view_angles_deg
 from simulator.mitigation.bands import draw_bands
 from simulator.mitigation.grf import OpacityRule
 from simulator.preprocess.artefacts import Artefacts
@@ -110,6 +111,7 @@ def compute_epof(
     frames: tuple[int, int] | None = None,
     flow_weights: tuple[float, float] | None = None,
     artefacts: Artefacts | None = None,
+    orientation_deg="grid",
 ) -> EpofResult:
     """EPOF and GRF opacity of a viewing: the head path sampled at every frame time.
 
@@ -144,6 +146,10 @@ def compute_epof(
     row): artefact frames are left out of the opacity percentiles (both sources), their
     opacity is held from the previous clean frame, and the result's ``artefact`` column
     names their kind; their EPOF is kept as measured.
+
+    ``orientation_deg``: the source's initial orientation (yaw, pitch, roll; None: none);
+    ``"grid"``: the one the grid's source applied (``meta["source"]``). Each head pose is
+    turned by it before the view is taken; the result keeps the head's angles.
     """
     if frustum is not None:
         if not isinstance(frustum, Frustum):
@@ -171,30 +177,39 @@ def compute_epof(
     h, v = viewport_fov(grid, hfov_deg, vfov_deg)
     view = frustum or Frustum.symmetric(h, v)
     sel_rows = rows if frames_sel is not None else None
+    pose = orientation_deg
+    if pose == "grid":  # the initial orientation the grid's source applied
+        pose = (grid.meta.get("source") or {}).get("orientation_deg")
     e, cov, parts = _epof_values(
-        grid, (yaw, pitch, roll), view, rows, sel_rows, sphere, flow_weights,
-        (hfov_deg, vfov_deg, top_k, frustum),
+        grid, view_angles_deg(pose, yaw, pitch, roll), view, rows, sel_rows, sphere,
+        flow_weights, (hfov_deg, vfov_deg, top_k, frustum),
     )  # fmt: skip
     thr, op, kinds = _opacity(rule, grid, e, rows, artefacts)
-    meta = {
-        "hfov_deg": h,
-        "vfov_deg": v,
-        "frustum_deg": None
-        if frustum is None
-        else [frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg],
-        "top_k": top_k,
-        "rule": rule,
-        "fps": grid.fps,
-        "method": "sphere" if sphere else "paper",
-        "flow_weights": None if flow_weights is None else list(flow_weights),
-        "video_content_hash": (grid.meta.get("video") or {}).get("content_hash"),
-    }
+    meta = _meta(grid, (h, v), frustum, top_k, rule, sphere, flow_weights, pose)
     if cov is not None:
         meta["coverage_rule"] = grid.meta["coverage"]["rule"]
     return EpofResult(
         frames, t, yaw, pitch, roll, e, op, thr, meta, cov,
         *(parts if parts is not None else (None, None)), kinds,
     )  # fmt: skip
+
+
+def _meta(grid, fov, frustum, top_k, rule, sphere: bool, flow_weights, pose) -> dict:
+    """:func:`compute_epof`'s settings (``EpofResult.meta``)."""
+    f = frustum
+    fr = None if f is None else [f.left_deg, f.right_deg, f.down_deg, f.up_deg]
+    return {
+        "hfov_deg": fov[0],
+        "vfov_deg": fov[1],
+        "frustum_deg": fr,
+        "top_k": top_k,
+        "rule": rule,
+        "fps": grid.fps,
+        "method": "sphere" if sphere else "paper",
+        "flow_weights": None if flow_weights is None else list(flow_weights),
+        "video_content_hash": (grid.meta.get("video") or {}).get("content_hash"),
+        "orientation_deg": None if pose is None else [float(a) for a in pose],
+    }
 
 
 def _opacity(rule: OpacityRule, grid: GridFile, e, rows, artefacts: Artefacts | None):
@@ -322,6 +337,8 @@ def epof_settings(result: EpofResult) -> dict:
         "opacity_rule": None if rule is None else rule.describe(),
         "opacity_thresholds_dps": [float(v) for v in result.thresholds_dps],
         **({"flow_weights": m["flow_weights"]} if m.get("flow_weights") else {}),
+        # the source's initial orientation each head pose was turned by (docs/sources.md)
+        **({"orientation_deg": m["orientation_deg"]} if m.get("orientation_deg") else {}),
         # the video the grid was made from (``render --opacity EPOF.csv`` checks it)
         "video_content_hash": m.get("video_content_hash"),
     }

@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import EYES, LAYOUTS, PROJECTIONS, STILL_FPS, STILL_SECONDS
 from simulator.core.errors import InputError
-from simulator.media.spherical import read_spherical
+from simulator.media.spherical import read_spherical, view_angles_deg
 from simulator.media.video import MediaInfo, PixelFormat, iter_frames, probe, read_frame
 from simulator.sphere.geometry import split_eye
 from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, EquirectConverter, converter
@@ -54,6 +54,9 @@ class Source:
     info : the file's :class:`simulator.media.video.MediaInfo` (of ``path``)
     metadata : its spherical metadata (:func:`simulator.media.spherical.read_spherical`)
     notes : one line each for the user (an option overriding the metadata)
+    orientation_deg : the initial orientation applied (yaw, pitch, roll degrees, from the
+        spherical metadata; None when it has none, it is zero, or ``orientation=False``):
+        every view of a head pose is turned by it (:meth:`view_angles_deg`)
     """
 
     path: str
@@ -66,6 +69,7 @@ class Source:
     info: MediaInfo | None = field(default=None, compare=False, repr=False)
     metadata: dict | None = field(default=None, compare=False, repr=False)
     notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
+    orientation_deg: tuple[float, float, float] | None = None
 
     @classmethod
     def open(
@@ -79,6 +83,7 @@ class Source:
         lens_fov_deg: float | None = None,
         still: tuple[float | None, float | None] | None = None,
         layout_default: str = "mono",
+        orientation: bool = True,
     ) -> Source:
         """Check and probe a source (InputError naming the file or option on bad input).
 
@@ -87,6 +92,8 @@ class Source:
         ``equirect``; given ones win over the metadata, with a note (:attr:`notes`) when
         they disagree. ``still = (seconds, fps)``: an image is accepted as a clip of
         ``seconds`` at ``fps`` (None: :data:`STILL_SECONDS`, :data:`STILL_FPS`).
+        ``orientation=False`` ignores the metadata's initial orientation (else applied:
+        :attr:`orientation_deg`).
         """
         path = check_local_path(path)
         info = probe(path)
@@ -95,11 +102,7 @@ class Source:
         projection = _resolve(path, "projection", projection, md.get("projection"), notes)
         layout = _resolve(path, "layout", layout, md.get("layout"), notes) or layout_default
         projection = projection or "equirect"
-        if md.get("orientation_deg") and any(md["orientation_deg"]):
-            notes.append(
-                f"{path}: its spherical metadata gives an initial orientation (yaw/pitch/roll "
-                f"{'/'.join(f'{v:g}' for v in md['orientation_deg'])} deg); recorded, not applied"
-            )
+        pose = _pose(path, md.get("orientation_deg"), orientation, notes)
         if layout not in LAYOUTS:
             raise InputError(
                 f"{path}: unknown stereo layout {layout!r}; expected one of {', '.join(LAYOUTS)}"
@@ -114,7 +117,8 @@ class Source:
         is_still = still is not None and not info.is_video
         if is_still:
             info = _still_info(info, *still)
-        src = cls(path, layout, projection, None, eye, lens_fov_deg, is_still, info)
+        src = cls(path, layout, projection, None, eye, lens_fov_deg, is_still, info,
+                  orientation_deg=pose)  # fmt: skip
         object.__setattr__(src, "metadata", md or None)
         object.__setattr__(src, "notes", tuple(notes))
         src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
@@ -190,9 +194,18 @@ class Source:
             "transfer": self._info.transfer,
             "pix_fmt": self._info.pix_fmt,
             "spherical_metadata": self.metadata,
+            # the initial orientation applied to every view (None: none, or ignored)
+            "orientation_deg": None if self.orientation_deg is None else list(self.orientation_deg),
+            "orientation_ignored": self.orientation_deg is None
+            and any((self.metadata or {}).get("orientation_deg") or ()),
             "eye": self.eye,
             "right": self.right,
         }
+
+    def view_angles_deg(self, yaw_deg, pitch_deg, roll_deg):
+        """``(yaw, pitch, roll)`` in the frame of a head pose: turned by the initial
+        orientation (:func:`simulator.media.spherical.view_angles_deg`), else as given."""
+        return view_angles_deg(self.orientation_deg, yaw_deg, pitch_deg, roll_deg)
 
     # -- the decode funnel -------------------------------------------------------------
     def file_of(self, eye: str) -> str:
@@ -318,6 +331,21 @@ def _resolve(path: str, what: str, given, from_file, notes: list[str]):
             f"{path}: its spherical metadata says {what} {from_file}; --{what} {given} wins"
         )
     return given
+
+
+def _pose(path: str, md_pose, apply: bool, notes: list[str]):
+    """The initial orientation to apply (a non-zero one of the metadata, unless ``apply``
+    is False), with a note saying what is done with it."""
+    if not md_pose or not any(md_pose):
+        return None
+    text = "/".join(f"{v:g}" for v in md_pose)
+    if not apply:
+        notes.append(f"{path}: its spherical metadata's initial orientation (yaw/pitch/roll "
+                     f"{text} deg) is ignored (--ignore-orientation)")  # fmt: skip
+        return None
+    notes.append(f"{path}: its spherical metadata gives an initial orientation (yaw/pitch/roll "
+                 f"{text} deg): head yaw/pitch/roll 0 looks there (--ignore-orientation: not)")  # fmt: skip
+    return tuple(float(v) for v in md_pose)
 
 
 def _still_info(info: MediaInfo, seconds: float | None, fps: float | None) -> MediaInfo:

@@ -5,6 +5,16 @@ FFmpeg's demuxers turn ``sv3d`` / ``st3d`` boxes (MP4) and Matroska's ``Projecti
 expose stream side data, so :func:`read_spherical` reads FFmpeg's own report of the stream
 (``ffmpeg -i FILE``, the binary of the ``imageio-ffmpeg`` package; about 50 ms) and, for
 Matroska, the stream's ``stereo_mode`` tag. Nothing is run but that binary on that file.
+
+**Initial orientation** (``sv3d``'s ``prhd`` ``pose_yaw/pitch/roll_degrees``; FFmpeg's
+"spherical" side data ``(yaw/pitch/roll)``) is taken as the direction a player looks at
+when the head is at yaw = pitch = roll = 0, in the head convention of SPEC.md (yaw + turns
+right, toward +lon; pitch + looks up; roll + right ear down; yaw, then pitch, then roll):
+the view of head pose ``H`` is the frame seen at ``R(pose) R(H)``
+(:func:`view_angles_deg`). Yaw agrees with the Spherical Video V2 RFC (the projection
+turned counter-clockwise about the up vector: a head at yaw 0 sees what lies at
++yaw); the RFC's wording for pitch and roll and FFmpeg's ``AVSphericalMapping`` comment
+read the other way round; docs/sources.md.
 """
 
 from __future__ import annotations
@@ -13,8 +23,11 @@ import re
 import subprocess
 
 import imageio_ffmpeg
+import numpy as np
 
-__all__ = ["parse_report", "read_spherical"]
+from simulator.sphere.geometry import head_angles_deg, head_rotation
+
+__all__ = ["parse_report", "read_spherical", "view_angles_deg"]
 
 #: FFmpeg's spherical projection names -> ours (``v360``'s). FFmpeg does not tell an
 #: equi-angular cubemap from a plain one in ``sv3d``; 360 cameras and YouTube write EAC.
@@ -76,3 +89,15 @@ def read_spherical(path: str, tags: dict | None = None) -> dict:
     # only the first video stream's block
     i = text.find("Video:")
     return parse_report(text[i:] if i >= 0 else "", tags)
+
+
+def view_angles_deg(pose_deg, yaw_deg, pitch_deg, roll_deg):
+    """``(yaw, pitch, roll)`` degrees in the video frame of a head at ``(yaw_deg,
+    pitch_deg, roll_deg)`` when the file's initial orientation is ``pose_deg`` (yaw,
+    pitch, roll; None or zeros: the head's own angles): ``R(pose) R(head)``."""
+    y, p, r = (np.asarray(v, float) for v in np.broadcast_arrays(yaw_deg, pitch_deg, roll_deg))
+    if pose_deg is None or not np.any(np.asarray(pose_deg, float)):
+        return y, p, r
+    if not np.any(np.asarray(pose_deg, float)[1:]):  # a yaw alone: exact, no Euler round trip
+        return (y + float(pose_deg[0]) + 180.0) % 360.0 - 180.0, p, r
+    return head_angles_deg(head_rotation(*(float(v) for v in pose_deg)) * head_rotation(y, p, r))

@@ -252,9 +252,7 @@ def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) ->
                         "time_s": t,
                         "frame": i,
                         "frame_time_s": float(plan.times_s[i]),
-                        "yaw_deg": yaw,
-                        "pitch_deg": pitch,
-                        "roll_deg": roll,
+                        **_head_angles(plan, i, (yaw, pitch, roll)),
                         "epof_dps": float(plan.epof_dps[i]),
                         "opacity": op,
                     }
@@ -390,3 +388,10 @@ def render_frames(
         Path(tmp).write_text(json_text(index) + "\n")
     folder.complete()
     return index
+
+
+def _head_angles(plan, i: int, view) -> dict:
+    """The head's own angles at plan row ``i`` (``view``: the view's in the frame, the
+    same without an initial orientation) as frames.json records them."""
+    a = view if plan.head_angles_deg is None else plan.head_angles_deg[i]
+    return dict(zip(("yaw_deg", "pitch_deg", "roll_deg"), (float(v) for v in a)))

@@ -279,7 +279,8 @@ def render_viewing(
     # visible flow after the EPOF columns.
     plan, vis = job.plan, job.visible
     settings = epof_settings(job)
-    res = EpofResult(plan.frames, plan.times_s, *plan.angles_deg.T, plan.epof_dps,
+    head = plan.angles_deg if plan.head_angles_deg is None else plan.head_angles_deg
+    res = EpofResult(plan.frames, plan.times_s, *head.T, plan.epof_dps,
                      plan.opacity, plan.thresholds_dps, coverage=plan.coverage,
                      artefact=plan.artefact)  # fmt: skip
     write_epof_csv(

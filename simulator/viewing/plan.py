@@ -38,7 +38,9 @@ class ViewingPlan:
     headpath : the head path; grid : the grid file or None
     frames : ndarray, shape (N,), the video frame numbers of the plan (``f0 .. f1 - 1``)
     times_s : ndarray, shape (N,), time of each frame ``i / fps`` (seconds)
-    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of each frame, degrees
+    angles_deg : ndarray, shape (N, 3), (yaw, pitch, roll) of the view in the video frame
+        at each frame, degrees: the head's turned by the source's initial orientation
+        (:meth:`simulator.media.source.Source.view_angles_deg`; the head's without one)
     epof_dps : ndarray, shape (N,), EPOF (deg/s; NaN without a grid)
     opacity : ndarray, shape (N,), the GRF opacity rendered at each frame (0 without GRF)
     thresholds_dps : the opacity rule's 0 and 1 thresholds (NaN without a grid)
@@ -70,6 +72,8 @@ class ViewingPlan:
     coverage: np.ndarray | None = None
     #: the artefact kind of each frame (``""``: none) when the grid stores them, else None
     artefact: tuple[str, ...] | None = None
+    #: (N, 3) the head path's own (yaw, pitch, roll) at each frame (None: ``angles_deg``)
+    head_angles_deg: np.ndarray | None = None
 
     @property
     def right(self) -> str | None:
@@ -113,7 +117,7 @@ def _check_needs_grid(view: ViewSpec, grid) -> None:
         )
 
 
-def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged):
+def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps, ranged, pose):
     """``(epof_dps, opacity, thresholds_dps, method, coverage, artefact)`` of the plan's
     ``frames`` (NaN, None, NaN, None, None, None without a grid): the EPOF over ``frustum``,
     the opacity of ``view.rule``, the covered share of the view (None for a full-sphere
@@ -136,6 +140,7 @@ def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps
         method=view.method,
         frames=(max(0, f0 - warm), f1) if ranged else None,
         artefacts=stored_artefacts(grid),  # those preprocess --artefacts stored: held
+        orientation_deg=pose,  # the source's initial orientation (docs/sources.md)
     )
     # Grid rows by video frame number (a grid may start later or lack the last frame).
     rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
@@ -214,7 +219,7 @@ def plan_viewing(
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
     epof_dps, op_auto, thresholds, epof_method, coverage, artefact = _epof_rows(
-        grid, hp, view, epof_frustum, frames, info.fps, ranged
+        grid, hp, view, epof_frustum, frames, info.fps, ranged, source.orientation_deg
     )
     if not drawn:
         op = np.zeros(nf)
@@ -224,7 +229,8 @@ def plan_viewing(
         op = op_auto
     else:
         op = np.full(nf, float(opacity))
-    angles = np.stack([yaw, pitch, roll], axis=-1)
+    head = np.stack([yaw, pitch, roll], axis=-1)
+    angles = np.stack(source.view_angles_deg(yaw, pitch, roll), axis=-1)  # in the frame
     return ViewingPlan(
         info,
         hp,
@@ -242,4 +248,5 @@ def plan_viewing(
         epof_frustum,
         coverage,
         artefact,
+        head,
     )

@@ -62,7 +62,14 @@ def epof_settings(job) -> dict:
         "opacity": "off" if not job.view.drawn else str(plan.opacity_label),
         "opacity_rule": _rule(job),
         "opacity_thresholds_dps": list(plan.thresholds_dps),
+        # the source's initial orientation each head pose was turned by (docs/sources.md)
+        **({"orientation_deg": list(pose)} if (pose := _pose(plan)) else {}),
     }
+
+
+def _pose(plan):
+    """The initial orientation the plan's source applies, or None."""
+    return None if plan.source is None else plan.source.orientation_deg
 
 
 def audio_summary(aud, requested: bool) -> dict:
