@@ -165,6 +165,8 @@ def draw(job: ViewingJob, ctx, out: Path, *, preset="veryfast", crf=18, threads=
             audio=job.audio,
             thresholds_dps=plan.thresholds_dps,
             opacity_used=not job.view.mitigation.local,
+            # a variable-rate source's timing, as the eye videos keep it
+            video_times_s=plan.times_s if plan.info.variable_rate else None,
         )
     try:
         result = render_video(

@@ -95,6 +95,8 @@ class ReviewWriter:
         the strip, labelled (None or NaN: not drawn)
     opacity_used : False when the render ignores the per-frame opacity (``local-grf``:
         each cell's own flow drives it): the strip and sheet then show no opacity
+    video_times_s : None (frame ``i`` at ``i / fps``), or each frame's time in seconds (a
+        variable-rate source's timestamps: the review video keeps its timing)
     """
 
     def __init__(
@@ -118,6 +120,7 @@ class ReviewWriter:
         audio=None,
         thresholds_dps=None,
         opacity_used: bool = True,
+        video_times_s=None,
     ):
         self.t = np.asarray(times_s, float)
         self.yaw, self.pitch = np.asarray(yaw_deg, float), np.asarray(pitch_deg, float)
@@ -136,7 +139,8 @@ class ReviewWriter:
         k = min(int(n_sheet), n)
         self.sheet_at = {int(i): None for i in np.linspace(0, n - 1, k).round().astype(int)}
         self._strip = self._base_strip()
-        self._writer = VideoWriter(video_path, fps, self.size, crf=crf, preset=preset, audio=audio)
+        self._writer = VideoWriter(video_path, fps, self.size, crf=crf, preset=preset,
+                                   audio=audio, times_s=video_times_s)  # fmt: skip
         self.n = 0
 
     # ------------------------------------------------------------------ strip

@@ -94,3 +94,27 @@ def test_render_keeps_the_sources_timing(ctx, clips, tmp_path):
                  "--opacity", "0.5", "--eye-size", "32x32", "--no-progress"]) == 0  # fmt: skip
     t = probe(out / "left.mp4").times_s()
     assert np.allclose(t[:5], [0, 1 / 30, 3 / 30, 4 / 30, 6 / 30], atol=2e-3)
+
+
+def _pts_s(path) -> tuple[np.ndarray, float]:
+    """Each frame's presentation time (seconds, in presentation order) and the stream's
+    tick (seconds)."""
+    import av
+
+    with av.open(str(path)) as c:
+        s = c.streams.video[0]
+        pts = sorted(int(p.pts) for p in c.demux(s) if p.pts is not None and p.size)
+        return np.asarray(pts, float) * float(s.time_base), float(s.time_base)
+
+
+def test_review_video_keeps_the_sources_timing(ctx, clips, tmp_path):
+    out = tmp_path / "r"
+    assert main(["render", str(clips / "vfr.mp4"), str(clips / "p.csv"), "-o", str(out),
+                 "--opacity", "0.5", "--eye-size", "32x32", "--no-progress", "--review",
+                 "--no-audio"]) == 0  # fmt: skip
+    src, tick = _pts_s(clips / "vfr.mp4")
+    for name in ("review.mp4", "left.mp4"):
+        t, out_tick = _pts_s(out / name)
+        assert len(t) == len(src) == 24
+        # every frame at the source's time (from its first frame) within one tick
+        assert np.abs((t - t[0]) - (src - src[0])).max() <= max(tick, out_tick) + 1e-9, name
