@@ -6,10 +6,12 @@ module gives, per projection and stored eye size, the ``PROJ`` define, the unifo
 cube face's rectangle, the texel box its filter may read, its rotation; a dual fisheye's
 lens FOV) and the frame's largest texel in radians (the filter's scale).
 
-A ``c3x2`` / ``c6x1`` frame is uploaded as a :class:`FaceAtlas`: each face bordered by
-:attr:`FaceAtlas.PAD` pixels of its neighbours (the face plane extended, nearest; the CPU
-converter's atlas), so the bicubic taps across a face edge read the neighbouring face, not
-a repeated edge (the faces are copied as blocks, the borders gathered: a frame copy).
+A ``c3x2`` / ``c6x1`` frame is uploaded as a :class:`FaceAtlas`: each face bordered by at
+least 3 pixels of its neighbours (the face plane extended, nearest: the CPU converter's
+atlas), so the bicubic taps across a face edge read the neighbouring face, not a repeated
+edge (the faces are copied as blocks, the borders gathered: a frame copy). A cell's side is
+a multiple of 32 (even faces), so mip levels 1-5 halve it exactly and no mip texel mixes
+two cells.
 ``eac`` needs none: a row of its faces is continuous and v360 writes the faces continued
 into its 2-pixel pads; a dual fisheye's lenses are read inside their halves.
 """
@@ -28,6 +30,7 @@ from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, PROJECTIONS, face
 __all__ = [
     "PROJ_DEFINE",
     "FaceAtlas",
+    "atlas_pad",
     "face_atlas",
     "sampled_projection",
     "texel_angle_rad",
@@ -48,10 +51,16 @@ def _lens(lens_fov_deg: float | None) -> float:
     return math.radians(DEFAULT_LENS_FOV_DEG if lens_fov_deg is None else float(lens_fov_deg))
 
 
-def texel_angle_rad(name: str, w: int, h: int, lens_fov_deg: float | None = None) -> float:
+def texel_angle_rad(
+    name: str, w: int, h: int, lens_fov_deg: float | None = None, *, smallest: bool = False
+) -> float:
     """The largest angular size of a texel of a ``w x h`` eye frame of projection ``name``
-    (radians): equirect and hequirect a row (pi / h), a cube face's centre texel (2 / F),
-    an eac face's (pi / 2 / its inner size), a fisheye's radial step (lens FOV / h)."""
+    (radians): equirect and hequirect a row (pi / h), a cube face's centre texel (2 / F;
+    eye.frag scales it across the face), an eac face's (pi / 2 / its inner size), a
+    fisheye's radial step (lens FOV / h). ``smallest``: the least of what the eye shader
+    takes (a cube face's corner), which decides whether mipmaps are needed."""
+    if name in ("c3x2", "c6x1") and smallest:  # at a cube corner: 1 / sqrt(3) of the centre
+        return texel_angle_rad(name, w, h) / math.sqrt(3.0)
     if name in ("equirect", "hequirect"):
         return math.pi / h
     if name == "dfisheye":
@@ -85,7 +94,7 @@ def uniforms(name: str, w: int, h: int, lens_fov_deg: float | None = None) -> di
             y0, y1 = (0, h // 2 - 1) if row == 0 else (h // 2, h - 1)
             boxes.append((0, y0, w - 1, y1))  # the row of faces, pads included
         else:  # the face in its FaceAtlas cell, the cell's border of neighbours readable
-            f, P = w // lay.cols, FaceAtlas.PAD
+            f, P = w // lay.cols, atlas_pad(w // lay.cols)
             a = f + 2 * P
             rects.append((float(col * a + P), float(row * a + P), float(f), float(f)))
             boxes.append((col * a, row * a, col * a + a - 1, row * a + a - 1))
@@ -101,19 +110,26 @@ def texture_size(name: str, w: int, h: int) -> tuple[int, int]:
     lay = face_grid(name) if name in ("c3x2", "c6x1") else None
     if lay is None:
         return w, h
-    a = w // lay.cols + 2 * FaceAtlas.PAD
+    f = w // lay.cols
+    a = f + 2 * atlas_pad(f)
     return lay.cols * a, lay.rows * a
 
 
-class FaceAtlas:
-    """The faces of a ``c3x2`` / ``c6x1`` frame, each bordered by :attr:`PAD` pixels of its
-    neighbours: ``atlas(frame)`` for ``(h, w, C)`` frames of one size."""
+def atlas_pad(face: int) -> int:
+    """A :class:`FaceAtlas` border (pixels) for faces of ``face`` pixels: at least 3 (the
+    bicubic reaches 2 beyond the last face texel), widened so that the cell's side is a
+    multiple of 32 when ``face`` is even."""
+    return 3 + (-(face + 6) % 32) // 2
 
-    PAD = 3  # the bicubic reaches 2 texels beyond the last face texel
+
+class FaceAtlas:
+    """The faces of a ``c3x2`` / ``c6x1`` frame, each bordered by :func:`atlas_pad` pixels
+    of its neighbours: ``atlas(frame)`` for ``(h, w, C)`` frames of one size."""
 
     def __init__(self, name: str, w: int, h: int):
         lay = face_grid(name)
-        F, P = w // lay.cols, self.PAD
+        F = w // lay.cols
+        P = self.pad = atlas_pad(F)
         A = F + 2 * P
         self.size, self.face = (w, h), F
         self.shape = (lay.rows * A, lay.cols * A)

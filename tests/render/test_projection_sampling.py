@@ -25,7 +25,7 @@ from simulator.media.video import iter_frames
 from simulator.render import EyeRenderer, RenderConfig, render_video
 from simulator.render.sampling import FaceAtlas, sampled_projection
 from simulator.sphere.geometry import head_rotation, perspective_rays
-from simulator.sphere.projections import converter
+from simulator.sphere.projections import EquirectConverter, converter
 from simulator.testing.reference import v360_convert
 
 F = 320  # cube face of the v360-made sources (the original is 1024 x 512)
@@ -40,7 +40,8 @@ CASES = {
 POSES = [(0, 0, 0), (45, 0, 0), (45, 35.26, 0), (180, 0, 0), (0, 89, 0), (-90, 10, 20),
          (135, -35, 0)]  # fmt: skip
 FRONT_POSES = [(0, 0, 0), (25, 0, 0), (0, 89, 0), (0, -60, 0), (-25, 10, 20)]  # hequirect
-CFG = RenderConfig(eye_size=(256, 256), hfov_deg=107.0, vfov_deg=107.0, grf=None)
+#: 512 px eyes at 107 deg: about one texel per pixel (cubic); 256: 1.7 texels (the mip path).
+EYES = [512, 256]
 
 
 @pytest.fixture(scope="module")
@@ -51,8 +52,9 @@ def original(real_dir):
     return cv2.resize(img, (1024, 512), interpolation=cv2.INTER_AREA)
 
 
-def _views(ctx, frame, poses, projection="equirect", lens=None) -> list[np.ndarray]:
-    r = EyeRenderer(ctx, CFG, projection=projection, lens_fov_deg=lens)
+def _views(ctx, frame, poses, eye, projection="equirect", lens=None) -> list[np.ndarray]:
+    cfg = RenderConfig(eye_size=(eye, eye), hfov_deg=107.0, grf=None)
+    r = EyeRenderer(ctx, cfg, projection=projection, lens_fov_deg=lens)
     try:
         r.upload(frame)
         return [np.array(r.render(head_rotation(*p).as_matrix())) for p in poses]
@@ -65,16 +67,17 @@ def _psnr(a, b, m) -> float:
     return 10 * math.log10(255.0**2 / np.mean(d**2))
 
 
+@pytest.mark.parametrize("eye", EYES)
 @pytest.mark.parametrize("name", list(CASES))
-def test_shader_sampling_at_least_as_close_as_the_cpu_conversion(ctx, original, name):
+def test_shader_sampling_at_least_as_close_as_the_cpu_conversion(ctx, original, name, eye):
     size, opts = CASES[name]
     lens = 190.0 if name == "dfisheye" else None
     poses = FRONT_POSES if name == "hequirect" else POSES
     stored = v360_convert(original, name, size, opts)
-    ref = _views(ctx, original, poses)
-    cpu = _views(ctx, converter(name, size, lens)(stored), poses)  # what render did before
-    gpu = _views(ctx, stored, poses, name, lens)
-    rays = perspective_rays(CFG.eye_size, CFG.hfov_deg)[0]
+    ref = _views(ctx, original, poses, eye)
+    cpu = _views(ctx, converter(name, size, lens)(stored), poses, eye)  # what render did before
+    gpu = _views(ctx, stored, poses, eye, name, lens)
+    rays = perspective_rays((eye, eye), 107.0)[0]
     p_cpu, p_gpu = [], []
     for pose, a, b, c in zip(poses, ref, cpu, gpu):
         d = rays @ head_rotation(*pose).as_matrix().T.astype(np.float32)
@@ -84,21 +87,22 @@ def test_shader_sampling_at_least_as_close_as_the_cpu_conversion(ctx, original, 
         p_gpu.append(_psnr(c, a, m))
         if name == "hequirect":  # its back half is not covered: black, as the CPU path
             assert not c[lon > math.radians(92)].any()
-    print(f"{name}: PSNR to the equirect render, CPU conversion {np.round(p_cpu, 2)} "
+    print(f"{name} {eye} px: PSNR to the equirect render, CPU conversion {np.round(p_cpu, 2)} "
           f"(median {np.median(p_cpu):.2f} dB), shader {np.round(p_gpu, 2)} "
           f"(median {np.median(p_gpu):.2f} dB)")  # fmt: skip
-    assert np.median(p_gpu) >= np.median(p_cpu)
+    assert np.median(p_gpu) >= np.median(p_cpu) - 0.01  # hequirect: the same (a pixel shift)
     assert min(g - c for g, c in zip(p_gpu, p_cpu)) > -0.5  # no pose (seam, corner) worse
-    assert min(p_gpu) > 32
+    assert min(p_gpu) > 30  # the pole views: 31.7-33.7 dB
 
 
 @pytest.mark.parametrize("name,size", [("c3x2", (96, 64)), ("c6x1", (192, 32))])
 def test_face_atlas_is_the_cpu_converters_atlas(name, size):
     rng = np.random.default_rng(0)
     frame = rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8)
-    ours = FaceAtlas(name, *size)(frame)
-    assert FaceAtlas.PAD == converter(name, size).PAD
-    np.testing.assert_array_equal(ours, converter(name, size).atlas(frame))
+    atlas = FaceAtlas(name, *size)
+    assert atlas.pad == 16 and atlas.shape[0] % 64 == 0  # 32 + 2 * 16: mips halve the cells
+    cpu = EquirectConverter(name, size, pad=atlas.pad)  # the CPU converter's atlas, same border
+    np.testing.assert_array_equal(atlas(frame), cpu.atlas(frame))
 
 
 def test_a_frame_over_the_texture_limit_goes_through_the_cpu_conversion(tmp_path):
@@ -108,7 +112,7 @@ def test_a_frame_over_the_texture_limit_goes_through_the_cpu_conversion(tmp_path
     assert (
         sampled_projection(types.SimpleNamespace(info={"GL_MAX_TEXTURE_SIZE": 4096}), src) == "c3x2"
     )
-    small = types.SimpleNamespace(info={"GL_MAX_TEXTURE_SIZE": 100})  # the atlas is 114 wide
+    small = types.SimpleNamespace(info={"GL_MAX_TEXTURE_SIZE": 150})  # the atlas is 192 wide
     assert sampled_projection(small, src) == "equirect"
 
 
