@@ -168,9 +168,9 @@ def sampled_projection(ctx, source) -> str:
     """The projection the eye renderer samples ``source``'s frames in: the source's own
     (frames uploaded as stored: no CPU conversion), or ``equirect`` (converted on the CPU
     by ``source``'s funnel) when its stored eye frame, as uploaded (:func:`texture_size`),
-    exceeds this OpenGL's ``GL_MAX_TEXTURE_SIZE``."""
+    exceeds this OpenGL's ``GL_MAX_TEXTURE_SIZE`` or eye.frag has no ``PROJ`` for it."""
     name = source.projection
-    if name == "equirect":
-        return name
+    if name not in PROJ_DEFINE or name == "equirect":  # a projection without GLSL: the CPU
+        return "equirect"
     w, h = texture_size(name, *source.stored_eye_size)
     return name if max(w, h) <= _gl_limit(ctx, "GL_MAX_TEXTURE_SIZE") else "equirect"
