@@ -316,7 +316,7 @@ class EyeRenderer:
             )
         tex = self._tex.get(eye)
         # Mipmaps only when some pixel is larger than the largest texel (minification).
-        texel = sampling.texel_angle_rad(self.projection, w0, h0, self.lens_fov_deg, smallest=True)
+        texel = sampling.texel_angle_rad(self.projection, w0, h0, self.lens_fov_deg)
         mips = self.config.pixel_angle_rad > 0.95 * texel
         if tex is None or tex.size != (w, h) or tex.extra != mips:
             if tex is not None:

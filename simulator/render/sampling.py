@@ -9,9 +9,9 @@ lens FOV) and the frame's largest texel in radians (the filter's scale).
 A ``c3x2`` / ``c6x1`` frame is uploaded as a :class:`FaceAtlas`: each face bordered by at
 least 3 pixels of its neighbours (the face plane extended, nearest: the CPU converter's
 atlas), so the bicubic taps across a face edge read the neighbouring face, not a repeated
-edge (the faces are copied as blocks, the borders gathered: a frame copy). A cell's side is
-a multiple of 32 (even faces), so mip levels 1-5 halve it exactly and no mip texel mixes
-two cells.
+edge (the faces are copied as blocks, the borders gathered: about a frame copy). A cell's
+side is a multiple of 16 (even faces), so mip levels 1-4 halve it exactly and no mip
+texel of them mixes two cells.
 ``eac`` needs none: a row of its faces is continuous and v360 writes the faces continued
 into its 2-pixel pads; a dual fisheye's lenses are read inside their halves.
 """
@@ -51,16 +51,13 @@ def _lens(lens_fov_deg: float | None) -> float:
     return math.radians(DEFAULT_LENS_FOV_DEG if lens_fov_deg is None else float(lens_fov_deg))
 
 
-def texel_angle_rad(
-    name: str, w: int, h: int, lens_fov_deg: float | None = None, *, smallest: bool = False
-) -> float:
+def texel_angle_rad(name: str, w: int, h: int, lens_fov_deg: float | None = None) -> float:
     """The largest angular size of a texel of a ``w x h`` eye frame of projection ``name``
-    (radians): equirect and hequirect a row (pi / h), a cube face's centre texel (2 / F;
-    eye.frag scales it across the face), an eac face's (pi / 2 / its inner size), a
-    fisheye's radial step (lens FOV / h). ``smallest``: the least of what the eye shader
-    takes (a cube face's corner), which decides whether mipmaps are needed."""
-    if name in ("c3x2", "c6x1") and smallest:  # at a cube corner: 1 / sqrt(3) of the centre
-        return texel_angle_rad(name, w, h) / math.sqrt(3.0)
+    (radians): equirect and hequirect a row (pi / h), a cube face's centre texel (2 / F),
+    an eac face's (pi / 2 / its inner size), a fisheye's radial step (lens FOV / h). Mipmaps
+    are built when a pixel is larger (as for the equirect, whose longitude texels shrink
+    towards the poles: a cube face's towards its corners, where eye.frag's mip level then
+    follows them)."""
     if name in ("equirect", "hequirect"):
         return math.pi / h
     if name == "dfisheye":
@@ -118,8 +115,8 @@ def texture_size(name: str, w: int, h: int) -> tuple[int, int]:
 def atlas_pad(face: int) -> int:
     """A :class:`FaceAtlas` border (pixels) for faces of ``face`` pixels: at least 3 (the
     bicubic reaches 2 beyond the last face texel), widened so that the cell's side is a
-    multiple of 32 when ``face`` is even."""
-    return 3 + (-(face + 6) % 32) // 2
+    multiple of 16 when ``face`` is even."""
+    return 3 + (-(face + 6) % 16) // 2
 
 
 class FaceAtlas:
@@ -146,15 +143,18 @@ class FaceAtlas:
             dst_x.append(rx + col * A)
             src_y.append(np.clip(np.rint(sy), 0, h - 1).astype(np.intp))
             src_x.append(np.clip(np.rint(sx), 0, w - 1).astype(np.intp))
-        self.dst = (np.concatenate(dst_y), np.concatenate(dst_x))
-        self.src = (np.concatenate(src_y), np.concatenate(src_x))
+        # flat pixel indices (a gather of whole pixels is 2x faster than of 2-d indices)
+        self.dst = np.concatenate(dst_y) * self.shape[1] + np.concatenate(dst_x)
+        self.src = np.concatenate(src_y) * w + np.concatenate(src_x)
 
     def __call__(self, frame: NDArray) -> NDArray:
         F = self.face
+        frame = np.ascontiguousarray(frame)
         out = np.empty(self.shape + frame.shape[2:], frame.dtype)
         for ay, ax, fy, fx in self.blocks:
             out[ay : ay + F, ax : ax + F] = frame[fy : fy + F, fx : fx + F]
-        out[self.dst] = frame[self.src]
+        px = f"V{frame.itemsize * int(np.prod(frame.shape[2:]))}"  # one pixel, any channels
+        out.reshape(-1).view(px)[self.dst] = frame.reshape(-1).view(px)[self.src]
         return out
 
 
