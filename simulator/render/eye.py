@@ -256,6 +256,7 @@ class EyeRenderer:
         self._buf = np.empty((2, h, w, 4), np.uint8)  # readback: preallocated, one per eye
         self._yuv = None  # chroma pass and yuv420p buffers, built on first use
         self._tex: dict[str, object] = {}
+        self._atlas_buf = None  # a cubemap's face atlas, reused frame after frame
         _check_gl(ctx, "after setting up the eye renderer")
 
     def _program(self, mipmap: bool):
@@ -330,7 +331,8 @@ class EyeRenderer:
             self._tex[eye] = tex
             self._set_uniforms(sampling.uniforms(self.projection, w0, h0, self.lens_fov_deg))
         if (w, h) != (w0, h0):  # a cubemap: its faces bordered by their neighbours
-            frame = sampling.face_atlas(self.projection, w0, h0)(frame)
+            atlas = sampling.face_atlas(self.projection, w0, h0)
+            frame = self._atlas_buf = atlas(frame, out=self._atlas_buf)  # written at once
         tex.write(np.ascontiguousarray(frame))
         if mips:
             tex.build_mipmaps()

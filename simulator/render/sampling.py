@@ -147,10 +147,14 @@ class FaceAtlas:
         self.dst = np.concatenate(dst_y) * self.shape[1] + np.concatenate(dst_x)
         self.src = np.concatenate(src_y) * w + np.concatenate(src_x)
 
-    def __call__(self, frame: NDArray) -> NDArray:
+    def __call__(self, frame: NDArray, out: NDArray | None = None) -> NDArray:
+        """The atlas of ``frame``, written into ``out`` when it fits (an earlier result:
+        reused, so that an 8K frame's atlas is not a fresh allocation per frame)."""
         F = self.face
         frame = np.ascontiguousarray(frame)
-        out = np.empty(self.shape + frame.shape[2:], frame.dtype)
+        shape = self.shape + frame.shape[2:]
+        if out is None or out.shape != shape or out.dtype != frame.dtype:
+            out = np.empty(shape, frame.dtype)
         for ay, ax, fy, fx in self.blocks:
             out[ay : ay + F, ax : ax + F] = frame[fy : fy + F, fx : fx + F]
         px = f"V{frame.itemsize * int(np.prod(frame.shape[2:]))}"  # one pixel, any channels
