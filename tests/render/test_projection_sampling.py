@@ -6,8 +6,9 @@ Sizes: the projections are made by v360 at 1.25x the original's density (cube fa
 px from a 1024x512 equirect), so that the CPU path's working equirect (4F x 2F) is not the
 original's own pixel grid. On that grid (faces of 256 px) the CPU path would redraw the
 very texels the reference render interpolates and share its interpolation error: there it
-measures 0.2-0.8 dB closer to the reference, while against analytic truth (frames sampled
-from a known function) the shader path is 0.3-4 dB closer at every pose.
+measures 0.45-0.8 dB closer to the reference, while against v360's own view of the
+original the shader path is 0.2-0.7 dB closer, and against analytic truth (frames sampled
+from a known function) 0.3-0.8 dB closer in median (docs/sources.md).
 """
 
 from __future__ import annotations
