@@ -123,12 +123,17 @@ def _smooth(w, h, phase):
     return np.stack([127 + 100 * v for v in c], -1).astype(np.uint8)
 
 
-@pytest.mark.parametrize("kind", ["top-bottom", "right-file"])
-def test_stereo_cubemap_renders_each_eye_from_its_own_frames(ctx, tmp_path, monkeypatch, kind):
-    """A stereo c3x2 clip: each eye's video equals the CPU conversion's render of it, and
-    differs from the other eye's; the review hook still gets equirect frames."""
-    eyes = [v360_convert(_smooth(256, 128, ph), "c3x2", (96, 64)) for ph in (0.0, 2.0)]
-    if kind == "top-bottom":
+@pytest.mark.parametrize("kind", ["top-bottom", "right-file", "vr180"])
+def test_stereo_sources_render_each_eye_from_its_own_frames(ctx, tmp_path, monkeypatch, kind):
+    """A stereo c3x2 clip (top-bottom, or two eye files) and a VR180 one (hequirect side by
+    side): each eye's video equals the CPU conversion's render of it, and differs from the
+    other eye's; the review hook still gets equirect frames."""
+    proj, size = ("hequirect", (64, 64)) if kind == "vr180" else ("c3x2", (96, 64))
+    eyes = [v360_convert(_smooth(256, 128, ph), proj, size) for ph in (0.0, 2.0)]
+    if kind == "vr180":
+        write_clip(tmp_path / "sbs.mp4", [np.concatenate(eyes, 1)] * 3, crf=0)
+        src = Source.open(tmp_path / "sbs.mp4", projection=proj, layout="side-by-side")
+    elif kind == "top-bottom":
         write_clip(tmp_path / "tb.mp4", [np.concatenate(eyes, 0)] * 3, crf=0)
         src = Source.open(tmp_path / "tb.mp4", projection="c3x2", layout="top-bottom")
     else:
@@ -149,7 +154,7 @@ def test_stereo_cubemap_renders_each_eye_from_its_own_frames(ctx, tmp_path, monk
     shader = run(tmp_path / "a")
     monkeypatch.setattr("simulator.render.video.sampled_projection", lambda c, s: "equirect")
     cpu = run(tmp_path / "b")
-    assert set(seen) == {(64, 128, 3)}  # equirect frames, both runs
+    assert set(seen) == {(64, 128, 3)}  # equirect frames (the working size), both runs
     for k in (0, 1):
         assert 10 * np.log10(255**2 / ((shader[k] - cpu[k]) ** 2).mean()) > 35
     assert np.abs(shader[0] - shader[1]).mean() > 10  # the eyes are not the same image
