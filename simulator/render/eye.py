@@ -1,11 +1,12 @@
-"""The eye renderer: one eye's view of an equirect frame, with the GRF overlay, in one GL pass.
+"""The eye renderer: one eye's view of a frame (equirect or another projection), with the GRF overlay, in one GL pass.
 
 Per eye, one full-screen pass (``shaders/fullscreen.vert`` + ``shaders/eye.frag``)
 computes each pixel's view ray from the eye's perspective projection (exact hfov/vfov,
 pixel centres as :func:`simulator.sphere.geometry.perspective_rays`) and the head rotation
 (the 3x3 head->world matrix of :func:`simulator.sphere.geometry.head_rotation`, passed as a
 uniform), converts it to lon/lat with the project's conventions and samples the eye's
-equirect frame:
+equirect frame (another projection's frame is sampled as stored, no CPU conversion: the
+ray is carried into its face or lens, each tap kept inside it, :mod:`simulator.render.sampling`):
 
 * magnification (a texel covers more than a pixel): bicubic, ffmpeg v360's 4-point
   Lagrange kernel, with longitude wrap-around at the +-180 deg seam and continuation
@@ -48,6 +49,7 @@ from simulator.core.choices import Eye
 from simulator.core.errors import InputError
 from simulator.mitigation.grf import GrainField, GrfConfig
 from simulator.mitigation.kinds import Mitigation
+from simulator.render import sampling
 from simulator.render.gl import _check_gl, _gl_limit, _program
 from simulator.sphere.cells import Frustum
 from simulator.sphere.geometry import check_fov, head_rotation
@@ -194,16 +196,23 @@ class EyeRenderer:
     ----------
     ctx : moderngl.Context from :func:`create_context`
     config : RenderConfig
+    projection, lens_fov_deg : the uploaded frames' projection (``equirect``, or one of
+        :data:`simulator.sphere.projections.PROJECTIONS`, sampled as stored) and a dual
+        fisheye's lens FOV (degrees; None: the default)
 
     Use :meth:`upload` once per video frame and eye (``"left"``, ``"right"``; for mono
     upload to ``"left"`` only and render both eyes from it), then :meth:`render`.
     """
 
-    def __init__(self, ctx, config: RenderConfig = RenderConfig()):
+    def __init__(self, ctx, config: RenderConfig = RenderConfig(), *,
+                 projection: str = "equirect", lens_fov_deg: float | None = None):  # fmt: skip
         import moderngl
 
+        if projection not in sampling.PROJ_DEFINE:
+            raise InputError(f"--projection {projection!r}: unknown to the renderer")
         self.ctx = ctx
         self.config = config
+        self.projection, self.lens_fov_deg = projection, lens_fov_deg
         # Bound again on release: releasing the bound FBO leaves moderngl restoring a dead
         # name on the next framebuffer creation (GL_INVALID_OPERATION).
         self._outer_fbo = ctx.fbo if ctx.fbo is not None else ctx.detect_framebuffer(0)
@@ -228,6 +237,7 @@ class EyeRenderer:
                 ctx, grf, config.pixel_angle_rad, self._outer_fbo
             )
         self._defines = {
+            "PROJ": sampling.PROJ_DEFINE[projection],
             "GRF": int(grf is not None),
             "GRAIN_LOD": int(grain_lod),
             "GRAIN_PARALLAX": int(grf is not None and grf.distance_m is not None),
@@ -237,6 +247,7 @@ class EyeRenderer:
         # Keyed by MIPMAP; the general variant (cubic or trilinear per pixel) is built now,
         # the cubic-only one on the first frame that needs no mipmaps.
         self._progs: dict[bool, tuple] = {}
+        self._frame_uniforms: dict = {}  # the uploaded frame's (sampling.uniforms)
         self._program(True)
         # eye.frag's outputs: RGB (a texture: chroma420.frag reads it) and luma (Y plane).
         self._color = ctx.texture((w, h), 4, dtype="f1")
@@ -245,6 +256,7 @@ class EyeRenderer:
         self._buf = np.empty((2, h, w, 4), np.uint8)  # readback: preallocated, one per eye
         self._yuv = None  # chroma pass and yuv420p buffers, built on first use
         self._tex: dict[str, object] = {}
+        self._atlas_buf = None  # a cubemap's face atlas, reused frame after frame
         _check_gl(ctx, "after setting up the eye renderer")
 
     def _program(self, mipmap: bool):
@@ -259,7 +271,7 @@ class EyeRenderer:
         values = {
             "u_tan_half": cfg.image_plane()[0],
             "u_size": (float(cfg.eye_size[0]), float(cfg.eye_size[1])),
-            "u_equirect": 0,
+            "u_frame": 0,
         }
         if grf is not None:
             values |= {
@@ -271,35 +283,56 @@ class EyeRenderer:
             }
         if cfg.mitigation.vignette:
             values |= {"u_vignette_color": cfg.mitigation.color}
-        for name, value in values.items():
+        for name, value in (values | self._frame_uniforms).items():
             if name in prog:
                 prog[name].value = value
         pv = self._progs[mipmap] = (prog, self.ctx.vertex_array(prog, []))
         return pv
 
+    def _set_uniforms(self, values: dict) -> None:
+        """Set the frame's projection uniforms in every program (and later ones)."""
+        self._frame_uniforms = values
+        for prog, _vao in self._progs.values():
+            for name, value in values.items():
+                if name in prog:
+                    prog[name].value = value
+
+    @property
+    def max_texture_size(self) -> int:
+        """The largest frame side :meth:`upload` takes (``GL_MAX_TEXTURE_SIZE``)."""
+        return self._max_tex
+
     def upload(self, frame: NDArray[np.uint8], eye: Eye = "left") -> None:
-        """Upload one eye's equirect frame ``(h, w, 3)`` uint8 RGB (top row first) and
-        rebuild its mipmaps. The texture is (re)allocated when the size changes."""
-        h, w = frame.shape[:2]
+        """Upload one eye's frame ``(h, w, 3)`` uint8 RGB (top row first; in the renderer's
+        projection, as stored) and rebuild its mipmaps. The texture is (re)allocated when
+        the size changes."""
+        h0, w0 = frame.shape[:2]
         if frame.ndim != 3 or frame.shape[2] != 3 or frame.dtype != np.uint8:
             raise ValueError(f"frame must be (h, w, 3) uint8; got {frame.shape} {frame.dtype}")
+        w, h = sampling.texture_size(self.projection, w0, h0)
         if w > self._max_tex or h > self._max_tex:
             raise InputError(
-                f"equirect frame {w}x{h} exceeds this OpenGL's texture limit of {self._max_tex} pixels"
+                f"{self.projection} frame {w}x{h} exceeds this OpenGL's texture limit of "
+                f"{self._max_tex} pixels"
             )
         tex = self._tex.get(eye)
-        # Mipmaps only when some pixel is larger than a texel row (minification).
-        mips = self.config.pixel_angle_rad > 0.95 * math.pi / h
+        # Mipmaps only when some pixel is larger than the largest texel (minification).
+        texel = sampling.texel_angle_rad(self.projection, w0, h0, self.lens_fov_deg)
+        mips = self.config.pixel_angle_rad > 0.95 * texel
         if tex is None or tex.size != (w, h) or tex.extra != mips:
             if tex is not None:
                 tex.release()
             mgl = self._moderngl
             tex = self.ctx.texture((w, h), 3, dtype="f1", alignment=1)
-            tex.repeat_x = True  # longitude wraps at the seam
+            tex.repeat_x = self.projection == "equirect"  # longitude wraps at the seam
             tex.repeat_y = False  # latitude is clamped at the poles
             tex.filter = (mgl.LINEAR_MIPMAP_LINEAR if mips else mgl.LINEAR, mgl.LINEAR)
             tex.extra = mips
             self._tex[eye] = tex
+            self._set_uniforms(sampling.uniforms(self.projection, w0, h0, self.lens_fov_deg))
+        if (w, h) != (w0, h0):  # a cubemap: its faces bordered by their neighbours
+            atlas = sampling.face_atlas(self.projection, w0, h0)
+            frame = self._atlas_buf = atlas(frame, out=self._atlas_buf)  # written at once
         tex.write(np.ascontiguousarray(frame))
         if mips:
             tex.build_mipmaps()
@@ -467,14 +500,17 @@ def render_view(
     config: RenderConfig = RenderConfig(eye_size=(256, 256), grf=None),
     opacity: float = 1.0,
     cell_opacity: NDArray | None = None,
+    projection: str = "equirect",
+    lens_fov_deg: float | None = None,
 ) -> NDArray[np.uint8]:
-    """One eye's view of an equirect image ``(h, w, 3)`` uint8 (a copy).
+    """One eye's view of an image ``(h, w, 3)`` uint8 (a copy), equirect or of
+    ``projection`` (as stored; ``lens_fov_deg``: a dual fisheye's).
 
     Orientation in degrees (yaw + right, pitch + up, roll + right ear down; applied yaw,
     pitch, roll). ``opacity`` is the GRF (and vignette) opacity; ``cell_opacity`` the
     per-cell grain opacity of local-grf (``(n_lat, n_lon)``).
     """
-    r = EyeRenderer(ctx, config)
+    r = EyeRenderer(ctx, config, projection=projection, lens_fov_deg=lens_fov_deg)
     try:
         r.upload(img)
         R = head_rotation(yaw_deg, pitch_deg, roll_deg).as_matrix()

@@ -1,7 +1,9 @@
 """Rendering whole videos: decode, render each eye, encode per-eye H.264 files.
 
 Frames are decoded once (:func:`simulator.media.video.prefetch`), rendered per eye
-(:class:`simulator.render.eye.EyeRenderer`) and leave the GPU as yuv420p planes for the
+(:class:`simulator.render.eye.EyeRenderer`; a non-equirect source's frames as stored, its
+projection sampled in the eye shader: no CPU conversion, :mod:`simulator.render.sampling`)
+and leave the GPU as yuv420p planes for the
 encoder as they are (:meth:`simulator.render.eye.EyeRenderer.render` ``pix_fmt``). Output
 files are written to temporary names and renamed when complete. A mono video with grains
 at infinity gives the same image to both eyes: it is rendered and encoded once and
@@ -34,8 +36,9 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
 from simulator.media.source import as_source
-from simulator.media.video import VideoWriter, prefetch
+from simulator.media.video import VideoWriter, iter_frames, prefetch
 from simulator.render.eye import EyeRenderer, RenderConfig
+from simulator.render.sampling import sampled_projection
 from simulator.sphere.geometry import head_rotation
 
 __all__ = ["VideoRenderResult", "render_video"]
@@ -184,7 +187,7 @@ def render_video(
         raise ValueError("render_video needs at least one output path")
     paths = [p for p in out_paths if p]
     eyes = (wanted[0],) if same else tuple(wanted)
-    renderer = EyeRenderer(ctx, config)
+    renderer, proj, on_frame = _renderer(ctx, source, config, on_frame)
     w, h = config.eye_size
     timings = dict.fromkeys(("decode_wait", "upload", "render", "encode_wait"), 0.0)
     t_start = time.perf_counter()
@@ -198,7 +201,7 @@ def render_video(
                               on_frame is not None, review_eye, timings)  # fmt: skip
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
-                decoded = source.eye_frames(start=start_frame, end=start_frame + total, threads=threads)
+                decoded = _decoded(source, proj, start_frame, start_frame + total, threads)
                 frames = stack.enter_context(
                     contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
@@ -216,6 +219,62 @@ def render_video(
         renderer.release()
     timings["total"] = time.perf_counter() - t_start
     return VideoRenderResult(n, (w, h), fps, timings)
+
+
+def _renderer(ctx, source, config, on_frame):
+    """``(eye renderer, the projection it samples, on_frame)``: a non-equirect source's
+    frames are sampled as stored (:func:`simulator.render.sampling.sampled_projection`);
+    ``on_frame`` then gets them converted to equirect, on its worker thread."""
+    proj = sampled_projection(ctx, source)
+    if on_frame is not None and proj != "equirect":  # the review draws the equirect frame
+        on_frame = functools.partial(_on_equirect, on_frame, source.converter)
+    renderer = EyeRenderer(ctx, config, projection=proj, lens_fov_deg=source.lens_fov_deg)
+    return renderer, proj, on_frame
+
+
+def _decoded(source, proj: str, start: int, end: int, threads):
+    """Per-eye frames for a renderer sampling ``proj``: equirect (the source's funnel) or
+    the frames as stored (:func:`_stored_eye_frames`)."""
+    if proj == "equirect":
+        return source.eye_frames(start=start, end=end, threads=threads)
+    return _stored_eye_frames(source, start, end, threads)
+
+
+def _on_equirect(on_frame, convert, frame, yuv) -> None:
+    """``on_frame`` given the equirect frame of a frame as stored (on its worker thread)."""
+    on_frame(convert(frame), yuv)
+
+
+def _stored_eye_frames(source, start: int, end: int, threads):
+    """:meth:`Source.eye_frames` without the conversion to equirect: each eye's frame as
+    stored (contiguous copies), for a renderer sampling the source's projection."""
+    if source.right is not None:
+        kw = {"start": start, "end": end, "threads": threads, "convert": False}
+        left, right = source.frames(eye="left", **kw), source.frames(eye="right", **kw)
+        try:
+            for fl in left:
+                fr = next(right, None)
+                if fr is None:
+                    raise InputError(
+                        f"{source.right}: right eye ends before the left eye ({source.path})"
+                    )
+                yield np.array(fl), np.array(fr)
+        finally:
+            left.close()
+            right.close()
+        return
+    eyes = EYES if source.stereo else (source.eye,)
+    if source.still:  # an image made a clip: every frame is the image
+        img = source.read_stored()
+        raw = iter([img] * max(0, min(end, source.info.n_frames) - max(0, start)))
+    else:
+        raw = iter_frames(source.path, start=start, end=end, threads=threads)
+    try:
+        for f in raw:
+            yield tuple(np.array(source.eye_view(f, e, convert=False), order="C") for e in eyes)
+    finally:
+        if hasattr(raw, "close"):
+            raw.close()
 
 
 def _out_times(info, start_frame: int, total: int):

@@ -51,6 +51,7 @@ __all__ = [
     "EquirectConverter",
     "Projection",
     "converter",
+    "face_grid",
     "image_to_dirs",
 ]
 
@@ -249,6 +250,12 @@ PROJECTIONS: dict[str, Projection] = {
         lambda w, h: (_even(2 * w), _even(h)), full=False,
     ),
 }  # fmt: skip
+
+
+def face_grid(name: str) -> _CubeLayout | None:
+    """The face grid (``cols``, ``rows``, ``cell``, ``rot`` per v360 direction in the order
+    right, left, up, down, front, back) of a cubemap projection (``eac`` included), else None."""
+    return {"c3x2": _C3X2, "c6x1": _C6X1, "eac": _EAC}.get(name)
 
 
 def image_to_dirs(proj: str, face_col: int, face_row: int, u: NDArray, v: NDArray) -> NDArray:

@@ -32,6 +32,7 @@ from simulator.media.video import iter_frames, probe
 from simulator.mitigation.kinds import KINDS
 from simulator.render.eye import EyeRenderer
 from simulator.render.gl import create_context
+from simulator.render.sampling import sampled_projection
 from simulator.sphere.geometry import head_rotation
 from simulator.viewing.plan import grf_settings, plan_viewing
 from simulator.viewing.spec import ViewSpec
@@ -219,7 +220,8 @@ def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) ->
     else:
         decoded = decode_frames(source.path, idx)
         decoded_right = decode_frames(source.right, idx) if source.right is not None else None
-    renderer = EyeRenderer(ctx, config)
+    proj = sampled_projection(ctx, source)  # frames as stored where the shader can sample them
+    renderer = EyeRenderer(ctx, config, projection=proj, lens_fov_deg=source.lens_fov_deg)
     rows = []
     bar = Counter(progress, len(times))
     pool = concurrent.futures.ThreadPoolExecutor(max_workers=2, thread_name_prefix="vimsim-png")
@@ -228,7 +230,8 @@ def _draw_frames(ctx, source, plan, config, out: Path, times, eyes, progress) ->
         for t, i in zip(times, idx):
             for e in EYES if stereo else ("left",):
                 held = decoded_right if e == "right" and decoded_right is not None else decoded
-                renderer.upload(np.ascontiguousarray(source.eye_view(held[i], e)), e)
+                view = source.eye_view(held[i], e, convert=proj == "equirect")
+                renderer.upload(np.ascontiguousarray(view), e)
             yaw, pitch, roll = (float(v) for v in plan.angles_deg[i])
             R = head_rotation(yaw, pitch, roll).as_matrix()
             op = float(plan.opacity[i])
