@@ -38,7 +38,7 @@ from simulator.media.video import prefetch
 from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
-from simulator.preprocess.tiles import tile_frames
+from simulator.preprocess.tiles import downscale, tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
     dir_to_lonlat,
@@ -122,7 +122,9 @@ class _TileGeometry:
         s, fov = cfg.tile_size, cfg.tile_fov_deg
         t = math.tan(math.radians(fov) / 2.0)
         # Pyramid level: halve the equirect while its pixels stay finer than a tile's
-        # centre pixel (anti-aliasing for the linear remap, and a cheaper remap).
+        # centre pixel (anti-aliasing for the linear remap, and a cheaper remap). The
+        # halvings are 2x2 area means (:func:`simulator.preprocess.tiles.downscale`, as the
+        # projection path's): at 8K 4 ms of CPU per frame against 11 for three pyrDowns.
         centre_px_deg = math.degrees(2.0 * math.atan(t / s))
         # Stored pixels may be non-square (e.g. SAR 9:8): lon and lat steps are checked apart.
         level, w, h = 0, W, H
@@ -131,7 +133,7 @@ class _TileGeometry:
             and max(360.0 / (w // 2), 180.0 / ((h + 1) // 2)) <= centre_px_deg
             and min(w // 2, (h + 1) // 2) >= 32
         ):
-            w, h = w // 2, (h + 1) // 2  # cv2.pyrDown's output size
+            w, h = w // 2, (h + 1) // 2
             level += 1
         self.level = level
         self.small_size = (w, h)
@@ -170,9 +172,7 @@ class _TileGeometry:
         )  # fmt: skip
 
     def tiles(self, frame: NDArray[np.uint8]) -> NDArray[np.uint8]:
-        f = np.ascontiguousarray(frame)
-        for _ in range(self.level):
-            f = cv2.pyrDown(f)
+        f = downscale(frame, self.small_size) if self.level else np.ascontiguousarray(frame)
         out = cv2.remap(
             pad_equirect(f), self.m1, self.m2, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
         )

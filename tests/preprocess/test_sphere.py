@@ -429,3 +429,45 @@ def test_compute_epof_carries_an_asymmetric_headset_frustum(tmp_path):
     assert np.allclose(res.epof_dps, exact, rtol=1e-9)
     assert np.max(np.abs(exact - centred)) > 1e-3 * np.max(np.abs(exact))
     assert res.meta["frustum_deg"] == [fr.left_deg, fr.right_deg, fr.down_deg, fr.up_deg]
+
+
+def _open_fds_to(path) -> int:
+    import os
+
+    fd_dir = "/proc/self/fd"
+    target = os.path.realpath(path)
+    n = 0
+    for fd in os.listdir(fd_dir):
+        try:
+            n += os.path.realpath(os.readlink(os.path.join(fd_dir, fd))) == target
+        except OSError:
+            pass
+    return n
+
+
+@pytest.mark.parametrize("err", [RuntimeError, KeyboardInterrupt])
+def test_field_from_video_error_in_the_consumer_stops_the_decoding_thread(tmp_path, err):
+    """Decoding and tiling run a few frames ahead in a background thread (media.video.prefetch):
+    an error in the caller's flow step (KeyboardInterrupt = what SIGINT raises there) stops
+    that thread and closes the video before the error reaches the caller."""
+    import threading
+    import time
+
+    vid = _rot_video(tmp_path / "rot.mp4", n=12)
+    calls = []
+
+    def flow(prev, cur):
+        calls.append(1)
+        if len(calls) == 2:
+            time.sleep(0.5)  # the thread fills its queue and waits to hand on the next frame
+            assert _open_fds_to(vid) >= 1  # the decoder has the file open now
+            assert any(t.name == "vimsim-prefetch" for t in threading.enumerate())
+            raise err("stop here")
+        return np.zeros((*prev.shape, 2), np.float32)
+
+    with pytest.raises(err, match="stop here") as info:
+        simulator.preprocess.sphere.field_from_video(vid, SphereConfig(tile_size=32), flow=flow)
+    # while the error (its traceback: the generators) is still held, e.g. being reported
+    assert not any(t.name == "vimsim-prefetch" for t in threading.enumerate())
+    assert _open_fds_to(vid) == 0
+    assert info.value.args == ("stop here",)
