@@ -41,6 +41,7 @@ __all__ = [
     "MidpointSplat",
     "adjust_parts",
     "fit_rotation",
+    "residual_speed",
 ]
 
 #: ``meta["ego"]`` of a grid with the per-frame camera rotation (sphere mode).
@@ -207,6 +208,53 @@ def fit_rotation(
     return EgoFit(w=w, t=np.zeros(3) if t is None else t, confidence=float(np.clip(conf, 0, 1)))
 
 
+#: Medians of chi-square variables of 1 and 2 degrees of freedom (noise power of one and
+#: two Gaussian components over its variance).
+_CHI2_MEDIAN = (0.4549, 1.3863)
+#: A residual across the translation's parallax is motion of its own (not noise) beyond
+#: this many noise deviations.
+_GATE_SIGMA = 3.0
+
+
+def residual_speed(vec, cell_dir, t, speed, ok) -> NDArray[np.float64]:
+    """Per cell: the speed of the flow with the camera rotation removed (radians per
+    frame), its flow noise discounted.
+
+    ``vec`` (C, 3): each cell's mean residual rotation vector (world frame; averaging the
+    vectors, not their lengths, lets noise that varies within a cell cancel);
+    ``cell_dir`` (C, 3) unit directions; ``t`` (3,) the fitted translation direction
+    (zeros: none fitted); ``speed`` (C,) the cells' measured speed; ``ok`` (C,) cells with
+    pixels. Flow noise makes the length of a residual vector biased upward (a pure
+    rotation's residual is all noise, yet its length is ~3-5 % of the speed); the noise is
+    removed using the fit's own residual statistics, relative to each cell's speed (flow
+    error grows with the motion):
+
+    - with a translation fitted, its parallax lies along ``d x t`` at every cell
+      (the epipolar constraint), so the residual's component across that direction is
+      noise, or content moving on its own: the speed is the along component, plus the
+      across component where it exceeds ``_GATE_SIGMA`` noise deviations (estimated as
+      the median over cells of the across component's square / speed^2);
+    - without one, the whole residual is noise or content moving on its own: its power
+      less twice the noise power per component (estimated from the median over cells of
+      |vec|^2 / speed^2, a chi-square of 2 degrees of freedom), floored at 0.
+    """
+    m2 = (vec * vec).sum(axis=1)
+    s2 = speed * speed
+    good = ok & (speed > 1e-9)
+    if not good.any():
+        return np.sqrt(m2)
+    if np.any(t):
+        a = np.cross(cell_dir, t)
+        a /= np.maximum(np.linalg.norm(a, axis=1, keepdims=True), 1e-12)
+        along2 = (vec * a).sum(axis=1) ** 2
+        across2 = np.maximum(m2 - along2, 0.0)
+        eps2 = np.median(across2[good] / s2[good]) / _CHI2_MEDIAN[0]
+        moving = across2 > _GATE_SIGMA**2 * eps2 * s2
+        return np.sqrt(along2 + np.where(moving, across2, 0.0))
+    eps2 = np.median(m2[good] / s2[good]) / _CHI2_MEDIAN[1]
+    return np.sqrt(np.maximum(m2 - 2.0 * eps2 * s2, 0.0))
+
+
 class MidpointSplat:
     """Per-frame cell means of a frame pair's tile flow, each pixel counted in the cell of
     its path's *midpoint*, plus the camera rotation and the residual (translational) field.
@@ -247,6 +295,7 @@ class MidpointSplat:
         self.tile_rot = np.asarray(tile_rot, np.float64)
         self.u0, self.v0 = u0, v0
         self.weight = np.ascontiguousarray(weight, np.float64).reshape(-1)
+        self.tan_half = np.float32(tan_half)
         self.splat = splat
         self.cells = cells
         self.cx, self.cy = np.float32(cx), np.float32(cy)
@@ -266,11 +315,11 @@ class MidpointSplat:
         )
         self._bin_dir = bd / np.linalg.norm(bd, axis=1, keepdims=True)
 
-    def _cell_mean(self, idx, values, den):
+    def _cell_mean(self, idx, values, den, weight):
         """Weighted cell means of per-pixel ``values``; cells without pixels this frame
         take the static splat's value (their rows only)."""
         v = values.reshape(-1)
-        num = np.bincount(idx, weights=self.weight * v, minlength=den.size)
+        num = np.bincount(idx, weights=weight * v, minlength=den.size)
         out = num / np.where(den > 0, den, 1.0)
         empty = den <= 0
         if empty.any():  # tiny polar cells: the mean of their latitude row
@@ -298,19 +347,56 @@ class MidpointSplat:
         yi += self._tile_off
         idx = self.lut.take(yi).reshape(-1)
         C = self.cells.n_cells
-        den = np.bincount(idx, weights=self.weight, minlength=C)
-        field = self._cell_mean(idx, ang, den)
+        wt = self._frame_weight(fx, fy)
+        den = np.bincount(idx, weights=wt, minlength=C)
+        field = self._cell_mean(idx, ang, den, wt)
         # the fit runs on every other evaluated pixel, in coarser bins of cells (~12 deg)
-        vsum, dsum = self._cell_vectors(idx, fx, fy, ang)
+        vsum, dsum = self._cell_vectors(idx, fx, fy, ang, wt)
         nb = self._bin_dir.shape[0]
         bw = np.bincount(self._bin, weights=dsum, minlength=nb)
         bv = np.stack(
             [np.bincount(self._bin, weights=vsum[:, k], minlength=nb) for k in range(3)], -1
         )
         fit = fit_rotation(bv / np.where(bw > 0, bw, 1.0)[:, None], self._bin_dir, bw)
-        return field, self._cell_mean(idx, self._residual(fit.w, fx, fy), den), fit
+        return field, self._trans_field(idx, fit, fx, fy, wt, field), fit
 
-    def _cell_vectors(self, idx, fx, fy, ang):
+    def _trans_field(self, idx, fit, fx, fy, wt, field):
+        """Per cell (radians per frame): the speed of the flow with the rotation removed,
+        from the cell's mean residual rotation vector (:func:`residual_speed`), on every
+        other evaluated pixel (stride 4 at DIS ultrafast's: its flow's own resolution)."""
+        n, C = len(self.tile_rot), self.cells.n_cells
+        h = slice(None, None, 2)
+        fx, fy = fx[:, h, h], fy[:, h, h]
+        ang, crx, cry, crz, m = self._residual(fit.w, fx, fy, h)
+        wsub = wt.reshape(n, *self.u0.shape)[:, h, h].reshape(-1)
+        # each pixel's residual as a rotation vector (angle x unit axis), tile coordinates
+        k = (ang / np.maximum(m, np.float32(1e-12))).reshape(-1) * wsub
+        key = (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
+        parts = [np.bincount(key, weights=k * c.reshape(-1), minlength=n * C) for c in (crx, cry, crz)]
+        vec = (np.stack(parts, -1).reshape(n, C, 3) @ self.tile_rot.transpose(0, 2, 1)).sum(axis=0)
+        den = np.bincount(key % C, weights=wsub, minlength=C)
+        vec /= np.where(den > 0, den, 1.0)[:, None]
+        st = residual_speed(vec, self.cell_dir, fit.t, field, den > 0)
+        empty = den <= 0
+        if empty.any():  # tiny polar cells: the mean of their latitude row
+            rn = np.bincount(self._row, weights=st * den, minlength=self.cells.shape[0])
+            rd = np.bincount(self._row, weights=den, minlength=self.cells.shape[0])
+            st[empty] = (rn / np.where(rd > 0, rd, 1.0))[self._row[empty]]
+        return st
+
+    def _frame_weight(self, fx, fy):
+        """Per evaluated pixel: its base weight times the tile blend at its flow *target*:
+        a pixel whose content leaves the tile (fast motion near a border) cannot be matched
+        and reads low; the overlapping tile, where both ends lie inside, measures it."""
+        q0 = np.abs(self.u0 + fx * self.cx)
+        q1 = np.abs(self.v0 + fy * self.cy)
+        np.maximum(q0, q1, out=q0)
+        t = self.tan_half
+        x = np.clip((t - q0) / (t - np.float32(1.0)), 0.0, 1.0)
+        b = x * x * (np.float32(3.0) - np.float32(2.0) * x)
+        return self.weight * b.reshape(-1)
+
+    def _cell_vectors(self, idx, fx, fy, ang, weight):
         """``(C, 3)`` weighted sums of the rotation vectors of every other evaluated pixel
         (each direction) per cell, world frame (summed per (tile, cell) in tile
         coordinates, then rotated per tile), and ``(C,)`` their weights."""
@@ -320,7 +406,7 @@ class MidpointSplat:
         du, dv = fx * self.cx, fy * self.cy
         cz = self.u0[h, h] * dv - self.v0[h, h] * du
         scale = ang / np.maximum(np.sqrt(du * du + dv * dv + cz * cz), np.float32(1e-12))
-        wsub = self.weight.reshape(fx.shape[0], *self.u0.shape)[:, h, h]
+        wsub = weight.reshape(fx.shape[0], *self.u0.shape)[:, h, h]
         key = (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
         ws = (wsub * scale).reshape(-1)
         parts = [
@@ -332,13 +418,15 @@ class MidpointSplat:
         vec = (vt @ self.tile_rot.transpose(0, 2, 1)).sum(axis=0)
         return vec, dsum.reshape(n, C).sum(axis=0)
 
-    def _residual(self, w, fx, fy):
-        """Per evaluated pixel: the angle (radians) between ``R(w) r0`` and ``r1``, the
-        flow with the rotation removed, in tile coordinates (``r = (u, v, 1)``)."""
+    def _residual(self, w, fx, fy, h):
+        """Per evaluated pixel (those of the slice ``h``; ``fx``, ``fy`` already sliced):
+        the angle (radians) between ``R(w) r0`` and ``r1``, the flow with the rotation
+        removed, and the cross product ``R(w) r0 x r1`` (3 arrays) with its length, in
+        tile coordinates (``r = (u, v, 1)``)."""
         Rw = _rotvec_matrix(w)
         Rt = (self.tile_rot.transpose(0, 2, 1) @ Rw @ self.tile_rot).astype(np.float32)
         R = Rt[:, :, :, None, None]
-        u0, v0 = self.u0, self.v0
+        u0, v0 = self.u0[h, h], self.v0[h, h]
         p0, p1, p2 = (R[:, i, 0] * u0 + R[:, i, 1] * v0 + R[:, i, 2] for i in range(3))
         q0 = u0 + fx * self.cx
         q1 = v0 + fy * self.cy
@@ -349,7 +437,7 @@ class MidpointSplat:
         cols = dot.shape[-1]
         m = cv2.magnitude(crx.reshape(-1, cols), cry.reshape(-1, cols))
         m = cv2.magnitude(m, crz.reshape(-1, cols))
-        return cv2.phase(dot.reshape(-1, cols), m)
+        return cv2.phase(dot.reshape(-1, cols), m), crx, cry, crz, m
 
 
 def _rotvec_matrix(w: NDArray) -> NDArray[np.float64]:

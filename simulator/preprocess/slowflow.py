@@ -1,0 +1,72 @@
+"""Sphere mode's default flow: DIS ultrafast, with variational refinement on the tiles whose content moved less than a few pixels in the previous frame pair.
+
+DIS ultrafast matches 8 px patches at 1/4 of the tile's resolution; where the content moves
+by a pixel or less per frame its flow is a fraction of a pixel at that scale, and its
+speed then wobbles by +-10-25 % from frame to frame (with the codec's frame types),
+a large share of a small speed. OpenCV's variational refinement (a brightness-constancy
+and smoothness energy minimised from the DIS flow) reads such motion better, but costs as
+much again as the flow itself. :class:`SlowRefine` pays it only where it matters: a tile
+is refined when the median displacement of its pixels in the *previous* frame pair was
+below :data:`SLOW_PX` (motion is smooth from one frame to the next; the first pair of a
+run is not refined), so fast footage costs what it did, and slow footage at most the cost
+of ``--flow dis:ultrafast+refine5`` (measured in ``bench/flow_at_speed.py``,
+``docs/ego.md``).
+
+Only the default ``dis`` / ``dis:ultrafast`` flow is made adaptive; a flow given with its
+own refinement (``dis:PRESET+refineN``), another preset or backend runs as given.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from simulator.flow.dis import DISFlow
+
+__all__ = ["SLOW_ITERATIONS", "SLOW_PX", "SlowRefine", "slow_refine_desc"]
+
+#: A tile is refined when its median displacement in the previous pair was below this
+#: (tile pixels per frame).
+SLOW_PX = 2.0
+#: Variational-refinement iterations per DIS scale on a slow tile.
+SLOW_ITERATIONS = 5
+
+
+def _adaptive(backend) -> bool:
+    return isinstance(backend, DISFlow) and backend.preset == "ultrafast" and backend.refine is None
+
+
+def slow_refine_desc(backend, desc: dict) -> dict:
+    """The grid meta's ``flow`` entry of ``backend`` as sphere mode runs it: ``desc`` plus
+    ``refine_slow`` where the refinement is adaptive."""
+    if not _adaptive(backend):
+        return desc
+    return {**desc, "refine_slow": {"below_px": SLOW_PX, "iterations": SLOW_ITERATIONS}}
+
+
+class SlowRefine:
+    """Flow of consecutive stacks of tiles, refining the tiles that moved slowly in the
+    previous call (module docstring); ``backend(prev, cur)`` as given where it is not the
+    default DIS ultrafast. One instance per video (it remembers the previous pair)."""
+
+    def __init__(self, backend):
+        self.backend = backend
+        self._refined = DISFlow("ultrafast", SLOW_ITERATIONS) if _adaptive(backend) else None
+        self._last: NDArray[np.float32] | None = None
+
+    def __call__(self, prev: NDArray[np.uint8], cur: NDArray[np.uint8]) -> NDArray[np.float32]:
+        if self._refined is None:
+            return np.asarray(self.backend(prev, cur), np.float32)
+        slow = np.zeros(len(prev), bool) if self._last is None else self._last < SLOW_PX
+        if slow.all():
+            fl = self._refined(prev, cur)
+        elif slow.any():
+            fl = np.empty((*prev.shape, 2), np.float32)
+            fl[~slow] = self.backend(prev[~slow], cur[~slow])
+            fl[slow] = self._refined(prev[slow], cur[slow])
+        else:
+            fl = np.asarray(self.backend(prev, cur), np.float32)
+        sub = fl[:, 2::8, 2::8]
+        mag = np.sqrt(sub[..., 0] ** 2 + sub[..., 1] ** 2).reshape(len(fl), -1)
+        self._last = np.median(mag, axis=1)
+        return fl
