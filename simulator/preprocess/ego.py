@@ -286,7 +286,7 @@ class MidpointSplat:
         uu, vv = np.meshgrid(xs * tan_half, -xs * tan_half)
         rays = np.stack([uu, vv, np.ones_like(uu)], -1)
         rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
-        world = np.einsum("nij,hwj->nhwi", tile_rot, rays).reshape(-1, 3)
+        world = np.einsum("nij,hwj->nhwi", tile_rot, rays, optimize=True).reshape(-1, 3)
         lon, lat = dir_to_lonlat(world)
         self.lut = cells.index(lon, lat).astype(np.int32).reshape(n, self.ext, self.ext)
         g = np.arange(s)[sel].astype(np.float32) + np.float32(pad + 0.5)
@@ -296,6 +296,14 @@ class MidpointSplat:
         self.u0, self.v0 = u0, v0
         self.weight = np.ascontiguousarray(weight, np.float64).reshape(-1)
         self.tan_half = np.float32(tan_half)
+        # the static blend of each evaluated pixel (the one in ``weight``) and its solid
+        # angle alone, for the per-frame blend at the flow's target (:meth:`_frame_weight`)
+        b0 = _smoothstep(
+            (self.tan_half - np.maximum(np.abs(u0), np.abs(v0))) / (self.tan_half - np.float32(1.0))
+        )
+        self._blend0 = b0.astype(np.float32)
+        wt = self.weight.reshape(-1, *b0.shape)
+        self._area = np.where(b0 > 0, wt / np.where(b0 > 0, b0, 1.0), 0.0)
         self.splat = splat
         self.cells = cells
         self.cx, self.cy = np.float32(cx), np.float32(cy)
@@ -385,16 +393,17 @@ class MidpointSplat:
         return st
 
     def _frame_weight(self, fx, fy):
-        """Per evaluated pixel: its base weight times the tile blend at its flow *target*:
-        a pixel whose content leaves the tile (fast motion near a border) cannot be matched
-        and reads low; the overlapping tile, where both ends lie inside, measures it."""
+        """Per evaluated pixel: its solid angle times the tile blend at the less reliable
+        of its two ends (its position, or its flow *target*): a pixel whose content leaves
+        the tile (fast motion near a border) cannot be matched and reads low; the
+        overlapping tile, where both ends lie inside, measures it. No flow: the static
+        weights."""
         q0 = np.abs(self.u0 + fx * self.cx)
         q1 = np.abs(self.v0 + fy * self.cy)
         np.maximum(q0, q1, out=q0)
-        t = self.tan_half
-        x = np.clip((t - q0) / (t - np.float32(1.0)), 0.0, 1.0)
-        b = x * x * (np.float32(3.0) - np.float32(2.0) * x)
-        return self.weight * b.reshape(-1)
+        b = _smoothstep((self.tan_half - q0) / (self.tan_half - np.float32(1.0)))
+        np.minimum(b, self._blend0, out=b)
+        return (self._area * b).reshape(-1)
 
     def _cell_vectors(self, idx, fx, fy, ang, weight):
         """``(C, 3)`` weighted sums of the rotation vectors of every other evaluated pixel
@@ -438,6 +447,12 @@ class MidpointSplat:
         m = cv2.magnitude(crx.reshape(-1, cols), cry.reshape(-1, cols))
         m = cv2.magnitude(m, crz.reshape(-1, cols))
         return cv2.phase(dot.reshape(-1, cols), m), crx, cry, crz, m
+
+
+def _smoothstep(x):
+    """``3x^2 - 2x^3`` of ``x`` clipped to [0, 1] (float32 in, float32 out)."""
+    x = np.clip(x, np.float32(0.0), np.float32(1.0))
+    return x * x * (np.float32(3.0) - np.float32(2.0) * x)
 
 
 def _rotvec_matrix(w: NDArray) -> NDArray[np.float64]:

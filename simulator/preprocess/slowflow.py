@@ -58,14 +58,13 @@ class SlowRefine:
         if self._refined is None:
             return np.asarray(self.backend(prev, cur), np.float32)
         slow = np.zeros(len(prev), bool) if self._last is None else self._last < SLOW_PX
-        if slow.all():
-            fl = self._refined(prev, cur)
-        elif slow.any():
+        if not slow.any():
+            fl = self.backend(prev, cur)
+        else:  # tile by tile into one array (DIS is thread-safe: no batch checks needed)
             fl = np.empty((*prev.shape, 2), np.float32)
-            fl[~slow] = self.backend(prev[~slow], cur[~slow])
-            fl[slow] = self._refined(prev[slow], cur[slow])
-        else:
-            fl = np.asarray(self.backend(prev, cur), np.float32)
+            for i in range(len(prev)):
+                be = self._refined if slow[i] else self.backend
+                fl[i] = be.pair(np.ascontiguousarray(prev[i]), np.ascontiguousarray(cur[i]))
         sub = fl[:, 2::8, 2::8]
         mag = np.sqrt(sub[..., 0] ** 2 + sub[..., 1] ** 2).reshape(len(fl), -1)
         self._last = np.median(mag, axis=1)
