@@ -17,8 +17,10 @@ independently moving content must not drag the estimate). The camera's angular
 velocity is the opposite of the content's: ``omega_cam = -w * fps``.
 
 The residual of a pixel (the flow with the rotation removed: parallax of the
-translation plus anything moving on its own) is the angle between ``R(w) r0`` and
-``r1``; its field is the *translational part* of the flow (:mod:`simulator.epof.parts`).
+translation plus anything moving on its own) is the rotation taking ``R(w) r0`` to
+``r1``; per cell, the length of the mean residual vector with the flow's noise
+discounted (:func:`residual_speed`) is the *translational part* of the flow
+(:mod:`simulator.epof.parts`).
 """
 
 from __future__ import annotations
@@ -52,7 +54,8 @@ EGO_META = {
     "ego_confidence": "0..1: share of the sphere the fitted camera motion explains, times "
     "how evenly it constrains the rotation",
     "field_trans_dps": "deg/s: the speed with the fitted camera rotation removed (parallax "
-    "of the translation and independently moving content)",
+    "of the translation and independently moving content), from each cell's mean residual "
+    "vector, the flow's noise discounted (simulator.preprocess.ego.residual_speed)",
     "method": "robust fit over every cell (Tukey), rotation plus translation direction "
     "(continuous epipolar constraint); simulator.preprocess.ego",
 }
@@ -265,7 +268,8 @@ class MidpointSplat:
     (5 % high down a corridor at 5 m/s): here it goes to the cell of the pixel position
     plus half its flow (looked up in a per-tile table of cell indices, extended beyond
     the tile by ``pad`` pixels). Cells no midpoint falls in (rare, polar) take the value
-    of the static splat (the cell of ``r0``).
+    of the static splat (the cell of ``r0``). A pixel's weight is its solid angle times
+    the tile blend at the less reliable end of its path (:meth:`_frame_weight`).
 
     Parameters
     ----------

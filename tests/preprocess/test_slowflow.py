@@ -1,4 +1,4 @@
-"""Sphere mode's flow at low and high speed: slow tiles refined, the tile blend at the flow's target, the residual speed without its noise bias."""
+"""Sphere mode's flow at low and high speed: slow frame pairs refined, the tile blend at the flow's target, the residual speed without its noise bias."""
 
 from __future__ import annotations
 
@@ -25,7 +25,7 @@ def _tiles(omega_dps, n=3, fps=30.0):
 
 def test_slow_tiles_are_refined_from_the_second_pair_on():
     """10 deg/s (under a pixel per frame): the first pair is plain DIS ultrafast, the
-    next one DIS with 5 refinement iterations on every tile; 150 deg/s: never refined."""
+    next one DIS with 5 refinement iterations (all six tiles); 150 deg/s: never refined."""
     est, t = _tiles(10.0)
     sr = SlowRefine(DISFlow())
     plain, refined = DISFlow(), DISFlow("ultrafast", 5)
