@@ -3,9 +3,9 @@
 How a speed is split. At every cell and frame a sphere-mode grid recording the camera's rotation
 holds the measured speed ``s`` (``field_dps``), the speed with the fitted camera
 rotation removed ``s_t`` (``field_trans_dps``: the translation's parallax plus anything
-moving on its own, the flow's noise discounted: a pure rotation's residual is flow error
-alone, whose length would otherwise count as translation,
-:func:`simulator.preprocess.ego.residual_speed`) and the camera's angular velocity ``omega`` (``ego_omega_dps``),
+moving on its own; where the fit finds no translation, its flow noise is discounted: a
+pure rotation's residual is flow error alone, whose length would otherwise count as
+translation, :func:`simulator.preprocess.ego.residual_speed`) and the camera's angular velocity ``omega`` (``ego_omega_dps``),
 whose speed at the cell's direction ``d`` alone is ``s_r = |omega x d|``. The measured
 speed is shared between the two in proportion to the speed each would give alone::
 
