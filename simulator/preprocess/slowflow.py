@@ -9,7 +9,9 @@ most of the flow's time again. :class:`SlowRefine` pays it only where it matters
 pair is refined when the median displacement of every tile's pixels in the *previous*
 pair was below :data:`SLOW_PX` (motion is smooth from one frame to the next; the first
 pair of a run is not refined), so fast footage costs what it did, and slow footage at
-most the cost of ``--flow dis:ultrafast+refine5``. All six tiles or none: refining only
+most the cost of ``--flow dis:ultrafast+refine5``; a still camera (every tile below
+:data:`STILL_PX`: nothing moves for the refinement to read better) is not refined
+either. All six tiles or none: refining only
 the slow tiles of a frame (the poles of a turning camera) mixes two flows whose small
 biases differ, which drags the rotation fit (3 m room: omega error 1.1 -> 2.0 %);
 measured in ``bench/flow_at_speed.py``, ``docs/ego.md``.
@@ -25,12 +27,16 @@ from numpy.typing import NDArray
 
 from simulator.flow.dis import DISFlow
 
-__all__ = ["SLOW_ITERATIONS", "SLOW_PX", "SlowRefine", "slow_refine_desc"]
+__all__ = ["SLOW_ITERATIONS", "SLOW_PX", "STILL_PX", "SlowRefine", "slow_refine_desc"]
 
 #: A frame pair is refined when every tile's median displacement in the previous pair was
 #: below this (tile pixels per frame: 1/2 pixel at DIS ultrafast's 1/4 scale).
 SLOW_PX = 2.0
-#: Variational-refinement iterations per DIS scale on a slow tile.
+#: ... unless every tile's median displacement was below this: a still camera (the flow's
+#: noise), where nothing moves for the refinement to read better and it would cost ~25 %
+#: more time.
+STILL_PX = 0.1
+#: Variational-refinement iterations per DIS scale on a slow frame pair.
 SLOW_ITERATIONS = 5
 
 
@@ -43,7 +49,10 @@ def slow_refine_desc(backend, desc: dict) -> dict:
     ``refine_slow`` where the refinement is adaptive."""
     if not _adaptive(backend):
         return desc
-    return {**desc, "refine_slow": {"below_px": SLOW_PX, "iterations": SLOW_ITERATIONS}}
+    return {
+        **desc,
+        "refine_slow": {"below_px": SLOW_PX, "from_px": STILL_PX, "iterations": SLOW_ITERATIONS},
+    }
 
 
 class SlowRefine:
@@ -59,7 +68,8 @@ class SlowRefine:
     def __call__(self, prev: NDArray[np.uint8], cur: NDArray[np.uint8]) -> NDArray[np.float32]:
         if self._refined is None:
             return np.asarray(self.backend(prev, cur), np.float32)
-        slow = self._last is not None and float(self._last.max()) < SLOW_PX
+        top = None if self._last is None else float(self._last.max())
+        slow = top is not None and STILL_PX <= top < SLOW_PX
         fl = (self._refined if slow else self.backend)(prev, cur)
         sub = fl[:, 2::8, 2::8]
         mag = np.sqrt(sub[..., 0] ** 2 + sub[..., 1] ** 2).reshape(len(fl), -1)

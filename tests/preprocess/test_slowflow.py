@@ -25,7 +25,8 @@ def _tiles(omega_dps, n=3, fps=30.0):
 
 def test_slow_tiles_are_refined_from_the_second_pair_on():
     """10 deg/s (under a pixel per frame): the first pair is plain DIS ultrafast, the
-    next one DIS with 5 refinement iterations (all six tiles); 150 deg/s: never refined."""
+    next one DIS with 5 refinement iterations (all six tiles); 150 deg/s and a still
+    camera: never refined."""
     est, t = _tiles(10.0)
     sr = SlowRefine(DISFlow())
     plain, refined = DISFlow(), DISFlow("ultrafast", 5)
@@ -38,7 +39,12 @@ def test_slow_tiles_are_refined_from_the_second_pair_on():
     assert np.all(fast._last > SLOW_PX)
     assert np.array_equal(fast(f[1], f[2]), plain(f[1], f[2]))
     # only the default flow adapts, and the grid says so
-    assert est.flow_desc["refine_slow"] == {"below_px": SLOW_PX, "iterations": 5}
+    assert est.flow_desc["refine_slow"] == {"below_px": SLOW_PX, "from_px": 0.1, "iterations": 5}
+    # a still camera: nothing moves, nothing refined
+    still = SlowRefine(DISFlow())
+    still(t[0], t[0])
+    assert np.all(still._last < 0.1)
+    assert np.array_equal(still(t[0], t[0]), plain(t[0], t[0]))
     given = FieldEstimator((512, 256), 30.0, SphereConfig(), flow="dis:ultrafast+refine5")
     assert "refine_slow" not in given.flow_desc
     assert SlowRefine(DISFlow("fast"))._refined is None
