@@ -20,7 +20,8 @@ Measured, each against the analytic truth (same cell grid, same viewport integra
 2. estimated camera angular velocity (grid ``ego_omega_dps``) vs the truth's
    ``omega_cam_dps``: median error / |omega|; deg/s when still;
 3. translational EPOF part (``epof_trans_dps``, forward viewport) vs the truth's
-   (viewport mean of ``speed_trans_dps``): median ratio;
+   (viewport mean of ``speed_trans_dps``): median ratio; its share of the EPOF (median
+   over frames: on a pure rotation, the split's leak);
 4. the real hand-held clip (shared data, threejs/pano.mp4): rotation estimate vs an
    independent one (Shi-Tomasi + Lucas-Kanade tracks on 6 cube faces, OpenCV's essential
    matrix and recoverPose per face, ``bench/_ego_reference.py``): median difference,
@@ -204,12 +205,16 @@ def trans_part(grid, tru, cell) -> dict:
     T = grid.n_frames
     z = np.zeros(T)
     rot, trans = viewport_parts(grid, z, z, z, hfov_deg=107.0, vfov_deg=107.0)
+    tot = rot + trans
+    on = tot > 1.0
+    # the translational part's share of the EPOF: a pure rotation's is the split's leak
+    share = {"trans_share_median": float(np.median(trans[on] / tot[on]))} if on.sum() >= 3 else {}
     s, sr, st = (np.asarray(tru[k], np.float64) for k in ("speed_dps", "speed_rot_dps", "speed_trans_dps"))
-    tot = sr + st
-    t_part = s * np.where(tot > 0, st / np.where(tot > 0, tot, 1.0), 0.5)
+    both = sr + st
+    t_part = s * np.where(both > 0, st / np.where(both > 0, both, 1.0), 0.5)
     tt = forward(t_part, cell)
     tr = forward(s - t_part, cell)
-    out = {}
+    out = dict(share)
     ok = tt > 1.0
     if ok.sum() >= 3:
         out["trans_ratio_median"] = float(np.median(trans[ok] / tt[ok]))

@@ -3,7 +3,9 @@
 How a speed is split. At every cell and frame a sphere-mode grid recording the camera's rotation
 holds the measured speed ``s`` (``field_dps``), the speed with the fitted camera
 rotation removed ``s_t`` (``field_trans_dps``: the translation's parallax plus anything
-moving on its own) and the camera's angular velocity ``omega`` (``ego_omega_dps``),
+moving on its own; where the fit finds no translation, its flow noise is discounted: a
+pure rotation's residual is flow error alone, whose length would otherwise count as
+translation, :func:`simulator.preprocess.ego.residual_speed`) and the camera's angular velocity ``omega`` (``ego_omega_dps``),
 whose speed at the cell's direction ``d`` alone is ``s_r = |omega x d|``. The measured
 speed is shared between the two in proportion to the speed each would give alone::
 
@@ -16,7 +18,8 @@ weighted EPOF of ``--flow-weights rot=A,trans=B`` is ``A * epof_rot_dps + B *
 epof_trans_dps``; the default ``A = B = 1`` is the EPOF itself.
 
 The truth of ``vimsim synth`` is split the same way (``speed_rot_dps``,
-``speed_trans_dps``: each motion alone), so estimate and truth compare part by part.
+``speed_trans_dps``: each motion alone, noise-free), so estimate and truth compare part by
+part.
 """
 
 from __future__ import annotations

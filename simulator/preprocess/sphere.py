@@ -38,6 +38,7 @@ from simulator.media.video import prefetch
 from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
+from simulator.preprocess.slowflow import SlowRefine, slow_refine_desc
 from simulator.preprocess.tiles import downscale, tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
@@ -141,7 +142,7 @@ class _TileGeometry:
         R = head_rotation(
             [a[0] for a in _CUBE], [a[1] for a in _CUBE], 0.0
         ).as_matrix()  # (6, 3, 3)
-        world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))  # (6, s, s, 3)
+        world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64), optimize=True)  # BLAS: 40x
         mx, my = equirect_remap_coords(world.reshape(len(_CUBE) * s, s, 3), *self.small_size)
         self.m1, self.m2 = cv2.convertMaps(mx, my, cv2.CV_16SC2)
         # Flow is evaluated on every ``stride``-th pixel (DIS presets with finest scale 2
@@ -218,7 +219,7 @@ def _backend(flow, tile_size: int) -> tuple[FlowFn, int, dict]:
         if isinstance(be, FlowBackend)
         else {"method": getattr(be, "__name__", "custom")}
     )
-    return be, stride, desc
+    return be, stride, slow_refine_desc(be, desc)
 
 
 class FieldEstimator:
@@ -260,7 +261,8 @@ class FieldEstimator:
         self.cells = CellGrid(config.cell_deg)
         self.fps = float(fps)
         self.equirect_size = (W, H)
-        self._flow, stride, self.flow_desc = _backend(flow, config.tile_size)
+        be, stride, self.flow_desc = _backend(flow, config.tile_size)
+        self._flow = SlowRefine(be)  # the default DIS: slow tiles refined
         self.stride = int(config.stride or stride)
         self._geo = _tile_geometry(config, (W, H), self.stride)
 
@@ -280,7 +282,7 @@ class FieldEstimator:
         """The field of the flow prev -> cur, its translational part (the residual once
         the fitted camera rotation is removed, :mod:`simulator.preprocess.ego`) and the
         camera's angular velocity with its confidence."""
-        fl = np.asarray(self._flow(prev_tiles, tiles), np.float32)
+        fl = self._flow(prev_tiles, tiles)
         ang, _ = self._geo.rays.into_scratch(fl)
         f, tr, fit = self._geo.midpoint(fl, ang)
         k = math.degrees(1.0) * self.fps

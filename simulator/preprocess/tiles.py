@@ -41,7 +41,7 @@ def tile_dirs(size: int, fov_deg: float, faces) -> NDArray[np.float64]:
     of ``fov_deg`` looking at ``faces = ((yaw_deg, pitch_deg), ...)``, stacked."""
     dirs, _ = perspective_rays((size, size), fov_deg, fov_deg)
     R = head_rotation([a[0] for a in faces], [a[1] for a in faces], 0.0).as_matrix()
-    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64))
+    world = np.einsum("nij,hwj->nhwi", R, dirs.astype(np.float64), optimize=True)
     return world.reshape(len(faces) * size, size, 3)
 
 
