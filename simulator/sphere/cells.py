@@ -199,17 +199,44 @@ def viewport_weights(
         plane normal (exact for a cell cut parallel to its sides), multiplied over the 4
         planes. Sums to the viewport's solid angle within ~1% for cells <= 5 deg.
     """
-    _centre, _e_half, _n_half, sa, stacked = _cell_geometry(float(cell_deg))
+    cell_deg = float(cell_deg)
+    _centre, _e_half, _n_half, sa, stacked = _cell_geometry(cell_deg)
     rot = np.asarray(rot, np.float64)
     single = rot.ndim == 2
     R = rot[None] if single else rot
     normals = np.einsum("mij,kj->mki", R, frustum.normals())  # (M, 4, 3) world
     C = len(sa)
-    d = (normals.reshape(-1, 3) @ stacked).reshape(len(R), 4, 3, C)
-    hw = np.abs(d[:, :, 1]) + np.abs(d[:, :, 2]) + 1e-9
-    cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
-    w = (cov * sa).astype(np.float32)
+    n_lon = CellGrid(cell_deg).shape[1]
+    w = np.zeros((len(R), C), np.float32)
+    # Only the latitude rows a view can reach are evaluated (a window covers ~1/6 of the
+    # cells); every cell outside them has coverage exactly 0.
+    rows = _view_rows(R, frustum, cell_deg)
+    for lo, hi in np.unique(rows, axis=0):
+        m = np.flatnonzero((rows[:, 0] == lo) & (rows[:, 1] == hi))
+        a, b = int(lo) * n_lon, int(hi) * n_lon
+        band = np.concatenate([stacked[:, a + k * C : b + k * C] for k in range(3)], axis=1)
+        d = (normals[m].reshape(-1, 3) @ band).reshape(len(m), 4, 3, b - a)
+        hw = np.abs(d[:, :, 1]) + np.abs(d[:, :, 2]) + 1e-9
+        cov = np.clip(0.5 + 0.5 * d[:, :, 0] / hw, 0.0, 1.0).prod(axis=1)
+        w[m, a:b] = cov * sa[a:b]
     return w[0] if single else w
+
+
+def _view_rows(R: NDArray, frustum: Frustum, cell_deg: float) -> NDArray[np.intp]:
+    """Per view ``(M, 2)``: the cell rows ``[lo, hi)`` its frustum can touch: the latitudes
+    within ``r`` of its axis, ``r`` = the cone around the axis holding the frustum's corners
+    plus two cells (a cell whose centre lies farther out is outside one of the four planes
+    by more than its half extent, so its coverage is 0)."""
+    t = [math.tan(math.radians(a)) for a in
+         (frustum.left_deg, frustum.right_deg, frustum.down_deg, frustum.up_deg)]  # fmt: skip
+    cone = max(math.atan(math.hypot(tx, ty)) for tx in t[:2] for ty in t[2:])
+    c = math.radians(cell_deg)
+    r = cone + 2.0 * c
+    lat = np.arcsin(np.clip(R[:, 1, 2], -1.0, 1.0))  # the view axis (head +z) in the world
+    n_lat = CellGrid(cell_deg).shape[0]
+    lo = np.floor((math.pi / 2 - np.minimum(lat + r, math.pi / 2)) / c)
+    hi = np.floor((math.pi / 2 - np.maximum(lat - r, -math.pi / 2)) / c) + 1
+    return np.stack([np.clip(lo, 0, n_lat), np.clip(hi, 0, n_lat)], -1).astype(np.intp)
 
 
 def _weights_band(
