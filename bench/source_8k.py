@@ -1,11 +1,12 @@
 """8K sources: sphere-mode preprocess throughput against decoding alone, and peak memory against length.
 
 Usage: .venv/bin/python bench/source_8k.py [--frames 300,3000] [--size 7680x3840]
-    [--preset ultrafast] [--repeat 2]
+    [--preset ultrafast] [--bitrate 120M] [--repeat 2]
 
 Encodes up to 60 frames of an H.264 clip once (ffmpeg ``testsrc2`` panned, x264 at
 ``--preset``: ``ultrafast`` has no CABAC and no deblocking, the cheapest 8K decode there
-is; a camera's or YouTube's stream decodes slower) and loops it by stream copy to each
+is; a camera's or YouTube's stream decodes slower: ``--preset fast --bitrate 120M`` is
+like an 8K 360 camera's H.264, CABAC, deblocking, B-frames, 120 Mbit/s) and loops it by stream copy to each
 frame count N. In the same run:
 
 - throughput: ``vimsim preprocess --method sphere`` frames/s over decoding alone (the same
@@ -66,6 +67,9 @@ def main() -> None:
     ap.add_argument("--frames", default="300,3000")
     ap.add_argument("--size", default="7680x3840")
     ap.add_argument("--preset", default="ultrafast", help="x264 preset of the test clip")
+    ap.add_argument("--bitrate", default=None,
+                    help="x264 average bitrate of the test clip (e.g. 120M, an 8K 360 camera's "
+                    "H.264; default: crf 28)")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=2, help="alternations at the smallest N")
     a = ap.parse_args()
     d = Path(tempfile.mkdtemp(prefix="vimsim-8k-"))
@@ -82,15 +86,17 @@ def run(a, d: Path) -> None:
     base = d / "base.mp4"  # encoded once (8K encoding is slow), then looped by stream copy
     nb = min(counts[0], 60)
     src = f"testsrc2=size={a.size}:rate=30,scroll=horizontal=0.002"
+    rate = ["-crf", "28"] if a.bitrate is None else ["-b:v", a.bitrate, "-maxrate", a.bitrate,
+                                                     "-bufsize", a.bitrate]  # fmt: skip
     subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-f", "lavfi", "-i", src, "-frames:v",
-                    str(nb), "-c:v", "libx264", "-preset", a.preset, "-crf", "28", "-g", str(nb),
+                    str(nb), "-c:v", "libx264", "-preset", a.preset, *rate, "-g", str(nb),
                     str(base)], check=True)  # fmt: skip
     for n in counts:
         clips[n] = d / f"c{n}.mp4"
         subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-stream_loop", str(-(-n // nb)), "-i",
                         str(base), "-frames:v", str(n), "-c", "copy", str(clips[n])],
                        check=True)  # fmt: skip
-    print(f"made {len(counts)} clips of {a.size}, x264 {a.preset} ({', '.join(map(str, counts))} frames) "
+    print(f"made {len(counts)} clips of {a.size}, x264 {a.preset} {' '.join(rate)} ({', '.join(map(str, counts))} frames) "
           f"in {time.perf_counter() - t0:.0f} s")  # fmt: skip
     n0 = counts[0]
     runs = [(child("decode", clips[n0], d / "x.npz"), child("preprocess", clips[n0], d / "g.npz"))
