@@ -163,7 +163,9 @@ def browser_copy(
     fh, fw = first.shape[:2]
     k = min(1.0, MAX_WEB_SIDE / max(fw, fh))
     size = (max(2, round(fw * k / 2) * 2), max(2, round(fh * k / 2) * 2))
-    with VideoWriter(dst, info.fps, size, crf=18) as vw:
+    # a variable-rate source keeps its frame times (from its first frame), as the replay seeks them
+    times = info.times_s() if info.variable_rate else None
+    with VideoWriter(dst, info.fps, size, crf=18, times_s=times) as vw:
         for f in _chain(first, frames):
             vw.write(f if (f.shape[1], f.shape[0]) == size else
                      cv2.resize(f, size, interpolation=cv2.INTER_AREA))  # fmt: skip

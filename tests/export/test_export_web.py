@@ -13,7 +13,7 @@ import pytest
 from simulator.cli import main
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import epof_from_grid
-from simulator.export.unity import covers, frame_at, read_export, read_grain_layout
+from simulator.export.unity import VERSION, covers, frame_at, read_export, read_grain_layout
 from simulator.export.web import WEB_FILES, export_web
 from simulator.media.gridfile import load_grid, require_field
 from simulator.mitigation.grf import GrainField, GrfConfig, grain_count
@@ -161,7 +161,7 @@ def test_export_web_files_and_cli(grid_path, tmp_path, capsys):
     assert not (out / "vimsim_grains.bin").exists()  # the layout is in vimsim_epof.bin
     m = json.loads((out / "vimsim_web.json").read_text())
     assert m["mode"] == "paper" and m["overlaps"]["shape"][-1] == 24
-    assert m["version"] == 2 and m["data_version"] == read_export(out)[0]["version"] == 3
+    assert m["version"] == 2 and m["data_version"] == read_export(out)[0]["version"] == VERSION
     for n in ("vimsim.js", "vimsim_grains.js", "vimsim_gl.js", "example.html"):
         assert "vimsim export" in (out / n).read_text().splitlines()[0]
     # Rerun over our own files: fine; a file we did not write: refused, nothing written.
@@ -198,7 +198,7 @@ def test_web_data_file_is_the_unity_export(grid_path, range_grid, tmp_path, meth
     a = (tmp_path / "u" / "vimsim_epof.bin").read_bytes()
     assert a == (tmp_path / "w" / "vimsim_epof.bin").read_bytes()
     h, data = read_export(tmp_path / "w")
-    assert h == res.header and h["version"] == 3 and data.shape[0] == h["n_frames"]
+    assert h == res.header and h["version"] == VERSION and data.shape[0] == h["n_frames"]
     start = 3 if which == "range" else 0
     assert (h["range"]["start_frame"], h["range"]["end_frame"]) == (start, start + h["n_frames"])
     assert h["source"]["n_frames"] == 10 and h["range"]["end_frame"] == (8 if start else 10)

@@ -12,7 +12,8 @@
 // Conventions, exactly as `vimsim epof`: angles in degrees; yaw + turns right (toward +lon),
 // pitch + looks up, roll + tilts the head right ear down, applied yaw, then pitch, then roll
 // (intrinsic); yaw = pitch = roll = 0 looks at the centre of the equirect frame. A time is
-// seconds from the video start; it shows video frame floor(time * fps + 1e-6); the export covers
+// seconds from the video start; it shows video frame floor(time * fps + 1e-6) (a variable-rate
+// video: the last of FrameTimesS at or before it); the export covers
 // frames RangeStartFrame .. RangeEndFrame - 1 of a source of SourceFrameCount frames.
 // Numbers: the same computation as vimsim (paper mode: simulator.epof.ViewportOverlaps, its
 // overlap table built at load; sphere mode: simulator.sphere.ViewportQuery). The grain layout
@@ -50,7 +51,7 @@ namespace Vimsim
     public sealed class VimsimEpof
     {
         /// <summary>The binary format version this runtime reads.</summary>
-        public const int FormatVersion = 3;
+        public const int FormatVersion = 4;
         /// <summary>File name of the data inside an export folder.</summary>
         public const string DataFileName = "vimsim_epof.bin";
         /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
@@ -67,8 +68,11 @@ namespace Vimsim
         /// <summary>Exported range: frames RangeStartFrame (inclusive) .. RangeEndFrame (exclusive), and in seconds.</summary>
         public int RangeStartFrame { get { return StartFrame; } }
         public int RangeEndFrame { get { return StartFrame + FrameCount; } }
-        public double RangeStartS { get { return StartFrame / Fps; } }
-        public double RangeEndS { get { return (StartFrame + FrameCount) / Fps; } }
+        public double RangeStartS { get { return FrameTimesS != null ? FrameTimesS[0] : StartFrame / Fps; } }
+        public double RangeEndS { get { return FrameTimesS != null ? rangeEndS : (StartFrame + FrameCount) / Fps; } }
+        /// <summary>A variable-rate video's frame times (s, one per exported frame; null: frame = floor(t * fps + 1e-6)).</summary>
+        public double[] FrameTimesS { get; private set; }
+        double rangeEndS;
         /// <summary>The source video's frame count and duration (s); SourceLengthKnown false: the grid's end.</summary>
         public int SourceFrameCount { get; private set; }
         public double SourceDurationS { get; private set; }
@@ -180,7 +184,7 @@ namespace Vimsim
                     throw new VimsimLoadException(src, "not a vimsim export (no VIMSIMEP signature); make one with vimsim export GRID.npz -o DIR");
             int version = (int)ReadU32(b, 8);
             if (version < FormatVersion)
-                throw new VimsimLoadException(src, "format version " + version + ", made by an older vimsim export (no grain layout, exported range or source length); "
+                throw new VimsimLoadException(src, "format version " + version + ", made by an older vimsim export (no grain layout, exported range, source length or variable-rate frame times); "
                     + "export again with vimsim export GRID.npz -o DIR --format unity and copy the new files (version " + FormatVersion + ")");
             if (version != FormatVersion)
                 throw new VimsimLoadException(src, "header of format version " + version + "; this VimsimEpof.cs reads version " + FormatVersion + ": use the VimsimEpof.cs exported with the data");
@@ -216,6 +220,17 @@ namespace Vimsim
             var rg = hd.Obj("range");
             if ((int)rg.Num("start_frame") != StartFrame || (int)rg.Num("end_frame") != StartFrame + FrameCount)
                 throw new VimsimLoadException(src, "header field range: frames " + rg.Num("start_frame") + ".." + rg.Num("end_frame") + " do not match start_frame and n_frames", "range");
+            FrameTimesS = null;
+            if (hd.Has("frame_times_s"))
+            {
+                var ft = hd.DoubleArray("frame_times_s");
+                rangeEndS = rg.Num("end_s");
+                bool ok = ft.Length == FrameCount && rangeEndS > ft[ft.Length - 1];
+                for (int i = 1; ok && i < ft.Length; i++) ok = ft[i] > ft[i - 1];
+                if (!ok)
+                    throw new VimsimLoadException(src, "header field frame_times_s: expected " + FrameCount + " increasing times before range.end_s", "frame_times_s");
+                FrameTimesS = ft;
+            }
             var so = hd.Obj("source");
             SourceFrameCount = (int)so.Num("n_frames");
             SourceDurationS = so.Num("duration_s");
@@ -426,7 +441,7 @@ namespace Vimsim
         {
             if (double.IsNaN(timeS) || double.IsInfinity(timeS))
                 throw new ArgumentOutOfRangeException("timeS", "time must be finite seconds; got " + timeS);
-            double f = Math.Floor(timeS * Fps + FrameEps);
+            double f = FrameOf(timeS);
             if (f < StartFrame) return StartFrame;
             if (f > StartFrame + FrameCount - 1) return StartFrame + FrameCount - 1;
             return (int)f;
@@ -437,7 +452,20 @@ namespace Vimsim
         public bool Covers(double timeS)
         {
             if (double.IsNaN(timeS) || double.IsInfinity(timeS)) return false;
-            return CoversFrame(Math.Floor(timeS * Fps + FrameEps));
+            return CoversFrame(FrameOf(timeS));
+        }
+
+        /// <summary>The video frame shown at a finite time (s): floor(t * fps + 1e-6), or for a
+        /// variable-rate export the last of FrameTimesS at or before t (tolerance 1e-6 / fps s):
+        /// StartFrame - 1 before the first, RangeEndFrame from RangeEndS on.</summary>
+        public double FrameOf(double timeS)
+        {
+            if (FrameTimesS == null) return Math.Floor(timeS * Fps + FrameEps);
+            double t = timeS + FrameEps / Fps;
+            if (t >= rangeEndS) return StartFrame + FrameCount;
+            int lo = 0, hi = FrameTimesS.Length; // first index with time > t
+            while (lo < hi) { int mid = (lo + hi) / 2; if (FrameTimesS[mid] <= t) lo = mid + 1; else hi = mid; }
+            return StartFrame + lo - 1;
         }
 
         /// <summary>Whether the export has a video frame.</summary>
@@ -657,11 +685,11 @@ namespace Vimsim
             return true;
         }
 
-        /// <summary>Advance with a time (s from the video start): frame floor(t * fps + 1e-6).</summary>
+        /// <summary>Advance with a time (s from the video start): frame FrameOf(t): floor(t * fps + 1e-6), or from FrameTimesS.</summary>
         public bool AdvanceTime(double timeS, float yawDeg, float pitchDeg, float rollDeg)
         {
             if (double.IsNaN(timeS) || double.IsInfinity(timeS)) return Advance(long.MinValue, yawDeg, pitchDeg, rollDeg);
-            return Advance((long)Math.Floor(timeS * e.Fps + VimsimEpof.FrameEps), yawDeg, pitchDeg, rollDeg);
+            return Advance((long)e.FrameOf(timeS), yawDeg, pitchDeg, rollDeg);
         }
     }
 

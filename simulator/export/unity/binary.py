@@ -14,8 +14,8 @@ offset  bytes  content
                at ``grains.offset`` (a multiple of 16); nothing after
 ======  =====  ==============================================================
 
-A time ``t`` (seconds from the video start) shows frame ``floor(t * fps + 1e-6)``
-(:func:`frame_at`); the export covers frames ``range.start_frame`` (inclusive) to
+A time ``t`` (seconds from the video start) shows frame ``floor(t * fps + 1e-6)``, or for a
+variable-rate video the last frame of ``frame_times_s`` at or before it (:func:`frame_at`); the export covers frames ``range.start_frame`` (inclusive) to
 ``range.end_frame`` (exclusive) of a source of ``source.n_frames`` frames (:func:`covers`).
 """
 
@@ -54,8 +54,9 @@ FORMAT = "vimsim-epof"
 #: 2: the opacity rule gained ease-in / ease-out (``opacity.ease_in_s``, ``ease_out_s``).
 #: 3: the grain layout (section ``grains``), GRF and vignette settings (``grf``,
 #: ``vignette``, ``mitigation``), the source video's length (``source``) and the exported
-#: range (``range``).
-VERSION = 3
+#: range (``range``). 4: a variable-rate video's frame times (``frame_times_s``), which
+#: the frame rule then uses.
+VERSION = 4
 MAGIC = b"VIMSIMEP"
 #: The data file inside an export folder.
 DATA_FILE = "vimsim_epof.bin"
@@ -197,20 +198,39 @@ def read_grain_layout(path: str | os.PathLike) -> NDArray[np.float32]:
     return _load(path)[4]
 
 
+def _frame_of(header: dict, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The video frame shown at times ``t`` by the export's rule: ``floor(t * fps + 1e-6)``,
+    or for a variable-rate export (``frame_times_s``) the last exported frame whose time is
+    at most ``t`` (tolerance 1e-6 / fps s): ``start_frame - 1`` before the first, ``end_frame``
+    from ``range.end_s`` on. NaN stays NaN."""
+    fps = float(header["fps"])
+    times = header.get("frame_times_s")
+    if times is None:
+        with np.errstate(invalid="ignore"):
+            return np.floor(t * fps + FRAME_EPS)
+    ft = np.asarray(times, np.float64)
+    s, end_s = int(header["start_frame"]), float(header["range"]["end_s"])
+    tt = t + FRAME_EPS / fps
+    with np.errstate(invalid="ignore"):
+        f = s + np.searchsorted(ft, np.where(np.isfinite(tt), tt, 0.0), side="right") - 1.0
+        f = np.where(tt >= end_s, s + len(ft), f)
+    return np.where(np.isfinite(tt), f, np.nan)
+
+
 def frame_at(header: dict, time_s) -> NDArray[np.int64]:
     """Video frame shown at ``time_s`` (seconds from the video start), the runtime's rule:
-    ``floor(time_s * fps + 1e-6)`` clamped to the exported frames."""
-    t = np.asarray(time_s, np.float64)
-    f = np.floor(t * float(header["fps"]) + FRAME_EPS)
+    ``floor(time_s * fps + 1e-6)`` (a variable-rate export: looked up in its
+    ``frame_times_s``) clamped to the exported frames."""
+    f = _frame_of(header, np.asarray(time_s, np.float64))
     s = int(header["start_frame"])
     return np.clip(f, s, s + int(header["n_frames"]) - 1).astype(np.int64)
 
 
 def covers(header: dict, time_s) -> NDArray[np.bool_]:
     """Whether the export has the frame shown at ``time_s`` (the runtime's ``Covers``):
-    ``start_frame <= floor(time_s * fps + 1e-6) < end_frame``; False for NaN or infinite."""
-    t = np.asarray(time_s, np.float64)
-    with np.errstate(invalid="ignore"):
-        f = np.floor(t * float(header["fps"]) + FRAME_EPS)
+    ``start_frame <= frame < end_frame`` by the rule of :func:`frame_at`; False for NaN or
+    infinite."""
+    f = _frame_of(header, np.asarray(time_s, np.float64))
     r = header["range"]
-    return np.isfinite(f) & (f >= int(r["start_frame"])) & (f < int(r["end_frame"]))
+    with np.errstate(invalid="ignore"):
+        return np.isfinite(f) & (f >= int(r["start_frame"])) & (f < int(r["end_frame"]))

@@ -114,12 +114,16 @@ def _mitigation_sections(grf: GrfConfig, mitigation: Mitigation, n_grains: int) 
 
 
 def _range_sections(g: GridFile, start: int, T: int) -> dict:
-    """``source`` (the whole video's length) and ``range`` (the exported frames)."""
+    """``source`` (the whole video's length), ``range`` (the exported frames) and, for a
+    variable-rate video, ``frame_times_s`` (each exported frame's time: the frame rule
+    then looks them up instead of ``time * fps``)."""
     fps = float(g.fps)
     video = g.meta.get("video", {}) or {}
     known = video.get("n_frames")
     n_src = int(known) if known else start + T
-    return {
+    times = g.meta.get("frame_times_s")
+    vfr = times is not None and len(times) >= T
+    out: dict = {
         "source": {
             "n_frames": n_src,
             "duration_s": n_src / fps,
@@ -134,6 +138,18 @@ def _range_sections(g: GridFile, start: int, T: int) -> dict:
             "rule": f"covered: start_frame <= floor(time_s * fps + {FRAME_EPS:g}) < end_frame",
         },
     }
+    if vfr:  # the stream's own timestamps (player's clock); the last frame lasts 1 / fps
+        t = [float(v) for v in times[:T]]
+        out["frame_times_s"] = t
+        out["range"].update(start_s=t[0], end_s=t[-1] + 1.0 / fps, rule=VFR_RULE)
+    return out
+
+
+#: The frame rule of a variable-rate export (``frame_times_s`` present).
+VFR_RULE = (
+    f"frame = start_frame + the index of the last frame_times_s <= time_s + {FRAME_EPS:g} / fps; "
+    "covered: range.start_s <= time_s + that tolerance < range.end_s"
+)
 
 
 def build_header(g: GridFile, data: np.ndarray, *, sphere: bool, dtype: str, fov: tuple,
@@ -154,7 +170,8 @@ def build_header(g: GridFile, data: np.ndarray, *, sphere: bool, dtype: str, fov
         "fps": float(g.fps),
         "n_frames": T,
         "start_frame": start,
-        "frame_rule": f"frame = floor(time_s * fps + {FRAME_EPS:g}); outside range: not covered "
+        "frame_rule": f"frame = floor(time_s * fps + {FRAME_EPS:g}) (a variable-rate video: "
+        "range.rule, from frame_times_s); outside range: not covered "
         "(Covers false; Epof clamps to the first / last exported frame)",
         "viewport": {"hfov_deg": fov[0], "vfov_deg": fov[1]},
         "grid": grid_dict,

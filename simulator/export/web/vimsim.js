@@ -14,7 +14,8 @@
 // Conventions, exactly as vimsim: angles in degrees; yaw + turns right, pitch + looks up,
 // roll + tilts the head right ear down, applied yaw, then pitch, then roll (intrinsic);
 // world +x right, +y up, +z forward (the centre of the equirect frame). A time is seconds
-// from the video start; it shows frame floor(time * fps + 1e-6); the export covers the frames
+// from the video start; it shows frame floor(time * fps + 1e-6) (a variable-rate video: the last
+// of header.frame_times_s at or before it, rt.frameTimes); the export covers the frames
 // range.start_frame .. range.end_frame - 1 of a source of source.n_frames frames: rt.covers(t)
 // tells, rt.epof(t, ...) is NaN outside (one console warning), as the C# runtime's Epof.
 // Paper mode reads the overlap table vimsim computed (vimsim_overlaps.bin: the table of
@@ -24,8 +25,9 @@
 
 export const FORMAT = "vimsim-epof";
 /** The vimsim_epof.bin format read here (3: grain layout, GRF and vignette settings, source
- * length and exported range in the file; older files are refused: export again). */
-export const VERSION = 3;
+ * length and exported range in the file; 4: a variable-rate video's frame times; older files
+ * are refused: export again). */
+export const VERSION = 4;
 /** The vimsim_web.json version read here. */
 export const MANIFEST_VERSION = 2;
 export const FRAME_EPS = 1e-6;
@@ -113,6 +115,10 @@ function checkHeader(h, name) {
     throw headerError(name, "grains", `a layout of shape [${g.shape}] for grf.n_grains = ${grf.n_grains}`);
   if (!(r.start_frame === h.start_frame && r.end_frame === h.start_frame + h.n_frames))
     throw headerError(name, "range", `frames ${r.start_frame}..${r.end_frame} are not the data's ${h.start_frame} + ${h.n_frames}`);
+  const ft = h.frame_times_s;
+  if (ft !== undefined && !(Array.isArray(ft) && ft.length === h.n_frames && r.end_s > ft[ft.length - 1] &&
+      ft.every((t, i) => Number.isFinite(t) && (i === 0 || t > ft[i - 1]))))
+    throw headerError(name, "frame_times_s", `expected ${h.n_frames} increasing times before range.end_s`);
 }
 
 /** Parse vimsim_epof.bin (format 3): {header, values (Uint16Array of binary16 or Float32Array,
@@ -126,7 +132,7 @@ export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
   const version = dv.getUint32(8, true), hlen = dv.getUint32(12, true);
   if (version < VERSION)
     throw new Error(`${name}: export format version ${version}, made by an older vimsim (no grain layout, ` +
-      `range or source length); export again with vimsim export (version ${VERSION})`);
+      `range, source length or variable-rate frame times); export again with vimsim export (version ${VERSION})`);
   if (version !== VERSION) throw new Error(`${name}: export format version ${version}; this runtime reads version ${VERSION}`);
   if (16 + hlen > b.length) throw new Error(`${name}: truncated header`);
   const header = JSON.parse(new TextDecoder().decode(b.subarray(16, 16 + hlen)));
@@ -378,6 +384,8 @@ export class VimsimEpof {
     const r = header.range, src = header.source, v = header.vignette;
     /** The exported frames (endFrame exclusive) and their times (s). */
     this.range = { startFrame: r.start_frame, endFrame: r.end_frame, startS: r.start_s, endS: r.end_s };
+    /** A variable-rate video's frame times (s, one per exported frame), else null. */
+    this.frameTimes = header.frame_times_s ? Float64Array.from(header.frame_times_s) : null;
     /** The source video's length (known: from the grid's meta; else the grid's end). */
     this.source = { nFrames: src.n_frames, durationS: src.duration_s, known: src.known };
     /** The grain layout stored in the file (the renderer's, float32 centres). */
@@ -390,13 +398,31 @@ export class VimsimEpof {
   }
   /** Video frame shown at a time (s from the video start), clamped to the exported frames. */
   frameAt(timeS) {
-    const f = Math.floor(timeS * this.fps + FRAME_EPS), s = this.startFrame;
+    const f = this.frameOf(timeS), s = this.startFrame;
     return Math.min(Math.max(f, s), s + this.frameCount - 1);
   }
+  /** The video frame shown at a finite time (s): floor(t * fps + 1e-6), or for a variable-rate
+   * export the last of frameTimes at or before t (tolerance 1e-6 / fps s): startFrame - 1
+   * before the first, range.endFrame from range.endS on (C#: FrameOf). */
+  frameOf(timeS) {
+    const ft = this.frameTimes;
+    if (!ft) return Math.floor(timeS * this.fps + FRAME_EPS);
+    const t = timeS + FRAME_EPS / this.fps;
+    if (t >= this.range.endS) return this.startFrame + this.frameCount;
+    let lo = 0, hi = ft.length; // the first index with a time > t
+    while (lo < hi) { const mid = (lo + hi) >> 1; if (ft[mid] <= t) lo = mid + 1; else hi = mid; }
+    return this.startFrame + lo - 1;
+  }
+  /** The time (s) frame `frame` starts (frame / fps, or its frame_times_s entry). */
+  frameTime(frame) {
+    const ft = this.frameTimes;
+    if (!ft) return frame / this.fps;
+    return ft[Math.min(Math.max(frame - this.startFrame, 0), ft.length - 1)];
+  }
   /** Whether the export has the frame shown at a time (s): range.startFrame <=
-   * floor(t * fps + 1e-6) < range.endFrame; false for NaN or infinite (C#: Covers). */
+   * frameOf(t) < range.endFrame; false for NaN or infinite (C#: Covers). */
   covers(timeS) {
-    return Number.isFinite(timeS) && this.coversFrame(Math.floor(timeS * this.fps + FRAME_EPS));
+    return Number.isFinite(timeS) && this.coversFrame(this.frameOf(timeS));
   }
   /** Whether the export has a video frame (C#: CoversFrame). */
   coversFrame(frame) {

@@ -82,7 +82,9 @@ async function main() {
     const f = rt.frameAt(t);
     return new Promise((ok) => {
       video.addEventListener("seeked", () => { draw(t, 0); ok(state); }, { once: true });
-      video.currentTime = (f + 0.5) / fps; // the middle of the frame: the decoder shows frame f
+      // the middle of the frame (its own interval for a variable-rate video): the decoder shows frame f
+      const t0 = rt.frameTime(f), t1 = f + 1 < rt.range.endFrame ? rt.frameTime(f + 1) : t0 + 1 / fps;
+      video.currentTime = (t0 + t1) / 2;
     });
   }
   T.onSeek((t) => seek(t));
