@@ -1,4 +1,4 @@
-// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 3).
+// vimsim export: VimsimEpof.cs, the EPOF runtime for engines (binary format version 4).
 // Written by `vimsim export GRID.npz -o DIR --format unity`; docs/unity.md in vimsim.
 // Plain C# (C# 6, .NET Framework 4.x / .NET Standard 2.0 profile): no UnityEngine here.
 //

@@ -121,7 +121,7 @@ function checkHeader(h, name) {
     throw headerError(name, "frame_times_s", `expected ${h.n_frames} increasing times before range.end_s`);
 }
 
-/** Parse vimsim_epof.bin (format 3): {header, values (Uint16Array of binary16 or Float32Array,
+/** Parse vimsim_epof.bin (format 4): {header, values (Uint16Array of binary16 or Float32Array,
  * C order), grains (Float32Array, n_grains x 3)}, views of the buffer (no copy). Throws Error
  * naming the file and the problem (an older format: export again). */
 export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {

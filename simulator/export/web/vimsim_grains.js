@@ -77,7 +77,7 @@ export class GrainLayout {
     this.count = centres.length / 3;
     this.radiusRad = (config.grain_deg * D2R) / 2;
   }
-  /** The layout stored in an export (format 3): the header's grf settings and its grains
+  /** The layout stored in an export (format 3 on): the header's grf settings and its grains
    * section (Float32Array, n_grains x 3 unit vectors), widened to float64. */
   static fromExport(header, floats) {
     const g = header.grf;
