@@ -85,6 +85,18 @@ class Browser:
             raise AssertionError(out["__error"])
         return out
 
+    def run_served(self, folder, page: str, script: str, *args):
+        """Serve ``folder`` on loopback, open ``page`` from it and :meth:`run_async` ``script``
+        there; the server is stopped on every exit."""
+        from simulator.report.serve import start_server
+
+        srv = start_server(folder)
+        try:
+            self.get(srv.url + page)
+            return self.run_async(script, *args)
+        finally:
+            srv.close()
+
     def gl_renderer(self) -> str:
         return self.driver.execute_script(
             "const gl = document.createElement('canvas').getContext('webgl2');"

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["gray_frames", "noise_frames", "write_clip"]
+__all__ = ["cut_clip", "gray_frames", "noise_frames", "smooth_equirect", "write_clip"]
 
 
 def write_clip(path, frames: Iterable[np.ndarray], fps: float = 10.0, *, preset: str = "ultrafast",
@@ -43,3 +43,30 @@ def gray_frames(levels: Iterable[int], size=(128, 64)):
     """One uniform gray frame per level (0..255): a frame's brightness can name it."""
     for v in levels:
         yield np.full((size[1], size[0], 3), v, np.uint8)
+
+
+def smooth_equirect(w: int = 256, h: int = 128) -> np.ndarray:
+    """A ``w x h`` equirect of low-frequency colour fields on the sphere (no seam, no pole
+    singularity) with some detail along longitude: resampling error stays small, a wrong
+    face or rotation shows."""
+    from simulator.sphere.geometry import equirect_pixel_lonlat, lonlat_to_dir
+
+    lon, lat = equirect_pixel_lonlat(w, h)
+    d = lonlat_to_dir(lon[None, :], lat[:, None])
+    chans = [d[..., 0] * 0.8 + d[..., 1] * 0.3, d[..., 2] * 0.9 - d[..., 0] * d[..., 1], d[..., 1]]
+    return np.stack([np.clip(127.5 + 120 * c, 0, 255) for c in chans], -1).astype(np.uint8)
+
+
+def cut_clip(first: Path, second: Path, out: Path, at_frame: int = 10) -> Path:
+    """``first``'s frames before ``at_frame``, then ``second``'s from ``at_frame`` on: a hard
+    cut (ffmpeg concat, H.264 crf 12)."""
+    import subprocess
+
+    from simulator.testing.reference import ffmpeg_exe
+
+    graph = (f"[0:v]trim=end_frame={at_frame},setpts=PTS-STARTPTS[a];[1:v]trim=start_frame="
+             f"{at_frame},setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]")  # fmt: skip
+    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", "-i", str(first), "-i", str(second),
+                    "-filter_complex", graph, "-map", "[v]", "-c:v", "libx264", "-crf", "12",
+                    "-pix_fmt", "yuv420p", str(out)], check=True)  # fmt: skip
+    return Path(out)

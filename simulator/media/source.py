@@ -250,21 +250,25 @@ class Source:
         start: int = 0,
         end: int | None = None,
         threads: int | None = None,
+        convert: bool = True,
     ) -> Iterator[tuple[NDArray[np.uint8], ...]]:
         """Frames ``start <= i < end`` as contiguous per-eye copies: ``(left, right)`` for a
         stereo source (two files decoded in step), ``(frame,)`` for a mono one. Every
-        file is closed on every exit."""
+        file is closed on every exit. ``convert=False``: in the source's projection, as
+        stored (for a renderer sampling it)."""
         if self.right is None:
             eyes = EYES if self.stereo else (self.eye,)
             it = self._decode(self.path, fmt, start, end, threads)
             try:
                 for f in it:
-                    yield tuple(np.array(self.eye_view(f, e), order="C") for e in eyes)
+                    yield tuple(
+                        np.array(self.eye_view(f, e, convert=convert), order="C") for e in eyes
+                    )
             finally:
                 it.close()
             return
-        left = self.frames(fmt=fmt, eye="left", start=start, end=end, threads=threads)
-        right = self.frames(fmt=fmt, eye="right", start=start, end=end, threads=threads)
+        kw = {"fmt": fmt, "start": start, "end": end, "threads": threads, "convert": convert}
+        left, right = self.frames(eye="left", **kw), self.frames(eye="right", **kw)
         try:
             for fl in left:
                 fr = next(right, None)

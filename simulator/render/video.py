@@ -36,7 +36,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output
 from simulator.core.progress import Counter, Progress
 from simulator.media.source import as_source
-from simulator.media.video import VideoWriter, iter_frames, prefetch
+from simulator.media.video import VideoWriter, prefetch
 from simulator.render.eye import EyeRenderer, RenderConfig
 from simulator.render.sampling import sampled_projection
 from simulator.sphere.geometry import head_rotation
@@ -201,7 +201,8 @@ def render_video(
                               on_frame is not None, review_eye, timings)  # fmt: skip
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
-                decoded = _decoded(source, proj, start_frame, start_frame + total, threads)
+                decoded = source.eye_frames(start=start_frame, end=start_frame + total,
+                                             threads=threads, convert=proj == "equirect")  # fmt: skip
                 frames = stack.enter_context(
                     contextlib.closing(decoded if serial else prefetch(decoded, depth=3))
                 )
@@ -232,49 +233,9 @@ def _renderer(ctx, source, config, on_frame):
     return renderer, proj, on_frame
 
 
-def _decoded(source, proj: str, start: int, end: int, threads):
-    """Per-eye frames for a renderer sampling ``proj``: equirect (the source's funnel) or
-    the frames as stored (:func:`_stored_eye_frames`)."""
-    if proj == "equirect":
-        return source.eye_frames(start=start, end=end, threads=threads)
-    return _stored_eye_frames(source, start, end, threads)
-
-
 def _on_equirect(on_frame, convert, frame, yuv) -> None:
     """``on_frame`` given the equirect frame of a frame as stored (on its worker thread)."""
     on_frame(convert(frame), yuv)
-
-
-def _stored_eye_frames(source, start: int, end: int, threads):
-    """:meth:`Source.eye_frames` without the conversion to equirect: each eye's frame as
-    stored (contiguous copies), for a renderer sampling the source's projection."""
-    if source.right is not None:
-        kw = {"start": start, "end": end, "threads": threads, "convert": False}
-        left, right = source.frames(eye="left", **kw), source.frames(eye="right", **kw)
-        try:
-            for fl in left:
-                fr = next(right, None)
-                if fr is None:
-                    raise InputError(
-                        f"{source.right}: right eye ends before the left eye ({source.path})"
-                    )
-                yield np.array(fl), np.array(fr)
-        finally:
-            left.close()
-            right.close()
-        return
-    eyes = EYES if source.stereo else (source.eye,)
-    if source.still:  # an image made a clip: every frame is the image
-        img = source.read_stored()
-        raw = iter([img] * max(0, min(end, source.info.n_frames) - max(0, start)))
-    else:
-        raw = iter_frames(source.path, start=start, end=end, threads=threads)
-    try:
-        for f in raw:
-            yield tuple(np.array(source.eye_view(f, e, convert=False), order="C") for e in eyes)
-    finally:
-        if hasattr(raw, "close"):
-            raw.close()
 
 
 def _out_times(info, start_frame: int, total: int):

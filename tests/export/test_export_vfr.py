@@ -102,17 +102,10 @@ return {covers: times.map((t) => rt.covers(t)), epof: times.map((t) => rt.epof(t
 
 @pytest.mark.browser
 def test_js_runtime_follows_the_frame_times(browser, vfr_grid, tmp_path):
-    from simulator.report.serve import start_server
-
     grid = load_grid(vfr_grid)
     h = export_web(vfr_grid, tmp_path / "w").header
     q, _ = _queries(grid)
-    srv = start_server(tmp_path / "w")
-    try:
-        browser.get(srv.url + "example.html")
-        got = browser.run_async(_JS, q.tolist())
-    finally:
-        srv.close()
+    got = browser.run_served(tmp_path / "w", "example.html", _JS, q.tolist())
     inside = covers(h, q)
     assert got["covers"] == inside.tolist()
     assert got["frames"] == frame_at(h, q).tolist()

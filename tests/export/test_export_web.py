@@ -260,8 +260,6 @@ def test_js_refuses_old_and_bad_files(browser, grid_path, tmp_path):
     are refused naming the field (as read_export and the C# loader)."""
     import struct
 
-    from simulator.report.serve import start_server
-
     d = tmp_path / "w"
     export_web(grid_path, d, method="sphere")
     good = (d / "vimsim_epof.bin").read_bytes()
@@ -277,12 +275,7 @@ def test_js_refuses_old_and_bad_files(browser, grid_path, tmp_path):
     (d / "old" / "vimsim_web.json").write_text(json.dumps({**m, "version": 1}))
     (d / "density.bin").write_bytes(edited(b'"density": 0.5', b'"density": 1.5'))
     (d / "cutout.bin").write_bytes(edited(b'"inner_deg": 18.0', b'"inner_deg": 48.0'))
-    srv = start_server(d)
-    try:
-        browser.get(srv.url + "example.html")
-        got = browser.run_async(_JS_REFUSE)
-    finally:
-        srv.close()
+    got = browser.run_served(d, "example.html", _JS_REFUSE)
     assert "version 2" in got["v2.bin"] and "export again" in got["v2.bin"], got
     assert "grain layout" in got["short.bin"], got
     assert "grf.density" in got["density.bin"] and "export again" in got["density.bin"], got
@@ -305,18 +298,11 @@ def test_js_range_of_a_partial_export(browser, range_grid, tmp_path):
     """An export of frames 3..7 of a 10-frame video: the JS runtime covers exactly those frames
     (as Python's covers), gives the Python EPOF inside and NaN before and after (within the
     source and beyond it), and knows the source's length."""
-    from simulator.report.serve import start_server
-
     res = export_web(range_grid, tmp_path / "w")
     h = res.header
     fps = h["fps"]
     times = np.array([0.0, 2.9, 3.0, 5.5, 7.999, 8.0, 9.5, 10.0, 1e6]) / fps
-    srv = start_server(tmp_path / "w")
-    try:
-        browser.get(srv.url + "example.html")
-        got = browser.run_async(_JS_RANGE, times.tolist())
-    finally:
-        srv.close()
+    got = browser.run_served(tmp_path / "w", "example.html", _JS_RANGE, times.tolist())
     inside = covers(h, times)
     assert got["covers"] == inside.tolist() == [False, False, True, True, True] + [False] * 4
     assert got["range"] == {"startFrame": 3, "endFrame": 8, "startS": 3 / fps, "endS": 8 / fps}

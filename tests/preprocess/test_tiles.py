@@ -5,23 +5,13 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from media_helpers import smooth_equirect
 
 from simulator.preprocess import SphereConfig
 from simulator.preprocess.sphere import _CUBE, FieldEstimator
 from simulator.preprocess.tiles import ProjectionTiles, downscale, tile_dirs, tile_frames
-from simulator.sphere.geometry import equirect_pixel_lonlat, lonlat_to_dir
 from simulator.sphere.projections import converter
 from simulator.testing.reference import v360_convert
-
-
-def _smooth_equirect(w: int, h: int) -> np.ndarray:
-    """Low-frequency fields on the sphere (no seam, no pole singularity) with some detail
-    along longitude, so that a wrong face or rotation shows and resampling error does not."""
-    lon, lat = equirect_pixel_lonlat(w, h)
-    d = lonlat_to_dir(lon[None, :], lat[:, None])
-    chans = [d[..., 0] * 0.8 + d[..., 1] * 0.3, d[..., 2] * 0.9 - d[..., 0] * d[..., 1], d[..., 1]]
-    return np.stack([np.clip(127.5 + 120 * c, 0, 255) for c in chans], -1).astype(np.uint8)
-
 
 CASES = [
     ("c3x2", (768, 512), ""),
@@ -52,7 +42,7 @@ def _psnr(a, b, m) -> float:
 def test_projection_tiles_match_the_equirect_tiles(name, size, opts, tile_size):
     lens = 190.0 if name == "dfisheye" else None
     conv = converter(name, size, lens)
-    E = _smooth_equirect(*conv.equirect_size)
+    E = smooth_equirect(*conv.equirect_size)
     src = v360_convert(E, name, size, opts)
     cfg = SphereConfig(tile_size=tile_size)
     est = FieldEstimator(conv.equirect_size, 30.0, cfg)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from media_helpers import cut_clip
 from PIL import Image
 
 from simulator.cli import main
@@ -53,22 +54,14 @@ def test_still_image_exit_2(tmp_path, still, capsys):
 @pytest.fixture(scope="module")
 def clips(tmp_path_factory):
     """A tiny calm clip and the same clip with a hard cut to a faster one at frame 10."""
-    import subprocess
-
     from simulator.synth import SynthConfig, synthesize
-    from simulator.testing.reference import ffmpeg_exe
 
     d = tmp_path_factory.mktemp("screen")
     synthesize(
         SynthConfig("rotate", seconds=2.0, fps=10, size=(128, 64), omega_dps=3.0), d / "calm.mp4"
     )
     synthesize(SynthConfig("coaster", seconds=2.0, fps=10, size=(128, 64)), d / "ride.mp4")
-    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", "-i", str(d / "calm.mp4"), "-i",
-                    str(d / "ride.mp4"), "-filter_complex",
-                    ("[0:v]trim=end_frame=10,setpts=PTS-STARTPTS[a];[1:v]trim=start_frame=10,"
-                    "setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]"), "-map", "[v]",
-                    "-c:v", "libx264", "-crf", "12", "-pix_fmt", "yuv420p", str(d / "cut.mp4")],
-                   check=True)  # fmt: skip
+    cut_clip(d / "calm.mp4", d / "ride.mp4", d / "cut.mp4")
     return d
 
 

@@ -4,21 +4,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from media_helpers import smooth_equirect
 
 from simulator.core.errors import InputError
-from simulator.sphere.geometry import equirect_pixel_lonlat, lonlat_to_dir
 from simulator.sphere.projections import PROJECTIONS, EquirectConverter, converter
 from simulator.testing.reference import v360_convert
-
-
-def _smooth_equirect(w=256, h=128) -> np.ndarray:
-    """Low-frequency colour fields on the sphere (no seam, no pole singularity), so that
-    resampling error is small and a wrong face or rotation is not."""
-    lon, lat = equirect_pixel_lonlat(w, h)
-    d = lonlat_to_dir(lon[None, :], lat[:, None])
-    chans = [d[..., 0] * 0.8 + d[..., 1] * 0.3, d[..., 2] * 0.9 - d[..., 0] * d[..., 1], d[..., 1]]
-    return np.stack([np.clip(127.5 + 120 * c, 0, 255) for c in chans], -1).astype(np.uint8)
-
 
 CASES = [
     ("c3x2", (192, 128), ""),
@@ -31,12 +21,12 @@ CASES = [
 
 @pytest.mark.parametrize("name,size,opts", CASES)
 def test_conversion_matches_v360(name, size, opts):
-    E = _smooth_equirect()
+    E = smooth_equirect()
     src = v360_convert(E, name, size, opts)
     c = converter(name, size, 190.0 if name == "dfisheye" else None)
     back = c(src)
     assert back.shape[:2] == (c.equirect_size[1], c.equirect_size[0])
-    ref = _smooth_equirect(*c.equirect_size)
+    ref = smooth_equirect(*c.equirect_size)
     m = c.covered.copy()
     m[: m.shape[0] // 8] = m[-m.shape[0] // 8 :] = False  # v360 reflects rows at the poles
     d = (back.astype(float) - ref.astype(float))[m]

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import json
-import subprocess
 
 import numpy as np
 import pytest
+from media_helpers import cut_clip as make_cut_clip
 
 from simulator.cli import main
 
@@ -16,7 +16,6 @@ def cut_clip(tmp_path_factory):
     """A calm rotating clip with a hard cut at frame 10 to a slow walk through another scene
     (as tests/screen, but calm on both sides: the cut's own frame is the hottest)."""
     from simulator.synth import SynthConfig, synthesize
-    from simulator.testing.reference import ffmpeg_exe
 
     d = tmp_path_factory.mktemp("cutstudy")
     synthesize(
@@ -24,13 +23,7 @@ def cut_clip(tmp_path_factory):
     )
     synthesize(SynthConfig("forward", seconds=2.0, fps=10, size=(128, 64), speed_mps=0.05),
                d / "ride.mp4")  # fmt: skip
-    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", "-i", str(d / "calm.mp4"), "-i",
-                    str(d / "ride.mp4"), "-filter_complex",
-                    ("[0:v]trim=end_frame=10,setpts=PTS-STARTPTS[a];[1:v]trim=start_frame=10,"
-                    "setpts=PTS-STARTPTS[b];[a][b]concat=n=2:v=1[v]"), "-map", "[v]",
-                    "-c:v", "libx264", "-crf", "12", "-pix_fmt", "yuv420p", str(d / "cut.mp4")],
-                   check=True)  # fmt: skip
-    return d / "cut.mp4"
+    return make_cut_clip(d / "calm.mp4", d / "ride.mp4", d / "cut.mp4")
 
 
 def test_provocative_moments_exclude_rows():
