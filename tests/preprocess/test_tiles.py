@@ -79,3 +79,18 @@ def test_downscale_is_the_frame_at_its_size_and_area_mean():
     assert downscale(f, (64, 32)) is not None and np.array_equal(downscale(f[:, :64], (64, 32)), f)
     s = downscale(np.kron(np.eye(2, dtype=np.uint8) * 200, np.ones((4, 4), np.uint8)), (2, 2))
     assert s.tolist() == [[200, 0], [0, 200]]
+
+
+def test_downscale_by_8_or_more_means_16_evenly_spread_pixels_and_keeps_centres():
+    rng = np.random.default_rng(3)
+    f = rng.integers(0, 256, (64, 128), dtype=np.uint8)
+    s = downscale(f, (16, 8)).astype(np.float64)
+    # each output pixel: mean of the middle 2x2 of each 4x4 quarter of its 8x8 block
+    mid = f.astype(np.float64).reshape(16, 4, 32, 4)[:, 1:3, :, 1:3].mean(axis=(1, 3))
+    want = mid.reshape(8, 2, 16, 2).mean(axis=(1, 3))
+    assert np.abs(s - want).max() <= 1.0  # uint8 rounding of the two steps
+    assert s.std() < 0.3 * f.std()  # averaged (16 samples), not point-sampled
+    # a ramp: the output's centres map as (x + 0.5) * w / W - 0.5
+    ramp = np.tile(np.arange(128, dtype=np.uint8), (64, 1))
+    r = downscale(ramp, (16, 8)).astype(np.float64)
+    assert np.abs(r - ((np.arange(16) + 0.5) * 8 - 0.5)[None, :]).max() <= 0.5
