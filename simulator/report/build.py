@@ -127,7 +127,14 @@ def browser_copy(
 ) -> dict:
     """The study's browser copy of a video: H.264 yuv420p MP4 (no audio), the source's
     (left-eye) equirect at its own resolution when no side exceeds :data:`MAX_WEB_SIDE`
-    (stream-copied when the source already is H.264 yuv420p mono), else scaled to fit."""
+    (stream-copied when the source already is H.264 yuv420p mono), else scaled to fit.
+
+    Returns ``{"how", "width", "height", "start_s"}``: ``start_s`` is what to add to the
+    copy's media time to get the source's clock (the clock of the EPOF rows and head
+    paths): 0 for a copy or stream copy (they keep the source's timestamps), the source's
+    first frame time for a re-encoding (which starts at 0; a video stream starting after
+    its container's start, e.g. 1 s after its audio, would otherwise replay that much
+    early)."""
     import av
 
     info = probe(src)
@@ -142,7 +149,7 @@ def browser_copy(
     if playable and mp4:
         with atomic_output(dst) as tmp:
             shutil.copyfile(src, tmp)
-        return {"how": "copy of the source (H.264 MP4)", "width": w, "height": h}
+        return {"how": "copy of the source (H.264 MP4)", "width": w, "height": h, "start_s": 0.0}
     if playable:
         with atomic_output(dst) as tmp, av.open(str(src)) as ic:
             oc = av.open(str(tmp), "w", format="mp4", options={"movflags": "+faststart"})
@@ -155,7 +162,7 @@ def browser_copy(
                     oc.mux(pkt)
             finally:
                 oc.close()
-        return {"how": "stream copy into MP4", "width": w, "height": h}
+        return {"how": "stream copy into MP4", "width": w, "height": h, "start_s": 0.0}
     import cv2
 
     frames = iter_frames(src, layout=layout, eye=eye)
@@ -169,7 +176,8 @@ def browser_copy(
         for f in _chain(first, frames):
             vw.write(f if (f.shape[1], f.shape[0]) == size else
                      cv2.resize(f, size, interpolation=cv2.INTER_AREA))  # fmt: skip
-    return {"how": "re-encoded (H.264 crf 18)", "width": size[0], "height": size[1]}
+    return {"how": "re-encoded (H.264 crf 18)", "width": size[0], "height": size[1],
+            "start_s": float(info.times_s([0])[0])}
 
 
 def _layout(grid: Path) -> tuple[str, str]:
@@ -229,7 +237,9 @@ def _video_data(
         key = _source_key(src)
         prev = (copies.get(vid) or {}).get("copy")
         target = tmp / "media" / f"{vid}.mp4"
-        if prev and prev.get("key") == key and (old / "media" / f"{vid}.mp4").is_file():
+        # (a copy from before "start_s" was recorded is made again)
+        reuse = prev and prev.get("key") == key and "start_s" in prev
+        if reuse and (old / "media" / f"{vid}.mp4").is_file():
             os.link(old / "media" / f"{vid}.mp4", target)
             res["copy"] = prev
         else:

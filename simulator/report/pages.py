@@ -168,7 +168,9 @@ class Site:
                 f"Viewing {vid}", info + "<p>No EPOF for this viewing (see its status).</p>"
             )
         video = self.videos.get(row["video"], {})
-        data = {**data, "media": f"media/{row['video']}.mp4" if video.get("copy") else None,
+        copy = video.get("copy") or {}
+        data = {**data, "media": f"media/{row['video']}.mp4" if copy else None,
+                "media_start_s": float(copy.get("start_s", 0.0)),
                 "export": f"data/{row['video']}/" if video.get("export") else None}  # fmt: skip
         body = f"""{info}
 <h2>EPOF and opacity</h2>

@@ -33,6 +33,9 @@ async function main() {
   }
   const rt = await loadExport(data.export);
   const r = data.render || {}, fps = rt.fps;
+  // the browser copy's media time + mediaStart = the source's clock (EPOF rows, head paths):
+  // a re-encoded copy starts at 0 where its source's video started later (build.py browser_copy)
+  const mediaStart = data.media_start_s || 0;
   const [w, h] = eyeSize(r);
   const canvas = $("eye");
   canvas.width = w; canvas.height = h;
@@ -84,14 +87,14 @@ async function main() {
       video.addEventListener("seeked", () => { draw(t, 0); ok(state); }, { once: true });
       // the middle of the frame (its own interval for a variable-rate video): the decoder shows frame f
       const t0 = rt.frameTime(f), t1 = f + 1 < rt.range.endFrame ? rt.frameTime(f + 1) : t0 + 1 / fps;
-      video.currentTime = (t0 + t1) / 2;
+      video.currentTime = (t0 + t1) / 2 - mediaStart;
     });
   }
   T.onSeek((t) => seek(t));
 
   let last = null;
   function onFrame(now, meta) {
-    const t = meta.mediaTime;
+    const t = meta.mediaTime + mediaStart;
     draw(t, last === null ? 0 : Math.max(0, t - last));
     last = t;
     if (!video.paused) video.requestVideoFrameCallback(onFrame);
@@ -116,7 +119,7 @@ async function main() {
     state.pitch = Math.max(-90, Math.min(90, drag[3] + (e.clientY - drag[1]) * k));
     if (video.paused) draw(state.t, 0);
   });
-  setupXR(rt, mitigation, video, state);
+  setupXR(rt, mitigation, video, state, mediaStart);
 
   /** Upload (optional) + draw + a 1-pixel read, n times at the current frame: frames per second. */
   function measure(count, upload = true) {
@@ -133,7 +136,7 @@ async function main() {
   await seek(c.time_s[0]);
 }
 
-async function setupXR(rt, mitigation, video, state) {
+async function setupXR(rt, mitigation, video, state, mediaStart) {
   if (!navigator.xr || !(await navigator.xr.isSessionSupported("immersive-vr").catch(() => false))) return;
   const btn = $("xr");
   btn.hidden = false;
@@ -160,7 +163,7 @@ async function setupXR(rt, mitigation, video, state) {
           eyes.set(view.eye, e);
         }
         const [yaw, pitch, roll] = anglesFromQuaternion(view.transform.orientation); // XR: -z forward
-        const t = video.currentTime, ep = rt.epof(t, yaw, pitch, roll);
+        const t = video.currentTime + mediaStart, ep = rt.epof(t, yaw, pitch, roll);
         e.upload(video);
         e.render(yaw, pitch, roll, rt.opacity(ep), [vp.x, vp.y]);
         state.epof = ep;
