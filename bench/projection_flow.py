@@ -24,6 +24,11 @@ same run:
 
 from __future__ import annotations
 
+import os
+
+# OpenBLAS threads as the vimsim command sets them (simulator.cli.BLAS_THREADS), before numpy loads
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import argparse
 import subprocess
 import tempfile

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -34,6 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
+from simulator.cli import BLAS_THREADS
 from simulator.testing.reference import ffmpeg_exe
 
 CHILD = r"""
@@ -57,8 +59,11 @@ print(json.dumps({"n": n, "s": dt, "cpu": ru.ru_utime + ru.ru_stime, "rss_mb": r
 
 
 def child(mode: str, path: Path, out: Path) -> dict:
+    # OpenBLAS threads as the vimsim command sets them (simulator.cli), unless given
+    env = {**os.environ}
+    env.setdefault("OPENBLAS_NUM_THREADS", BLAS_THREADS)
     r = subprocess.run([sys.executable, "-c", CHILD, mode, str(path), str(out)],
-                       capture_output=True, text=True, check=True)  # fmt: skip
+                       capture_output=True, text=True, check=True, env=env)  # fmt: skip
     return json.loads(r.stdout.strip().splitlines()[-1])
 
 
