@@ -80,31 +80,48 @@ class RayAngles:
         self._local = threading.local()
 
     def _scratch(self, shape: tuple[int, ...]) -> list[NDArray[np.float32]]:
-        """Seven float32 scratch arrays of ``shape`` for the calling thread (reused: fresh
-        temporaries cost a page-faulting mmap each, more than the arithmetic)."""
+        """Nine float32 scratch arrays of ``shape`` for the calling thread (reused: fresh
+        temporaries cost a page-faulting mmap each, more than the arithmetic); the last
+        two hold the flow's components (:meth:`components`)."""
         bufs = getattr(self._local, "bufs", None)
         if bufs is None or bufs[0].shape != shape:
-            bufs = [np.empty(shape, np.float32) for _ in range(7)]
+            bufs = [np.empty(shape, np.float32) for _ in range(9)]
             self._local.bufs = bufs
         return bufs
 
+    def components(self, flow: NDArray[np.float32]) -> tuple[NDArray[np.float32], NDArray[np.float32]]:
+        """``(dx, dy)`` of the evaluated pixels of ``flow`` (``(..., h, w, 2)`` pixels, full
+        size), contiguous, in this thread's scratch (overwritten by its next call); an
+        :meth:`into_scratch` given them (``components=``) does not gather them again."""
+        w, h = self.size
+        if flow.shape[-3:] != (h, w, 2):
+            raise ValueError(f"flow must be (..., {h}, {w}, 2); got {flow.shape}")
+        if self.stride > 1:
+            flow = flow[..., self.sel, self.sel, :]
+        bufs = self._scratch(flow.shape[:-1])
+        np.copyto(bufs[7], flow[..., 0])
+        np.copyto(bufs[8], flow[..., 1])
+        return bufs[7], bufs[8]
+
     def into_scratch(
-        self, flow: NDArray[np.float32], *, magnitude: bool = False
+        self, flow: NDArray[np.float32], *, magnitude: bool = False, components=None
     ) -> tuple[NDArray[np.float32], NDArray[np.float32] | None]:
         """:meth:`__call__` without the copy: ``(angles, |flow| or None)`` as views into
         this thread's scratch arrays, overwritten by the thread's next call.
 
         ``flow`` is ``(..., h, w, 2)`` pixels (full size, also when ``stride > 1``);
-        ``magnitude=True`` also gives ``sqrt(dx^2 + dy^2)`` (pixels) of the evaluated pixels.
+        ``magnitude=True`` also gives ``sqrt(dx^2 + dy^2)`` (pixels) of the evaluated pixels;
+        ``components``: ``flow``'s evaluated ``(dx, dy)`` already gathered (:meth:`components`).
         """
         w, h = self.size
         if flow.shape[-3:] != (h, w, 2):
             raise ValueError(f"flow must be (..., {h}, {w}, 2); got {flow.shape}")
         if self.stride > 1:
             flow = flow[..., self.sel, self.sel, :]
-        fx, fy, du, dv, t, u, mag = self._scratch(flow.shape[:-1])
-        np.copyto(fx, flow[..., 0])
-        np.copyto(fy, flow[..., 1])
+        fx, fy, du, dv, t, u, mag, _, _ = self._scratch(flow.shape[:-1])
+        src = (flow[..., 0], flow[..., 1]) if components is None else components
+        np.copyto(fx, src[0])  # contiguous when given: no second strided gather
+        np.copyto(fy, src[1])
         np.multiply(fx, fx, out=t)
         np.multiply(fy, fy, out=u)
         if magnitude:

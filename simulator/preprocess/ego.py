@@ -336,12 +336,16 @@ class MidpointSplat:
                 out[e] = self.splat[e] @ v
         return out
 
-    def __call__(self, flow: NDArray, ang: NDArray):
+    def __call__(self, flow: NDArray, ang: NDArray, components=None):
         """``(field, trans_field, EgoFit)``: cell means (radians per frame) of the angles
         ``ang`` (n, s', s') and of the residual angles, and the rotation fit, for pixel
-        flow ``flow`` (n, s, s, 2) (x right, y down)."""
-        sub = flow[:, self.sel, self.sel, :]
-        fx, fy = np.ascontiguousarray(sub[..., 0]), np.ascontiguousarray(sub[..., 1])
+        flow ``flow`` (n, s, s, 2) (x right, y down); ``components``: its evaluated
+        ``(dx, dy)`` (n, s', s') contiguous, when the caller has them (not modified)."""
+        if components is None:
+            sub = flow[:, self.sel, self.sel, :]
+            fx, fy = np.ascontiguousarray(sub[..., 0]), np.ascontiguousarray(sub[..., 1])
+        else:
+            fx, fy = components
         hi = self.ext - 1
         # midpoint pixel (rounded; gx, gy hold the pixel centres + pad + 0.5)
         xi = np.clip((self.gx + np.float32(0.5) * fx).astype(np.int32), 0, hi)

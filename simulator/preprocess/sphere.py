@@ -283,8 +283,9 @@ class FieldEstimator:
         the fitted camera rotation is removed, :mod:`simulator.preprocess.ego`) and the
         camera's angular velocity with its confidence."""
         fl = self._flow(prev_tiles, tiles)
-        ang, _ = self._geo.rays.into_scratch(fl)
-        f, tr, fit = self._geo.midpoint(fl, ang)
+        fxy = self._geo.rays.components(fl)  # gathered once for both
+        ang, _ = self._geo.rays.into_scratch(fl, components=fxy)
+        f, tr, fit = self._geo.midpoint(fl, ang, fxy)
         k = math.degrees(1.0) * self.fps
         shape = self.cells.shape
         return FrameParts(
