@@ -32,6 +32,7 @@ from numpy.typing import NDArray
 
 from simulator.core.choices import OPACITY_RULES, OPACITY_SOURCES
 from simulator.core.errors import InputError
+from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import GridFile
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 
@@ -266,7 +267,8 @@ class OpacityRule:
 
     Opacity = clamp((EPOF - lo) / (hi - lo), 0, 1) with ``lo``/``hi`` the ``low_pct`` /
     ``high_pct`` percentiles of the flow of ``source``: ``"grid"`` = every window of
-    every frame of the grid file (the paper's "whole video"), ``"viewing"`` = this
+    every frame of the grid file (the paper's "whole video"; only the windows the
+    projection covers, e.g. VR180's front half), ``"viewing"`` = this
     viewing's EPOF. ``smoothing_s`` > 0 applies a causal exponential smoothing with that
     time constant (seconds) to the opacity; 0 (default) = none.
 
@@ -344,7 +346,12 @@ class OpacityRule:
     def fit(self, grid: GridFile | None, epof_dps, *, keep=None) -> tuple[float, float]:
         """``(lo, hi)`` thresholds in deg/s: the absolute ones, or percentiles of the grid's
         flow or of this viewing's EPOF. ``keep`` (bool, one per grid row for source
-        ``grid``, one per EPOF sample for ``viewing``) leaves rows out, e.g. artefacts."""
+        ``grid``, one per EPOF sample for ``viewing``) leaves rows out, e.g. artefacts.
+
+        Source ``grid`` takes the windows the source's projection covers (all of them but
+        for e.g. VR180, :mod:`simulator.media.coverage`): an uncovered window has no flow
+        measured (stored as 0 deg/s), and counting it would pull both thresholds down
+        (VR180: the low one to 0)."""
         if self.is_absolute:
             return float(self.low_dps), float(self.high_dps)
         if self.source == "grid":
@@ -353,6 +360,9 @@ class OpacityRule:
             pof = grid.pof_dps
             if keep is not None and len(keep) == len(pof) and not np.all(keep):
                 pof = np.asarray(pof)[np.asarray(keep, bool)]
+            wins, _ = coverage_masks(grid.meta)
+            if wins is not None and wins.shape == tuple(pof.shape[1:]) and wins.any():
+                pof = np.asarray(pof)[:, wins]  # (T, covered windows)
             vals = np.array(pof, np.float64).ravel()  # our own copy
         else:
             vals = np.asarray(epof_dps, np.float64)

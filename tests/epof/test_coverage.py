@@ -65,3 +65,27 @@ def test_epof_csv_has_the_coverage_column(vr180, tmp_path):
     header = next(ln for ln in text.splitlines() if not ln.startswith("#"))
     assert header.endswith(",coverage") and "coverage_rule" not in header
     assert len(read_epof_csv(tmp_path / "e.csv").frame) == 10
+
+
+def test_opacity_thresholds_come_from_covered_windows_only(vr180, tmp_path):
+    """The grid-wide opacity percentiles (the paper's "whole video") leave out the windows
+    the projection does not cover: their 0 deg/s is no measured flow. With them, VR180's
+    10th percentile would be 0 (half the sphere is black)."""
+    from simulator.mitigation.grf import OpacityRule
+
+    g = tmp_path / "p.npz"
+    assert main(["preprocess", str(vr180 / "h.mp4"), "-o", str(g), "--method", "paper",
+                 "--projection", "hequirect", "--no-progress", "--window-size", "32"]) == 0  # fmt: skip
+    grid = load_grid(g)
+    wins, _ = coverage_masks(grid.meta)
+    pof = np.asarray(grid.pof_dps, np.float64)
+    want = np.percentile(pof[:, wins], [10, 90])
+    lo, hi = OpacityRule().fit(grid, None)
+    assert (lo, hi) == pytest.approx(tuple(want))
+    assert lo > 0.5 * np.median(pof[:, wins])  # not pulled to 0 by the black half
+    assert np.percentile(pof, 10) == 0.0  # which counting every window would give
+    # the export's thresholds are the same ones
+    from simulator.export.unity import export_unity
+
+    h = export_unity(g, tmp_path / "x").header
+    assert (h["opacity"]["low_dps"], h["opacity"]["high_dps"]) == pytest.approx((lo, hi))

@@ -73,7 +73,7 @@ def _opacity_section(rule: OpacityRule, lo: float, hi: float) -> dict:
         "high_pct": float(rule.high_pct),
         "source": "absolute: fixed deg/s (--opacity-rule absolute), the same for every video"
         if rule.is_absolute
-        else "grid: every window of every frame of pof_dps",
+        else "grid: every window of every frame of pof_dps (only the windows the projection covers)",
         # relative: low/high_dps are percentiles of this video's flow; absolute: fixed deg/s
         "scale": "absolute" if rule.is_absolute else "relative",
         "low_dps": lo,
