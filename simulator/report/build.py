@@ -30,7 +30,8 @@ from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.export.unity import VERSION as DATA_VERSION
 from simulator.export.web import JS_FILES, MANIFEST_VERSION, export_web, js_source
-from simulator.media.video import VideoWriter, iter_frames, probe
+from simulator.media.source import Source
+from simulator.media.video import VideoWriter, probe
 from simulator.mitigation.grf import GrfConfig
 from simulator.report import pages
 from simulator.study.tasks import _rule as study_rule
@@ -123,11 +124,15 @@ def _source_key(path: Path) -> str:
 
 
 def browser_copy(
-    src: str | os.PathLike, dst: Path, layout: str = "mono", eye: str = "left"
-) -> dict:
+    src: str | os.PathLike, dst: Path, layout: str = "mono", eye: str = "left",
+    projection: str = "equirect", lens_fov_deg: float | None = None,
+) -> dict:  # fmt: skip
     """The study's browser copy of a video: H.264 yuv420p MP4 (no audio), the source's
     (left-eye) equirect at its own resolution when no side exceeds :data:`MAX_WEB_SIDE`
-    (stream-copied when the source already is H.264 yuv420p mono), else scaled to fit.
+    (stream-copied when the source already is H.264 yuv420p mono equirect), else scaled
+    to fit. Another ``projection`` (the replay draws an equirect texture) is converted to
+    its equirect working frame (:class:`simulator.media.source.Source`; uncovered
+    directions black), as every vimsim command sees it.
 
     Returns ``{"how", "width", "height", "start_s"}``: ``start_s`` is what to add to the
     copy's media time to get the source's clock (the clock of the EPOF rows and head
@@ -144,8 +149,9 @@ def browser_copy(
         mp4 = "mp4" in c.format.name.split(",") and len(c.streams.video) == 1
     w, h = info.width, info.height
     playable = (
-        layout == "mono" and codec == "h264" and pix == "yuv420p" and max(w, h) <= MAX_WEB_SIDE
-    )
+        layout == "mono" and projection == "equirect" and codec == "h264" and pix == "yuv420p"
+        and max(w, h) <= MAX_WEB_SIDE
+    )  # fmt: skip
     if playable and mp4:
         with atomic_output(dst) as tmp:
             shutil.copyfile(src, tmp)
@@ -165,7 +171,9 @@ def browser_copy(
         return {"how": "stream copy into MP4", "width": w, "height": h, "start_s": 0.0}
     import cv2
 
-    frames = iter_frames(src, layout=layout, eye=eye)
+    source = Source.open(src, layout=layout, projection=projection, eye=eye,
+                         lens_fov_deg=lens_fov_deg, orientation=False)  # fmt: skip
+    frames = source.frames(fmt="rgb24")  # the eye, converted to equirect
     first = next(frames)
     fh, fw = first.shape[:2]
     k = min(1.0, MAX_WEB_SIDE / max(fw, fh))
@@ -180,14 +188,19 @@ def browser_copy(
             "start_s": float(info.times_s([0])[0])}
 
 
-def _layout(grid: Path) -> tuple[str, str]:
-    """The stereo layout and eye the grid was made from (mono, left when unknown)."""
+def _layout(grid: Path) -> dict:
+    """How the grid's source was read: ``browser_copy``'s ``layout``, ``eye``,
+    ``projection`` and ``lens_fov_deg`` (mono equirect, left, when unknown)."""
     try:
         with np.load(grid, allow_pickle=False) as z:
             meta = json.loads(str(z["meta"]))
-        return str(meta.get("layout") or "mono"), str(meta.get("eye") or "left")
     except (OSError, ValueError, KeyError):
-        return "mono", "left"
+        meta = {}
+    src = meta.get("source") if isinstance(meta.get("source"), dict) else {}
+    lens = src.get("lens_fov_deg")
+    return {"layout": str(meta.get("layout") or "mono"), "eye": str(meta.get("eye") or "left"),
+            "projection": str(meta.get("projection") or "equirect"),
+            "lens_fov_deg": None if lens is None else float(lens)}  # fmt: skip
 
 
 def _chain(first, rest):
@@ -243,8 +256,7 @@ def _video_data(
             os.link(old / "media" / f"{vid}.mp4", target)
             res["copy"] = prev
         else:
-            layout, eye = _layout(grid)
-            res["copy"] = {**browser_copy(src, target, layout=layout, eye=eye), "key": key}
+            res["copy"] = {**browser_copy(src, target, **_layout(grid)), "key": key}
     vdir = out / "videos" / vid
     for name in ("epof_viewers.png", "provocative.png"):
         if (vdir / name).is_file():

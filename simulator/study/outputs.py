@@ -165,19 +165,27 @@ def _thumbnails(source, moments: list[dict], hfov: float, vfov: float,
 
 
 def _frames_at(source, frames: list[int]):
-    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``: a seek to
-    the keyframe before each (not a decode from the start: a long video has its
-    moments anywhere), then decoding up to the frame (index = presentation time x fps)."""
+    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``, each
+    converted to equirect from the source's projection: a seek to the keyframe before
+    each (not a decode from the start: a long video has its moments anywhere), then
+    decoding up to the frame whose presentation time is the index's (the source's frame
+    times, :meth:`simulator.media.video.MediaInfo.times_s`: a variable-rate video's frame
+    ``i`` is not at ``i / fps``)."""
+    info = source.info
+    times = info.times_s(frames)
+    tol = 0.25 / info.fps
     with av.open(str(source.path)) as c:
         s = c.streams.video[0]
-        fps = float(s.average_rate or s.guessed_rate)
-        t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
-        for f in frames:
-            c.seek(int((t0 + f / fps) / s.time_base), stream=s, backward=True, any_frame=False)
+        tb = float(s.time_base)
+        # the player's clock, as probe's frame times: 0 at the container's start
+        c0 = c.start_time / 1e6 if c.start_time is not None else (
+            float(s.start_time * s.time_base) if s.start_time is not None else 0.0)  # fmt: skip
+        for f, tf in zip(frames, times):
+            c.seek(int((tf + c0) / tb), stream=s, backward=True, any_frame=False)
             got = None
             for fr in c.decode(s):
-                i = round((float(fr.pts * s.time_base) - t0) * fps) if fr.pts is not None else f
-                if i >= f:
+                t = fr.pts * tb - c0 if fr.pts is not None else tf
+                if t >= tf - tol:
                     got = fr
                     break
             if got is not None:
@@ -252,7 +260,9 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     moments = provocative_moments(m, grid.yaw_deg, fps, exclude=bad)
     for mo in moments:
         mo["pitch_deg"] = pitch0
-    _thumbnails(Source.open(v.path, layout=v.layout, eye=v.eye), moments, grid.hfov_deg, grid.vfov_deg, folder)
+    src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
+                      lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    _thumbnails(src, moments, grid.hfov_deg, grid.vfov_deg, folder)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
     T = m.shape[0]
