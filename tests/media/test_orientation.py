@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import json
-import struct
-from pathlib import Path
 
 import numpy as np
 import pytest
+from media_helpers import with_pose
 from PIL import Image
 
 from simulator.cli import main
@@ -15,51 +14,6 @@ from simulator.epof.viewing import read_epof_csv
 from simulator.media.source import Source
 from simulator.media.spherical import view_angles_deg
 from simulator.traces.path import HeadPath, save_headpath_csv
-
-_PATH = (b"moov", b"trak", b"mdia", b"minf", b"stbl", b"stsd")
-
-
-def _box(kind: bytes, payload: bytes) -> bytes:
-    return struct.pack(">I", 8 + len(payload)) + kind + payload
-
-
-def sv3d_box(yaw: float, pitch: float, roll: float) -> bytes:
-    """A Spherical Video V2 ``sv3d`` box (equirect, the pose in 16.16 fixed point)."""
-    pose = struct.pack(">iii", *(round(v * 65536) for v in (yaw, pitch, roll)))
-    prhd = _box(b"prhd", b"\0\0\0\0" + pose)
-    equi = _box(b"equi", b"\0\0\0\0" + bytes(16))
-    svhd = _box(b"svhd", b"\0\0\0\0" + b"vimsim test\0")
-    return _box(b"sv3d", svhd + _box(b"proj", prhd + equi))
-
-
-def _child(data: bytes, start: int, end: int, kind: bytes) -> int:
-    """Offset of the first ``kind`` box in ``data[start:end]``."""
-    while start < end:
-        size, k = struct.unpack(">I4s", data[start : start + 8])
-        if k == kind:
-            return start
-        start += size
-    raise AssertionError(f"no {kind!r} box")
-
-
-def with_pose(src, dst, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> None:
-    """``dst`` = the MP4 ``src`` (moov after mdat, one video track) with an ``sv3d`` box
-    appended to its sample entry; the sizes of the boxes holding it grow to match."""
-    data = bytearray(Path(src).read_bytes())
-    heads, start, end = [], 0, len(data)
-    for kind in _PATH:
-        off = _child(data, start, end, kind)
-        heads.append(off)
-        start, end = off + (16 if kind == b"stsd" else 8), off + struct.unpack(">I", data[off : off + 4])[0]
-    assert _child(data, 0, len(data), b"mdat") < heads[0]  # chunk offsets stay valid
-    entry = start  # the first sample entry (avc1)
-    heads.append(entry)
-    box = sv3d_box(yaw, pitch, roll)
-    at = entry + struct.unpack(">I", data[entry : entry + 4])[0]
-    data[at:at] = box
-    for off in heads:
-        struct.pack_into(">I", data, off, struct.unpack(">I", data[off : off + 4])[0] + len(box))
-    Path(dst).write_bytes(bytes(data))
 
 
 @pytest.fixture(scope="module")

@@ -77,6 +77,15 @@ namespace Vimsim
         public int SourceFrameCount { get; private set; }
         public double SourceDurationS { get; private set; }
         public bool SourceLengthKnown { get; private set; }
+        /// <summary>The file's initial orientation (yaw, pitch, roll degrees, from its spherical
+        /// metadata), or null: Epof turns head angles by it (ViewAngles), as vimsim does.</summary>
+        public double[] OrientationDeg { get; private set; }
+        double[] pose; // head -> video rotation of OrientationDeg (row-major), or null
+        /// <summary>Whether Epof turns head angles by OrientationDeg (default true: head angles
+        /// as in a vimsim head path, on the clock of a player that honours the metadata). False
+        /// when the angles are already in the video's frame: an app showing the frame as stored,
+        /// e.g. Unity's Skybox/Panoramic (VimsimEpofBehaviour.applyOrientation).</summary>
+        public bool ApplyOrientation { get; set; } = true;
         /// <summary>Viewport FOV in degrees (exact, horizontal and vertical).</summary>
         public double HfovDeg { get; private set; }
         public double VfovDeg { get; private set; }
@@ -235,6 +244,14 @@ namespace Vimsim
             SourceFrameCount = (int)so.Num("n_frames");
             SourceDurationS = so.Num("duration_s");
             SourceLengthKnown = so.Num("known") != 0;
+            if (so.Has("orientation_deg"))
+            {
+                var o = so.DoubleArray("orientation_deg");
+                if (o.Length != 3 || double.IsNaN(o[0] + o[1] + o[2]) || double.IsInfinity(o[0] + o[1] + o[2]))
+                    throw new VimsimLoadException(src, "header field source.orientation_deg: expected 3 finite degrees", "source.orientation_deg");
+                OrientationDeg = o;
+                pose = HeadRotation(Rad(o[0]), Rad(o[1]), Rad(o[2]));
+            }
             if (SourceFrameCount < StartFrame + FrameCount)
                 throw new VimsimLoadException(src, "header field source.n_frames: " + SourceFrameCount + " is shorter than the exported range's end " + (StartFrame + FrameCount), "source.n_frames");
             var vp = hd.Obj("viewport");
@@ -490,8 +507,31 @@ namespace Vimsim
                 throw new ArgumentOutOfRangeException("frame", "frame " + frame + " outside " + StartFrame + ".." + (StartFrame + FrameCount - 1));
             if (double.IsNaN(yawDeg + pitchDeg + rollDeg) || double.IsInfinity(yawDeg + pitchDeg + rollDeg))
                 throw new ArgumentOutOfRangeException("yawDeg", "orientation must be finite degrees");
+            if (pose != null && ApplyOrientation)
+            {
+                double[] v = ViewAngles(yawDeg, pitchDeg, rollDeg);
+                yawDeg = v[0]; pitchDeg = v[1]; rollDeg = v[2];
+            }
             if (paper != null) return paper.Query(data, row * rowLength, yawDeg, pitchDeg, rollDeg, scratch);
             return sphere.Query(FramePrefix(row), 0, yawDeg, pitchDeg, rollDeg);
+        }
+
+        /// <summary>(yaw, pitch, roll) degrees of the view in the video's frame for a head pose:
+        /// the head's turned by the file's initial orientation, R(OrientationDeg) R(head)
+        /// (simulator.media.spherical.view_angles_deg), else the head's. Epof applies it; draw
+        /// the video and the overlay at these angles, as vimsim render does.</summary>
+        public double[] ViewAngles(double yawDeg, double pitchDeg, double rollDeg)
+        {
+            if (pose == null || !ApplyOrientation) return new double[] { yawDeg, pitchDeg, rollDeg };
+            double[] H = HeadRotation(Rad(yawDeg), Rad(pitchDeg), Rad(rollDeg)), M = new double[9];
+            for (int i = 0; i < 3; i++)
+                for (int j = 0; j < 3; j++)
+                    M[3 * i + j] = pose[3 * i] * H[j] + pose[3 * i + 1] * H[3 + j] + pose[3 * i + 2] * H[6 + j];
+            const double D = 180.0 / Math.PI;
+            double pitch = Math.Asin(Math.Max(-1.0, Math.Min(1.0, M[5]))) * D;
+            if (Math.Abs(M[5]) < 1 - 1e-12)
+                return new double[] { Math.Atan2(M[2], M[8]) * D, pitch, Math.Atan2(-M[3], M[4]) * D };
+            return new double[] { Math.Atan2(-M[6], M[0]) * D, pitch, 0.0 };
         }
 
         /// <summary>Un-eased GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to

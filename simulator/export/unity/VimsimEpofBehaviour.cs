@@ -38,6 +38,10 @@ namespace Vimsim
                  + "Unity's Skybox/Panoramic shader: its Rotation minus 90")]
         public float yawOffsetDeg = 0f;
 
+        [Tooltip("Turn the head by the file's initial orientation (its spherical metadata), as vimsim does: "
+                 + "on only when the app turns the video sphere by it; Unity's Skybox/Panoramic shows the frame as stored")]
+        public bool applyOrientation = false;
+
         [Tooltip("Ease the opacity with the exported rule, once per video frame (vimsim epof's opacity column)")]
         public bool ease = true;
 
@@ -143,6 +147,7 @@ namespace Vimsim
                 return false;
             }
             Runtime = loading.Result;
+            Runtime.ApplyOrientation = applyOrientation; // the camera's angles are in the shown frame
             clock = Runtime.CreatePlaybackClock();
             SetUpOverlay(masking.Result);
             return true;

@@ -123,12 +123,18 @@ def _range_sections(g: GridFile, start: int, T: int) -> dict:
     n_src = int(known) if known else start + T
     times = g.meta.get("frame_times_s")
     vfr = times is not None and len(times) >= T
+    pose = (g.meta.get("source") or {}).get("orientation_deg")
     out: dict = {
         "source": {
             "n_frames": n_src,
             "duration_s": n_src / fps,
             "known": bool(known),
             "what": "the source video's length (known: from the grid's meta; else the grid's end)",
+            # the file's initial orientation (spherical metadata), applied as vimsim applies it
+            **({"orientation_deg": [float(v) for v in pose],
+                "orientation_rule": "head angles are turned by it before every query and "
+                "drawing: view = R(orientation) R(head), R = head_rotation (docs/sources.md)"}
+               if pose is not None and any(float(v) for v in pose) else {}),
         },
         "range": {
             "start_frame": start,

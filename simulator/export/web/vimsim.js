@@ -388,6 +388,13 @@ export class VimsimEpof {
     this.frameTimes = header.frame_times_s ? Float64Array.from(header.frame_times_s) : null;
     /** The source video's length (known: from the grid's meta; else the grid's end). */
     this.source = { nFrames: src.n_frames, durationS: src.duration_s, known: src.known };
+    /** The file's initial orientation (yaw, pitch, roll degrees; its spherical metadata), or
+     * null (C#: OrientationDeg); its head -> video rotation, `pose`: see viewAngles. */
+    this.orientationDeg = src.orientation_deg ? src.orientation_deg.slice() : null;
+    this.pose = src.orientation_deg ? headRotation(...src.orientation_deg) : null;
+    /** Whether epof() and viewAngles() turn head angles by it (default true: head angles as in a
+     * vimsim head path; false when they already are in the video's frame: C# ApplyOrientation). */
+    this.applyOrientation = true;
     /** The grain layout stored in the file (the renderer's, float32 centres). */
     this.grains = GrainLayout.fromExport(header, grains);
     /** What the overlay draws, as the export was made (EyeRenderer's `mitigation` option). */
@@ -444,13 +451,24 @@ export class VimsimEpof {
     return this.epofAtFrame(this.frameAt(timeS), yawDeg, pitchDeg, rollDeg);
   }
   /** EPOF (deg/s) at a video frame number (range.startFrame .. range.endFrame - 1; RangeError
-   * outside, as the C# EpofAtFrame). */
+   * outside, as the C# EpofAtFrame). Head angles: turned by the file's initial orientation. */
   epofAtFrame(frame, yawDeg, pitchDeg, rollDeg = 0) {
     const row = frame - this.startFrame;
     if (!(row >= 0 && row < this.frameCount && Number.isInteger(row)))
       throw new RangeError(`frame ${frame} outside ${this.range.startFrame}..${this.range.endFrame - 1}`);
     if (![yawDeg, pitchDeg, rollDeg].every(Number.isFinite)) throw new Error("orientation must be finite degrees");
-    return this.model.query(this.frameRow(row), 0, yawDeg, pitchDeg, rollDeg);
+    return this.model.query(this.frameRow(row), 0, ...this.viewAngles(yawDeg, pitchDeg, rollDeg));
+  }
+  /** [yaw, pitch, roll] (degrees) of the view in the video's frame for a head pose: the head's
+   * turned by the file's initial orientation (its spherical metadata: R(orientation) R(head),
+   * simulator.media.spherical.view_angles_deg; C#: ViewAngles), else the head's. epof() applies
+   * it; draw the video and the overlay (EyeRenderer.render) at these angles, as vimsim render. */
+  viewAngles(yawDeg, pitchDeg, rollDeg = 0) {
+    if (!this.pose || !this.applyOrientation) return [yawDeg, pitchDeg, rollDeg];
+    const P = this.pose, H = headRotation(yawDeg, pitchDeg, rollDeg), M = new Array(9);
+    for (let i = 0; i < 3; i++)
+      for (let j = 0; j < 3; j++) M[3 * i + j] = P[3 * i] * H[j] + P[3 * i + 1] * H[3 + j] + P[3 * i + 2] * H[6 + j];
+    return headAngles(M);
   }
   /** Row `row` of the data (one frame), decoded to float32 (kept until another is asked). */
   frameRow(row) {

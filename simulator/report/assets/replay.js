@@ -69,7 +69,7 @@ async function main() {
       state.opacity = dt > 0 ? easing.update(o, dt) : o;
     }
     eye.upload(video);
-    eye.render(state.yaw, state.pitch, state.roll, state.opacity);
+    eye.render(...rt.viewAngles(state.yaw, state.pitch, state.roll), state.opacity);
     state.drawn++;
     $("t").textContent = t.toFixed(3);
     $("frame").textContent = String(rt.frameAt(t));
@@ -127,7 +127,7 @@ async function main() {
     const t0 = performance.now();
     for (let k = 0; k < count; k++) {
       if (upload) eye.upload(video);
-      eye.render(state.yaw, state.pitch, state.roll, 0.5);
+      eye.render(...rt.viewAngles(state.yaw, state.pitch, state.roll), 0.5);
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
     }
     return (count * 1000) / (performance.now() - t0);
@@ -165,7 +165,7 @@ async function setupXR(rt, mitigation, video, state, mediaStart) {
         const [yaw, pitch, roll] = anglesFromQuaternion(view.transform.orientation); // XR: -z forward
         const t = video.currentTime + mediaStart, ep = rt.epof(t, yaw, pitch, roll);
         e.upload(video);
-        e.render(yaw, pitch, roll, rt.opacity(ep), [vp.x, vp.y]);
+        e.render(...rt.viewAngles(yaw, pitch, roll), rt.opacity(ep), [vp.x, vp.y]);
         state.epof = ep;
       }
     };
