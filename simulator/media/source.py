@@ -255,20 +255,31 @@ class Source:
         """Frames ``start <= i < end`` as contiguous per-eye copies: ``(left, right)`` for a
         stereo source (two files decoded in step), ``(frame,)`` for a mono one. Every
         file is closed on every exit. ``convert=False``: in the source's projection, as
-        stored (for a renderer sampling it)."""
+        stored (for a renderer sampling it). A still's clip yields one read-only tuple,
+        the same at every frame (its frames are the same: made once, not copied per frame)."""
         if self.right is None:
             eyes = EYES if self.stereo else (self.eye,)
             it = self._decode(self.path, fmt, start, end, threads)
+            made = None
             try:
                 for f in it:
-                    yield tuple(
+                    if made is not None:
+                        yield made
+                        continue
+                    out = tuple(
                         np.array(self.eye_view(f, e, convert=convert), order="C") for e in eyes
                     )
+                    if self.still:
+                        for a in out:
+                            a.setflags(write=False)
+                        made = out
+                    yield out
             finally:
                 it.close()
             return
         kw = {"fmt": fmt, "start": start, "end": end, "threads": threads, "convert": convert}
         left, right = self.frames(eye="left", **kw), self.frames(eye="right", **kw)
+        made = None
         try:
             for fl in left:
                 fr = next(right, None)
@@ -276,7 +287,15 @@ class Source:
                     raise InputError(
                         f"{self.right}: right eye ends before the left eye ({self.path})"
                     )
-                yield np.array(fl), np.array(fr)
+                if made is None:
+                    out = np.array(fl), np.array(fr)
+                    if self.still:  # two stills: the same pair at every frame
+                        for a in out:
+                            a.setflags(write=False)
+                        made = out
+                    yield out
+                else:
+                    yield made
         finally:
             left.close()
             right.close()

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import json
 
 import numpy as np
@@ -9,6 +10,7 @@ import pytest
 from PIL import Image
 
 from simulator.cli import main
+from simulator.media.source import Source
 from simulator.media.video import iter_frames
 from simulator.sphere.geometry import equirect_pixel_lonlat, lonlat_to_dir
 from simulator.testing.reference import v360_convert
@@ -46,7 +48,14 @@ def test_render_and_frames_take_a_still_as_a_clip(ctx, files):
     common = ["--opacity", "0.5", "--eye-size", "32x32", "--no-progress"]
     assert main(["render", str(files / "e.png"), str(files / "p.csv"), "-o", str(out), *common,
                  "--seconds", "1", "--fps", "4"]) == 0  # fmt: skip
-    assert sum(1 for _ in iter_frames(out / "left.mp4")) == 4
+    drawn = list(iter_frames(out / "left.mp4"))
+    assert len(drawn) == 4
+    # uploaded once, drawn at every pose: the sweep turns the view from frame to frame
+    assert min(np.abs(a.astype(int) - b).mean() for a, b in itertools.pairwise(drawn)) > 2
+    src = Source.open(files / "e.png", still=(1.0, 4.0))
+    made = list(src.eye_frames())
+    assert len(made) == 4 and all(m is made[0] for m in made)  # one decode, no copy per frame
+    assert not made[0][0].flags.writeable
     s = json.loads((out / "summary.json").read_text())
     assert s["fps"] == 4 and s["frames_written"] == 4
     fr = files / "f"
