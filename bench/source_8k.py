@@ -1,7 +1,7 @@
 """8K sources: sphere-mode preprocess throughput against decoding alone, and peak memory against length.
 
 Usage: .venv/bin/python bench/source_8k.py [--frames 300,3000] [--size 7680x3840]
-    [--preset ultrafast] [--bitrate 120M] [--repeat 2]
+    [--preset ultrafast] [--bitrate 120M] [--repeat 2] [--render 60,300]
 
 Encodes up to 60 frames of an H.264 clip once (ffmpeg ``testsrc2`` panned, x264 at
 ``--preset``: ``ultrafast`` has no CABAC and no deblocking, the cheapest 8K decode there
@@ -17,7 +17,9 @@ frame count N. In the same run:
   the ratio of CPU time per frame (all threads): what the throughput ratio is when every
   core is busy (a loaded machine, or decoding alone already using all cores);
 - memory: the peak RSS of a fresh process preprocessing N frames, for each N, and their
-  ratio (largest / smallest; goal <= 1.2x), with the absolute peak.
+  ratio (largest / smallest; goal <= 1.2x), with the absolute peak; with ``--render``, the
+  same for ``vimsim render`` (256x256 mono eye, GRF at 0.5, a static head) of clips of
+  those lengths.
 
 The machine is shared: ``--frames 60,240`` keeps the run to a few minutes (the figures
 quoted in docs/sources.md say which counts were run).
@@ -48,6 +50,15 @@ t0 = time.perf_counter()
 src = Source.open(path)
 if mode == "decode":
     n = sum(1 for _ in src.frames(fmt="gray"))
+elif mode == "render":  # a static head, GRF at 0.5, 256x256 mono eye (memory: the frames in flight)
+    from simulator.cli import main
+    from simulator.traces.path import HeadPath, save_headpath_csv
+    T = src.info.duration_s + 1.0
+    save_headpath_csv(out + ".csv", HeadPath.from_angles_deg([0.0, T], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]))
+    if main(["render", path, out + ".csv", "-o", out, "--opacity", "0.5", "--eye-size", "256x256",
+             "--no-progress", "--quiet"]) != 0:
+        sys.exit("render failed")
+    n = src.info.n_frames
 else:
     preprocess_sphere(src, out, grid=grid_preset("default"), config=SphereConfig(), progress=False)
     n = src.info.n_frames
@@ -76,6 +87,9 @@ def main() -> None:
                     help="x264 average bitrate of the test clip (e.g. 120M, an 8K 360 camera's "
                     "H.264; default: crf 28)")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=2, help="alternations at the smallest N")
+    ap.add_argument("--render", default="",
+                    help="also render (256x256 mono eye, GRF) clips of these frame counts, e.g. "
+                    "60,300: peak RSS against length")  # fmt: skip
     a = ap.parse_args()
     d = Path(tempfile.mkdtemp(prefix="vimsim-8k-"))
     try:
@@ -128,6 +142,19 @@ def run(a, d: Path) -> None:
     r = pre[counts[-1]]["rss_mb"] / pre[n0]["rss_mb"]
     print(f"peak RSS {counts[-1]} / {n0} frames: {r:.3f}x (goal <= 1.2x); decode alone peak "
           f"{dec['rss_mb']:.0f} MB")  # fmt: skip
+    rcounts = sorted(int(v) for v in a.render.split(",") if v)
+    if rcounts:
+        got = {}
+        for n in rcounts:
+            c = d / f"r{n}.mp4"
+            subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-stream_loop", str(-(-n // nb)),
+                            "-i", str(base), "-frames:v", str(n), "-c", "copy", str(c)],
+                           check=True)  # fmt: skip
+            got[n] = child("render", c, d / f"render{n}")
+            print(f"render, {n} frames: peak RSS {got[n]['rss_mb']:.0f} MB "
+                  f"({got[n]['n'] / got[n]['s']:.2f} frames/s)")  # fmt: skip
+        r = got[rcounts[-1]]["rss_mb"] / got[rcounts[0]]["rss_mb"]
+        print(f"render peak RSS {rcounts[-1]} / {rcounts[0]} frames: {r:.3f}x (goal <= 1.2x)")
 
 
 if __name__ == "__main__":
