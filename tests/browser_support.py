@@ -13,6 +13,19 @@ import tempfile
 from pathlib import Path
 
 CHROMIUM = "/usr/bin/chromium"
+
+
+def data_url_image(url: str):
+    """``(h, w, 3)`` uint8 RGB of a ``data:image/png;base64,...`` URL (a canvas's
+    ``toDataURL``)."""
+    import base64
+    import io
+
+    import numpy as np
+    from PIL import Image
+
+    raw = base64.b64decode(url.split(",", 1)[1])
+    return np.asarray(Image.open(io.BytesIO(raw)).convert("RGB"))
 CHROMEDRIVER = "/usr/bin/chromedriver"
 
 FLAGS = (

@@ -3,9 +3,7 @@ error, no request outside the folder), the replay against ``vimsim frames``, bad
 
 from __future__ import annotations
 
-import base64
 import csv
-import io
 import json
 import shutil
 import subprocess
@@ -13,10 +11,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from browser_support import data_url_image
 from PIL import Image
 
 from simulator.cli import main
 from simulator.report.serve import start_server
+from simulator.testing.reference import psnr
 from simulator.traces.path import save_headpath_csv, synth
 
 EYE = (160, 120)
@@ -109,16 +109,6 @@ def test_pages_load_clean_served_and_from_files(browser, study):
     assert "--serve" in note
 
 
-def _png(data_url: str) -> np.ndarray:
-    raw = base64.b64decode(data_url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(raw)).convert("RGB"))
-
-
-def _psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return 99.0 if mse == 0 else 10 * np.log10(255.0**2 / mse)
-
-
 @pytest.mark.browser
 def test_replay_matches_vimsim_frames(browser, study, tmp_path):
     """Replay paused after a seek vs vimsim frames of the same viewing, same browser copy."""
@@ -172,9 +162,9 @@ def test_replay_matches_vimsim_frames(browser, study, tmp_path):
     scores = []
     for f, g in zip(files, got):
         ref = np.asarray(Image.open(f).convert("RGB"))
-        js = _png(g["png"])
+        js = data_url_image(g["png"])
         assert js.shape == ref.shape
-        scores.append(_psnr(js, ref))
+        scores.append(psnr(js, ref))
     print(f"\nreplay vs vimsim frames PSNR {', '.join(f'{s:.1f}' for s in scores)} dB ({renderer})")
     assert min(scores) >= 30.0, scores
 

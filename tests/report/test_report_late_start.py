@@ -6,8 +6,6 @@ it starts at 0, and the page says by how much to shift it)."""
 
 from __future__ import annotations
 
-import base64
-import io
 import json
 import subprocess
 from pathlib import Path
@@ -15,11 +13,13 @@ from pathlib import Path
 import imageio_ffmpeg
 import numpy as np
 import pytest
+from browser_support import data_url_image
 from PIL import Image
 
 from simulator.cli import main
 from simulator.media.video import probe
 from simulator.report.serve import start_server
+from simulator.testing.reference import psnr
 from simulator.traces.path import save_headpath_csv, synth
 
 EYE = (160, 120)
@@ -73,16 +73,6 @@ vfov = 80
     return d
 
 
-def _png(data_url: str) -> np.ndarray:
-    raw = base64.b64decode(data_url.split(",", 1)[1])
-    return np.asarray(Image.open(io.BytesIO(raw)).convert("RGB"))
-
-
-def _psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
-    return 99.0 if mse == 0 else 10 * np.log10(255.0**2 / mse)
-
-
 def test_browser_copy_says_where_a_late_source_starts(late_study):
     copies = json.loads((late_study / "out" / "report" / ".vimsim-report.json").read_text())["copies"]
     assert "copy of the source" in copies["h264"]["copy"]["how"]
@@ -133,7 +123,7 @@ def test_replay_of_a_late_source_shows_the_frame_of_the_players_clock(browser, l
                          f"{EYE[0]}x{EYE[1]}", "--hfov", "100", "--vfov", "80", "--opacity",
                          str(epof), "--grf", "on", "--no-progress"]) == 0  # fmt: skip
             refs[shift] = [np.asarray(Image.open(f).convert("RGB")) for f in sorted(fdir.glob("*.png"))]
-        scores = [(_psnr(_png(g), r), _psnr(_png(g), w))
+        scores = [(psnr(data_url_image(g), r), psnr(data_url_image(g), w))
                   for g, r, w in zip(got[name], refs[0.0], refs[LATE_S])]  # fmt: skip
         print(f"\n{name}: replay vs the source's frame, and vs the frame 1 s later (PSNR dB): {scores}")
         assert len(scores) == len(times)

@@ -16,17 +16,12 @@ from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.sphere.geometry import extract_view
 from simulator.study.outputs import _frames_at
-from simulator.testing.reference import ffmpeg_exe
+from simulator.testing.reference import ffmpeg_exe, psnr
 from simulator.traces.path import save_headpath_csv, synth
 
 
 def _ff(*args) -> None:
     subprocess.run([ffmpeg_exe(), "-v", "error", "-y", *map(str, args)], check=True)
-
-
-def _psnr(a, b) -> float:
-    mse = float(np.mean((np.asarray(a, float) - np.asarray(b, float)) ** 2))
-    return 99.0 if mse == 0 else 10 * np.log10(255.0**2 / mse)
 
 
 @pytest.fixture(scope="module")
@@ -88,12 +83,12 @@ def test_study_of_projections_makes_thumbnails_and_equirect_browser_copies(proj_
         assert (info.width, info.height) == ref[0].shape[1::-1] and info.width == 2 * info.height
         got = list(Source.open(copy).frames(fmt="rgb24"))
         assert len(got) == len(ref)
-        scores = [_psnr(g, r) for g, r in zip(got, ref)]
+        scores = [psnr(g, r) for g, r in zip(got, ref)]
         assert min(scores) > 30, (vid, scores)  # x264 crf 18 of a sharp synthetic scene
         # not the stored layout stretched to 2:1 (what the replay drew before)
         raw = Source.open(d / path, **kw).frames(fmt="rgb24", convert=False)
         stretched = np.asarray(Image.fromarray(next(raw)).resize(got[0].shape[1::-1]))
-        assert _psnr(got[0], stretched) < scores[0] - 8, (vid, _psnr(got[0], stretched))
+        assert psnr(got[0], stretched) < scores[0] - 8, (vid, psnr(got[0], stretched))
     man = json.loads((d / "out" / "report" / ".vimsim-report.json").read_text())
     assert all("re-encoded" in c["copy"]["how"] for c in man["copies"].values())
 
