@@ -126,6 +126,13 @@ namespace Vimsim
         int rowLength;
         PaperModel paper;
         SphereModel sphere;
+        double[] coverPrefix; // sphere mode, a source not covering the sphere: covered cells' running sums
+        /// <summary>A source that does not cover the sphere (VR180): below this share of the
+        /// viewport covered, Epof fades to 0 (header coverage; 0 when it covers the sphere).</summary>
+        public double MinCoverage { get; private set; }
+        /// <summary>Whether the source's projection covers only part of the sphere (VR180): Epof is
+        /// then the covered part's mean, as vimsim epof (docs/sources.md, Coverage).</summary>
+        public bool PartialCoverage { get { return coverPrefix != null; } }
         double[] scratch;
         static readonly Dictionary<string, PaperModel> PaperCache = new Dictionary<string, PaperModel>();
 
@@ -387,6 +394,21 @@ namespace Vimsim
             if (shape[1] != sphere.NLat || shape[2] != sphere.NLon)
                 throw new VimsimLoadException(SourcePath, "data shape [" + string.Join(",", shape) + "] does not match " + f.Num("cell_deg") + " deg cells (" + sphere.NLat + " x " + sphere.NLon + ")", "data.shape");
             prefix = new double[shape[1] * (shape[2] + 1)];
+            if (hd.Has("coverage"))
+            {   // a source that does not cover the sphere (VR180): the covered cells' running sums
+                var cv = hd.Obj("coverage");
+                var cells = cv.DoubleArray("cells");
+                int nl = sphere.NLon;
+                if (cells.Length != sphere.NLat * nl)
+                    throw new VimsimLoadException(SourcePath, "header field coverage.cells: expected " + (sphere.NLat * nl) + " values", "coverage.cells");
+                MinCoverage = cv.Num("min_coverage");
+                coverPrefix = new double[sphere.NLat * (nl + 1)];
+                for (int r = 0; r < sphere.NLat; r++)
+                {
+                    double acc = 0;
+                    for (int j = 0; j < nl; j++) { acc += cells[r * nl + j]; coverPrefix[r * (nl + 1) + j + 1] = acc; }
+                }
+            }
         }
 
         /// <summary>Sphere mode: running sums along each cell row of one frame (double: exact to
@@ -513,7 +535,20 @@ namespace Vimsim
                 yawDeg = v[0]; pitchDeg = v[1]; rollDeg = v[2];
             }
             if (paper != null) return paper.Query(data, row * rowLength, yawDeg, pitchDeg, rollDeg, scratch);
-            return sphere.Query(FramePrefix(row), 0, yawDeg, pitchDeg, rollDeg);
+            double e = sphere.Query(FramePrefix(row), 0, yawDeg, pitchDeg, rollDeg);
+            if (coverPrefix == null) return e;
+            // the covered part's mean, faded where the viewer sees mostly no content
+            double share = Math.Max(0.0, Math.Min(1.0, sphere.Query(coverPrefix, 0, yawDeg, pitchDeg, rollDeg)));
+            return share > 1e-9 ? e / share * Math.Min(1.0, share / MinCoverage) : 0.0;
+        }
+
+        /// <summary>Covered share (0..1) of the viewport at a head pose (turned by the initial
+        /// orientation as Epof is): 1 for a source covering the sphere (vimsim epof's coverage column).</summary>
+        public double Coverage(double yawDeg, double pitchDeg, double rollDeg)
+        {
+            if (coverPrefix == null) return 1.0;
+            double[] v = ViewAngles(yawDeg, pitchDeg, rollDeg);
+            return Math.Max(0.0, Math.Min(1.0, sphere.Query(coverPrefix, 0, v[0], v[1], v[2])));
         }
 
         /// <summary>(yaw, pitch, roll) degrees of the view in the video's frame for a head pose:

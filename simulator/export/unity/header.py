@@ -12,7 +12,9 @@ import numpy as np
 from simulator import __version__
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import ViewportOverlaps
+from simulator.core.errors import InputError
 from simulator.export.unity.binary import FORMAT, FRAME_EPS, VERSION
+from simulator.media.coverage import MIN_COVERAGE, coverage_masks
 from simulator.media.gridfile import GridFile, content_hash
 from simulator.mitigation.grf import GrfConfig, OpacityRule
 from simulator.mitigation.kinds import Mitigation
@@ -158,6 +160,28 @@ VFR_RULE = (
 )
 
 
+def _coverage_section(g: GridFile, cells) -> dict | None:
+    """``coverage`` of a sphere-mode export whose source's projection does not cover the
+    sphere (VR180): the covered cells (row-major, as the data's rows) and the rule the
+    runtimes apply, as ``vimsim epof`` does (:mod:`simulator.media.coverage`); None when
+    everything is covered."""
+    _, mask = coverage_masks(g.meta)
+    if mask is None:
+        return None
+    if tuple(mask.shape) != tuple(cells.shape):
+        raise InputError(
+            f"{g.path}: the grid's coverage cells {mask.shape} do not match its field "
+            f"{tuple(cells.shape)}; preprocess it again"
+        )
+    return {
+        "cells": [int(v) for v in np.asarray(mask, bool).ravel()],
+        "min_coverage": float(MIN_COVERAGE),
+        "rule": "share = the viewport query of the covered cells (1 covered, 0 not), clamped to "
+        "0..1; epof = (query of the field) / share * min(1, share / min_coverage), 0 where "
+        "share <= 1e-9 (the covered part's mean, faded where the viewer sees mostly no content)",
+    }
+
+
 def build_header(g: GridFile, data: np.ndarray, *, sphere: bool, dtype: str, fov: tuple,
                  rule: OpacityRule, thresholds: tuple, grf: GrfConfig, mitigation: Mitigation,
                  n_grains: int, cache_bins: int, cells=None) -> dict:  # fmt: skip
@@ -209,7 +233,17 @@ def build_header(g: GridFile, data: np.ndarray, *, sphere: bool, dtype: str, fov
             "query_step_deg": float(_defaults(viewport_epof, ("step_deg",))["step_deg"]),
             "cache_bins": int(cache_bins),
         }
+        cov = _coverage_section(g, cells)
+        if cov is not None:
+            header["coverage"] = cov
     else:
+        if coverage_masks(g.meta)[0] is not None:
+            raise InputError(
+                f"{g.path}: a paper-mode export of a source that does not cover the sphere "
+                f"({g.meta.get('projection')}) is not supported (the runtimes would count its "
+                "uncovered windows as still); export a sphere-mode grid (vimsim preprocess "
+                "--method sphere)"
+            )
         table = _table_params()
         header["overlap_table"] = {k: float(x) for k, x in table.items()}
         header["overlap_table"]["rays"] = int(table["rays"])

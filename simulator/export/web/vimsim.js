@@ -391,6 +391,10 @@ export class VimsimEpof {
     /** The file's initial orientation (yaw, pitch, roll degrees; its spherical metadata), or
      * null (C#: OrientationDeg); its head -> video rotation, `pose`: see viewAngles. */
     this.orientationDeg = src.orientation_deg ? src.orientation_deg.slice() : null;
+    /** A source covering only part of the sphere (VR180): its covered cells (1/0, the data's row
+     * layout) and the fade threshold; epof() is then the covered part's mean (C#: PartialCoverage). */
+    this.coverMask = header.coverage ? Float32Array.from(header.coverage.cells) : null;
+    this.minCoverage = header.coverage ? header.coverage.min_coverage : 0;
     this.pose = src.orientation_deg ? headRotation(...src.orientation_deg) : null;
     /** Whether epof() and viewAngles() turn head angles by it (default true: head angles as in a
      * vimsim head path; false when they already are in the video's frame: C# ApplyOrientation). */
@@ -457,7 +461,17 @@ export class VimsimEpof {
     if (!(row >= 0 && row < this.frameCount && Number.isInteger(row)))
       throw new RangeError(`frame ${frame} outside ${this.range.startFrame}..${this.range.endFrame - 1}`);
     if (![yawDeg, pitchDeg, rollDeg].every(Number.isFinite)) throw new Error("orientation must be finite degrees");
-    return this.model.query(this.frameRow(row), 0, ...this.viewAngles(yawDeg, pitchDeg, rollDeg));
+    const v = this.viewAngles(yawDeg, pitchDeg, rollDeg), e = this.model.query(this.frameRow(row), 0, ...v);
+    if (!this.coverMask) return e;
+    // the covered part's mean, faded where the viewer sees mostly no content (vimsim epof)
+    const share = Math.max(0, Math.min(1, this.model.query(this.coverMask, 0, ...v)));
+    return share > 1e-9 ? (e / share) * Math.min(1, share / this.minCoverage) : 0;
+  }
+  /** Covered share (0..1) of the viewport at a head pose (vimsim epof's coverage column); 1 for a
+   * source covering the sphere (C#: Coverage). */
+  coverage(yawDeg, pitchDeg, rollDeg = 0) {
+    if (!this.coverMask) return 1;
+    return Math.max(0, Math.min(1, this.model.query(this.coverMask, 0, ...this.viewAngles(yawDeg, pitchDeg, rollDeg))));
   }
   /** [yaw, pitch, roll] (degrees) of the view in the video's frame for a head pose: the head's
    * turned by the file's initial orientation (its spherical metadata: R(orientation) R(head),
