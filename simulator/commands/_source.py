@@ -10,9 +10,11 @@ from simulator.core.choices import PROJECTIONS, STILL_FPS, STILL_SECONDS
 __all__ = ["add_source_arguments", "source_from_args"]
 
 
-def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> None:
-    """Add ``--projection``, ``--lens-fov`` and ``--ignore-orientation`` (and with ``still``,
-    ``--seconds``/``--fps``)."""
+def add_source_arguments(
+    p: argparse.ArgumentParser, *, still: bool = False, orientation: bool = True
+) -> None:
+    """Add ``--projection``, ``--lens-fov`` and (unless ``orientation`` is False)
+    ``--ignore-orientation`` (and with ``still``, ``--seconds``/``--fps``)."""
     p.add_argument(
         "--projection",
         choices=PROJECTIONS,
@@ -29,6 +31,13 @@ def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> 
         metavar="DEG",
         help="dual fisheye: each lens's field of view in degrees, in (180, 360) (default 190)",
     )
+    if orientation:
+        _add_ignore_orientation(p)
+    if still:
+        _add_still(p)
+
+
+def _add_ignore_orientation(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--ignore-orientation",
         action="store_true",
@@ -36,21 +45,23 @@ def add_source_arguments(p: argparse.ArgumentParser, *, still: bool = False) -> 
         "yaw/pitch/roll; default: applied, head yaw/pitch/roll 0 looks where it says; "
         "docs/sources.md)",
     )
-    if still:
-        p.add_argument(
-            "--seconds",
-            type=float,
-            default=None,
-            metavar="S",
-            help=f"a still image is a clip of S seconds (default {STILL_SECONDS:g})",
-        )
-        p.add_argument(
-            "--fps",
-            type=positive_float,
-            default=None,
-            metavar="F",
-            help=f"a still image's clip rate, frames/s (default {STILL_FPS:g})",
-        )
+
+
+def _add_still(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--seconds",
+        type=float,
+        default=None,
+        metavar="S",
+        help=f"a still image is a clip of S seconds (default {STILL_SECONDS:g})",
+    )
+    p.add_argument(
+        "--fps",
+        type=positive_float,
+        default=None,
+        metavar="F",
+        help=f"a still image's clip rate, frames/s (default {STILL_FPS:g})",
+    )
 
 
 def source_from_args(

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from simulator.commands._opacity import add_opacity_arguments
+from simulator.commands._source import add_source_arguments
 from simulator.commands._types import nonneg_int
 from simulator.core.choices import LAYOUTS
 
@@ -26,7 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(docs/screen.md). Codec keyframes, hard cuts, fades "
         "and static overlays appearing are detected and left out (--no-artefacts: kept).",
     )
-    p.add_argument("videos", nargs="+", metavar="VIDEO", help="the videos (mono equirect)")
+    p.add_argument("videos", nargs="+", metavar="VIDEO", help="the videos (equirect unless --projection or their metadata says otherwise)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--viewers", type=int, default=30, metavar="N",
                    help="scripted viewers per video (default 30)")  # fmt: skip
@@ -40,6 +41,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    "(same content), repeatable")  # fmt: skip
     p.add_argument("--layout", choices=LAYOUTS, default="mono",
                    help="frame layout of every VIDEO (stereo: the left eye is screened)")  # fmt: skip
+    add_source_arguments(p, orientation=False)  # --projection, --lens-fov of every VIDEO
     p.add_argument("--no-artefacts", action="store_true",
                    help="do not detect keyframes, cuts, fades and overlays (keep every frame)")  # fmt: skip
     p.add_argument("--executor", default="local", metavar="local|ray|ray:ADDRESS",
@@ -83,7 +85,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         s = screen_videos(args.videos, args.output, viewers=args.viewers, kind=args.viewer_kind,
                           seed=args.seed, epof=epof, artefacts=not args.no_artefacts,
-                          grids=args.grid, layout=args.layout, executor=args.executor, workers=args.workers,
+                          grids=args.grid, layout=args.layout, projection=args.projection,
+                          lens_fov_deg=args.lens_fov, executor=args.executor, workers=args.workers,
                           cache_dir=args.cache_dir, progress=progress)  # fmt: skip
     finally:
         for bar in bars:

@@ -336,6 +336,44 @@ class Source:
             it.close()
         raise InputError(f"{self.path}: has no frame {index}")
 
+    def frames_at(self, frames, *, eye: str | None = None) -> Iterator[tuple[int, NDArray[np.uint8]]]:
+        """``(index, the eye's equirect frame RGB)`` for the sorted frame indices ``frames``
+        of a video, without decoding from the start (a long video has its moments anywhere):
+        decoding forward to a frame within 2 s, else a seek to the keyframe before it. A
+        frame is found by its time (:meth:`MediaInfo.times_s`, the player's clock: a
+        variable-rate video's frame ``i`` is not at ``i / fps``). Indices past the end are
+        skipped; a still yields its image for each."""
+        eye = self.eye if eye is None else eye
+        frames = sorted({int(f) for f in frames})
+        if self.still:
+            img = self.read(0, eye=eye)
+            yield from ((f, img) for f in frames if 0 <= f < self._info.n_frames)
+            return
+        import av
+
+        info = self._info
+        times = info.times_s(np.clip(frames, 0, max(info.n_frames - 1, 0)))
+        tol = 0.25 / info.fps
+        with av.open(str(self.file_of(eye))) as c:
+            s = c.streams.video[0]
+            s.thread_type = "AUTO"
+            tb = float(s.time_base)
+            # the player's clock, as probe's frame times: 0 at the container's start
+            c0 = c.start_time / 1e6 if c.start_time is not None else (
+                float(s.start_time * s.time_base) if s.start_time is not None else 0.0)  # fmt: skip
+            it, pos = None, -math.inf
+            for f, tf in zip(frames, times):
+                if f < 0 or f >= info.n_frames:
+                    continue
+                if it is None or tf - pos > 2.0:
+                    c.seek(int((tf + c0) / tb), stream=s, backward=True, any_frame=False)
+                    it = c.decode(s)
+                for fr in it:
+                    pos = fr.pts * tb - c0 if fr.pts is not None else tf
+                    if pos >= tf - tol:
+                        yield f, np.array(self.eye_view(fr.to_ndarray(format="rgb24"), eye))
+                        break
+
 
 def as_source(video) -> Source:
     """``video`` if it is a :class:`Source`, else ``Source.open(video)`` (mono equirect)."""

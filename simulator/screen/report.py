@@ -20,16 +20,17 @@ import math
 import warnings
 from pathlib import Path
 
-import av
 import numpy as np
 
 from simulator.core.fileio import atomic_output
 from simulator.epof.viewing import read_epof_csv
+from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
 from simulator.media.lazyfield import field_chunks
+from simulator.media.source import Source
 from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
 from simulator.screen.page import write_screen_page
-from simulator.sphere.geometry import extract_view, split_eye
+from simulator.sphere.geometry import extract_view
 
 __all__ = ["SCREEN_COLUMNS", "write_screen_outputs"]
 
@@ -60,30 +61,6 @@ def _write_csv(path: Path, header, rows, comments=()) -> None:
         Path(tmp).write_text(buf.getvalue())
 
 
-def _frames_at(video, frames: list[int], layout: str, eye: str):
-    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``, decoding
-    on threads: forward to the next frame when it is near, else a seek to the keyframe
-    before it."""
-    with av.open(str(video)) as c:
-        s = c.streams.video[0]
-        s.thread_type = "AUTO"
-        fps = float(s.average_rate or s.guessed_rate)
-        t0 = float(s.start_time * s.time_base) if s.start_time is not None else 0.0
-        it, pos = None, -(10**9)
-        for f in frames:
-            if it is None or f - pos > 2 * round(fps):
-                c.seek(int((t0 + f / fps) / s.time_base), stream=s, backward=True, any_frame=False)
-                it = c.decode(s)
-            for fr in it:
-                pos = round((float(fr.pts * s.time_base) - t0) * fps) if fr.pts is not None else f
-                if pos >= f:
-                    yield (
-                        f,
-                        split_eye(fr.to_ndarray(format="rgb24"), layout, eye, source=str(video)),
-                    )
-                    break
-
-
 def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
     """``map.csv``: one row per frame and pitch, one column per yaw (deg/s, 6 digits)."""
     buf = io.StringIO()
@@ -98,11 +75,15 @@ def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
         Path(tmp).write_text(buf.getvalue())
 
 
-def _sphere_mean(f) -> np.ndarray:
+def _sphere_mean(f, covered=None) -> np.ndarray:
     """Per frame, the solid-angle-weighted mean of a lon/lat field ``(T, n_lat, n_lon)``
-    (deg/s), read chunk by chunk (a lazy grid field: memory flat in the video's length)."""
+    (deg/s) over the cells ``covered`` (bool ``(n_lat, n_lon)``, None: all; a VR180
+    source's back half has no flow measured), read chunk by chunk (a lazy grid field:
+    memory flat in the video's length)."""
     lat = (np.arange(f.shape[1]) + 0.5) / f.shape[1] * np.pi - np.pi / 2
     w = np.cos(lat)[:, None] * np.ones(f.shape[2])
+    if covered is not None and covered.shape == w.shape and covered.any():
+        w = w * covered
     out = [(np.asarray(b, np.float64) * w).sum(axis=(1, 2)) / w.sum() for _, b in field_chunks(f)]
     return np.concatenate(out)
 
@@ -118,14 +99,16 @@ def _grid_arrays(path: Path) -> dict:
     d = {"pof": np.asarray(g.pof_dps, np.float64), "yaw": g.yaw_deg, "pitch": g.pitch_deg,
          "fps": float(g.fps), "start": int(meta.get("start_frame", 0)),
          "hfov": float(meta["grid"]["hfov_deg"]), "vfov": float(meta["grid"]["vfov_deg"])}  # fmt: skip
+    wins, cells = coverage_masks(meta)  # a projection covering part of the sphere: that part
     if g.field_dps is not None:
-        d["sphere"] = _sphere_mean(g.field_dps)
+        d["sphere"] = _sphere_mean(g.field_dps, cells)
     else:  # no field: the windows' mean
-        d["sphere"] = d["pof"].reshape(d["pof"].shape[0], -1).mean(axis=1)
+        pof = d["pof"] if wins is None or not wins.any() else d["pof"][:, wins]
+        d["sphere"] = pof.reshape(pof.shape[0], -1).mean(axis=1)
     nan = np.full(len(d["sphere"]), np.nan)
     # the camera's rotation and the flow without it (grids that record them)
     trans = getattr(g, "field_trans_dps", None)
-    d["trans"] = nan if trans is None else _sphere_mean(trans)
+    d["trans"] = nan if trans is None else _sphere_mean(trans, cells)
     om = (g.extras or {}).get("ego_omega_dps")
     d["rot"] = nan if om is None else np.linalg.norm(np.asarray(om, np.float64), axis=1)
     return d
@@ -167,7 +150,9 @@ def _thumbnails(v, g: dict, moments: list[dict], folder: Path, pitch0: float) ->
     want = {}
     for mo in moments:
         want.setdefault(mo["frame"] + g["start"], []).append(mo)
-    for f, frame in _frames_at(v.path, sorted(want), v.layout, v.eye):
+    src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
+                      lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    for f, frame in src.frames_at(sorted(want)):
         for mo in want[f]:
             view = extract_view(frame, mo["yaw_deg"], pitch0, 0.0, hfov_deg=g["hfov"],
                                 vfov_deg=g["vfov"], size=(240, 240))  # fmt: skip

@@ -18,6 +18,7 @@ from pathlib import Path
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.media.gridfile import content_hash
+from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
 from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
@@ -44,9 +45,11 @@ def _video_id(path: Path, taken: set[str]) -> str:
     return vid
 
 
-def _matching_grid(video: Path, grids: list[Path], layout: str) -> Path | None:
+def _matching_grid(
+    video: Path, grids: list[Path], layout: str, projection: str = "equirect"
+) -> Path | None:
     """The first of ``grids`` made of ``video`` (the content hash its meta records) with
-    ``layout``."""
+    ``layout`` and ``projection``."""
     import json
 
     import numpy as np
@@ -60,7 +63,8 @@ def _matching_grid(video: Path, grids: list[Path], layout: str) -> Path | None:
                 meta = json.loads(str(z["meta"]))
         except (OSError, ValueError, KeyError):
             raise InputError(f"{g}: not a vimsim grid file") from None
-        if meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout:
+        if (meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout
+                and (meta.get("projection") or "equirect") == projection):  # fmt: skip
             return g
     return None
 
@@ -76,6 +80,8 @@ def screen_videos(
     artefacts: bool = True,
     grids=(),
     layout: str = "mono",
+    projection: str | None = None,
+    lens_fov_deg: float | None = None,
     executor: str = "local",
     workers: int | None = None,
     cache_dir=None,
@@ -85,7 +91,8 @@ def screen_videos(
 
     ``epof``: the ``[epof]`` options of a study manifest (opacity rule, FOV); ``grids``:
     grid files the user already made (used for the video whose content they match);
-    ``layout``: of every video (stereo: the left eye is screened).
+    ``layout``: of every video (stereo: the left eye is screened); ``projection``,
+    ``lens_fov_deg``: of every video (None: each file's spherical metadata, else equirect).
     InputError (nothing written) for no video, a still image, a missing file, bad viewers.
     """
     check_viewers(viewers, kind)
@@ -95,21 +102,26 @@ def screen_videos(
     if not paths:
         raise InputError("screen needs at least one video")
     grid_files = [check_input_file(g, "grid") for g in grids]
+    sources = {}
     for p in paths:
         info = probe(p)
         if not info.is_video or info.n_frames < 2:
             raise InputError(f"{p}: is a still image; screen needs a video")
-        info.eye_size(layout)  # the layout must fit the frame (InputError naming the file)
+        # the layout and projection must fit the frame (InputError naming the file)
+        sources[p] = Source.open(p, layout=layout, projection=projection,
+                                 lens_fov_deg=lens_fov_deg)  # fmt: skip
     out = Path(outdir)
     taken: set[str] = set()
     specs, views, reused = [], [], {}
     for p in paths:
         vid = _video_id(p, taken)
-        g = _matching_grid(p, grid_files, layout)
+        src = sources[p]
+        g = _matching_grid(p, grid_files, src.layout, src.projection)
         if g is not None:
             reused[vid] = str(g)
-        specs.append(VideoSpec(id=vid, path=p.resolve(), layout=layout, method="sphere",
-                               grid_file=g, artefacts=artefacts))  # fmt: skip
+        specs.append(VideoSpec(id=vid, path=p.resolve(), layout=src.layout, method="sphere",
+                               grid_file=g, artefacts=artefacts, projection=src.projection,
+                               lens_fov_deg=src.lens_fov_deg))  # fmt: skip
     width = max(3, len(str(viewers)))
     for spec in specs:  # viewer k: the scripted head path of seed + k - 1 (study tasks make it)
         for k in range(1, viewers + 1):

@@ -154,7 +154,7 @@ def _thumbnails(source, moments: list[dict], hfov: float, vfov: float,
     want: dict[int, list[dict]] = {}
     for mo in moments:
         want.setdefault(mo["frame"], []).append(mo)
-    for i, frame in _frames_at(source, sorted(want)):
+    for i, frame in source.frames_at(sorted(want)):
         for mo in want[i]:
             view = extract_view(frame, mo["yaw_deg"], mo["pitch_deg"], 0.0,
                                 hfov_deg=hfov, vfov_deg=vfov, size=THUMB_SIZE)  # fmt: skip
@@ -162,35 +162,6 @@ def _thumbnails(source, moments: list[dict], hfov: float, vfov: float,
             with atomic_output(folder / name) as tmp:
                 Image.fromarray(view).save(tmp, format="PNG")
             mo["thumbnail"] = name
-
-
-def _frames_at(source, frames: list[int]):
-    """Yield ``(index, eye frame RGB)`` for the sorted frame indices ``frames``, each
-    converted to equirect from the source's projection: a seek to the keyframe before
-    each (not a decode from the start: a long video has its moments anywhere), then
-    decoding up to the frame whose presentation time is the index's (the source's frame
-    times, :meth:`simulator.media.video.MediaInfo.times_s`: a variable-rate video's frame
-    ``i`` is not at ``i / fps``)."""
-    info = source.info
-    times = info.times_s(frames)
-    tol = 0.25 / info.fps
-    with av.open(str(source.path)) as c:
-        s = c.streams.video[0]
-        tb = float(s.time_base)
-        # the player's clock, as probe's frame times: 0 at the container's start
-        c0 = c.start_time / 1e6 if c.start_time is not None else (
-            float(s.start_time * s.time_base) if s.start_time is not None else 0.0)  # fmt: skip
-        for f, tf in zip(frames, times):
-            c.seek(int((tf + c0) / tb), stream=s, backward=True, any_frame=False)
-            got = None
-            for fr in c.decode(s):
-                t = fr.pts * tb - c0 if fr.pts is not None else tf
-                if t >= tf - tol:
-                    got = fr
-                    break
-            if got is not None:
-                rgb = got.to_ndarray(format="rgb24")
-                yield f, source.eye_view(rgb)
 
 
 @dataclasses.dataclass(frozen=True)

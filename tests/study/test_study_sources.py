@@ -15,7 +15,6 @@ from simulator.cli import main
 from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.sphere.geometry import extract_view
-from simulator.study.outputs import _frames_at
 from simulator.testing.reference import ffmpeg_exe, psnr
 from simulator.traces.path import save_headpath_csv, synth
 
@@ -105,7 +104,7 @@ def test_thumbnail_frames_of_a_variable_rate_video_are_found_by_their_times(tmp_
     assert src.info.variable_rate
     ref = list(src.frames(fmt="rgb24"))
     want = [1, 3, 7, 12, 18, 24]
-    got = dict(_frames_at(src, want))
+    got = dict(src.frames_at(want))
     assert sorted(got) == want
     for f in want:
         np.testing.assert_array_equal(got[f], ref[f])

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 
 from simulator import __version__
+from simulator.core.errors import InputError
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import ViewportOverlaps
-from simulator.core.errors import InputError
 from simulator.export.unity.binary import FORMAT, FRAME_EPS, VERSION
 from simulator.media.coverage import MIN_COVERAGE, coverage_masks
 from simulator.media.gridfile import GridFile, content_hash
