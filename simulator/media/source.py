@@ -70,6 +70,9 @@ class Source:
     metadata: dict | None = field(default=None, compare=False, repr=False)
     notes: tuple[str, ...] = field(default=(), compare=False, repr=False)
     orientation_deg: tuple[float, float, float] | None = None
+    #: The file's stereo metadata stores the right eye first (top, or left half): each eye
+    #: is read from its own half (:meth:`eye_view`).
+    right_first: bool = False
 
     @classmethod
     def open(
@@ -117,8 +120,15 @@ class Source:
         is_still = still is not None and not info.is_video
         if is_still:
             info = _still_info(info, *still)
+        # the stored eye order applies to the layout the metadata describes
+        right_first = (md.get("eye_order") == "right-first" and layout == md.get("layout")
+                       and layout != "mono")  # fmt: skip
+        if right_first:
+            half = "top" if layout == "top-bottom" else "left"
+            notes.append(f"{path}: its stereo metadata stores the right eye first (the {half} "
+                         "half): each eye is read from its own half")  # fmt: skip
         src = cls(path, layout, projection, None, eye, lens_fov_deg, is_still, info,
-                  orientation_deg=pose)  # fmt: skip
+                  orientation_deg=pose, right_first=right_first)  # fmt: skip
         object.__setattr__(src, "metadata", md or None)
         object.__setattr__(src, "notes", tuple(notes))
         src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
@@ -200,6 +210,8 @@ class Source:
             and any((self.metadata or {}).get("orientation_deg") or ()),
             "eye": self.eye,
             "right": self.right,
+            "eye_order": None if self.layout == "mono" or self.right is not None
+            else ("right-first" if self.right_first else "left-first"),
         }
 
     def view_angles_deg(self, yaw_deg, pitch_deg, roll_deg):
@@ -218,7 +230,8 @@ class Source:
         (``convert=False``: as stored, for :meth:`EquirectConverter.sample`)."""
         eye = self.eye if eye is None else eye
         if self.right is None and self.layout != "mono":
-            frame = split_eye(frame, self.layout, eye, source=self.path)
+            stored = ("right" if eye == "left" else "left") if self.right_first else eye
+            frame = split_eye(frame, self.layout, stored, source=self.path)
         c = self.converter
         return frame if c is None or not convert else c(frame)
 

@@ -46,6 +46,8 @@ _STEREO = {
     "2d": "mono",
     "mono": "mono",
 }
+#: Matroska stereo modes that store the right eye first (top, or left half).
+_RIGHT_FIRST = ("bottom_top", "right_left")
 _SPH = re.compile(r"spherical(?: mapping)?\s*:\s*([a-z ]+?)\s*(?:\(|,|$)", re.IGNORECASE | re.MULTILINE)
 _ORI = re.compile(r"\(?\s*(-?[\d.]+)\s*/\s*(-?[\d.]+)\s*/\s*(-?[\d.]+)\s*\)?")
 _ST3 = re.compile(r"stereo ?3d\s*:\s*([a-z_ ]+?)\s*(?:,|$)", re.IGNORECASE | re.MULTILINE)
@@ -53,8 +55,12 @@ _ST3 = re.compile(r"stereo ?3d\s*:\s*([a-z_ ]+?)\s*(?:,|$)", re.IGNORECASE | re.
 
 def parse_report(text: str, tags: dict | None = None) -> dict:
     """The spherical metadata in FFmpeg's report of a file (and a stream's tags):
-    ``{"projection", "layout", "orientation_deg", "raw"}``, each None when absent."""
-    out: dict = {"projection": None, "layout": None, "orientation_deg": None, "raw": []}
+    ``{"projection", "layout", "eye_order", "orientation_deg", "raw"}``, each None when
+    absent. ``eye_order``: ``"right-first"`` when a stereo layout stores the right eye in the
+    top (or left) half (FFmpeg's "(inverted)" stereo3d flag; Matroska's ``bottom_top``,
+    ``right_left``), ``"left-first"`` for another stereo layout."""
+    out: dict = {"projection": None, "layout": None, "eye_order": None, "orientation_deg": None,
+                 "raw": []}  # fmt: skip
     m = _SPH.search(text)
     if m:
         name = m.group(1).strip().lower()
@@ -65,12 +71,18 @@ def parse_report(text: str, tags: dict | None = None) -> dict:
             out["orientation_deg"] = [float(v) for v in o.groups()]  # yaw/pitch/roll
     s = _ST3.search(text)
     mode = (tags or {}).get("stereo_mode")
+    inverted = False
     if s:
+        line = text[s.start() :].split("\n", 1)[0].lower()
         out["raw"].append(f"stereo3d: {s.group(1).strip().lower()}")
         out["layout"] = _STEREO.get(s.group(1).strip().lower())
+        inverted = "(inverted)" in line or str(mode or "").strip().lower() in _RIGHT_FIRST
     elif mode:
         out["raw"].append(f"stereo_mode: {mode}")
         out["layout"] = _STEREO.get(str(mode).strip().lower())
+        inverted = str(mode).strip().lower() in _RIGHT_FIRST
+    if out["layout"] in ("top-bottom", "side-by-side"):
+        out["eye_order"] = "right-first" if inverted else "left-first"
     return out
 
 

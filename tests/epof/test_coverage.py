@@ -84,8 +84,18 @@ def test_opacity_thresholds_come_from_covered_windows_only(vr180, tmp_path):
     assert (lo, hi) == pytest.approx(tuple(want))
     assert lo > 0.5 * np.median(pof[:, wins])  # not pulled to 0 by the black half
     assert np.percentile(pof, 10) == 0.0  # which counting every window would give
-    # the export's thresholds are the same ones
+    # the export's thresholds are the same ones (a sphere-mode grid: paper-mode exports of
+    # a partial source are refused, tests/export/test_export_coverage.py)
     from simulator.export.unity import export_unity
 
-    h = export_unity(g, tmp_path / "x").header
-    assert (h["opacity"]["low_dps"], h["opacity"]["high_dps"]) == pytest.approx((lo, hi))
+    gs = tmp_path / "s.npz"
+    assert main(["preprocess", str(vr180 / "h.mp4"), "-o", str(gs), "--method", "sphere",
+                 "--projection", "hequirect", "--no-progress", "--window-size", "32",
+                 "--cell", "10"]) == 0  # fmt: skip
+    sphere = load_grid(gs)
+    ws, _ = coverage_masks(sphere.meta)
+    lo_s, hi_s = OpacityRule().fit(sphere, None)
+    want_s = np.percentile(np.asarray(sphere.pof_dps, np.float64)[:, ws], [10, 90])
+    assert (lo_s, hi_s) == pytest.approx(tuple(want_s))
+    h = export_unity(gs, tmp_path / "x").header
+    assert (h["opacity"]["low_dps"], h["opacity"]["high_dps"]) == pytest.approx((lo_s, hi_s))
