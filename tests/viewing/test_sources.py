@@ -123,10 +123,18 @@ def test_spherical_metadata_gives_the_layout_and_an_option_wins_with_a_note(tmp_
     assert md["orientation_deg"] == [15.0, -2.5, 0.0]
 
 
-def test_10bit_hevc_decodes_and_the_summary_records_it(ctx, tmp_path):
-    p = tmp_path / "h10.mp4"
-    _ffmpeg("-f", "lavfi", "-i", "testsrc2=size=128x64:rate=10", "-t", "0.5", "-c:v", "libx265",
-            "-pix_fmt", "yuv420p10le", "-x265-params", "log-level=error", str(p))  # fmt: skip
+@pytest.mark.parametrize(
+    "name, codec",
+    [
+        ("h10.mp4", ["-c:v", "libx265", "-x265-params", "log-level=error"]),  # HEVC Main10
+        ("vp9.webm", ["-c:v", "libvpx-vp9", "-profile:v", "2"]),  # VP9 profile 2
+        ("av1.mp4", ["-c:v", "libaom-av1", "-cpu-used", "8"]),  # AV1 10-bit
+    ],
+)
+def test_10bit_sources_decode_and_the_summary_records_it(ctx, tmp_path, name, codec):
+    p = tmp_path / name
+    _ffmpeg("-f", "lavfi", "-i", "testsrc2=size=128x64:rate=10", "-t", "0.5", *codec,
+            "-pix_fmt", "yuv420p10le", str(p))  # fmt: skip
     save_headpath_csv(tmp_path / "p.csv", synth("static", 1.0, rate_hz=30.0))
     out = tmp_path / "r"
     assert main(["render", str(p), str(tmp_path / "p.csv"), "-o", str(out), "--opacity", "0.5",
