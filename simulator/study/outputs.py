@@ -370,7 +370,7 @@ def write_study_outputs(manifest, out: Path, grids: dict[str, Path], table: list
         epofs = {k: a for k, (a, _) in read.items()}
         try:
             if not grids[v.id].is_file():
-                raise InputError(f"video {v.id}: no grid (its preprocessing failed)")
+                raise InputError("no grid (its preprocessing failed)")  # the CLI names the video
             report["videos"][v.id] = _video_outputs(v, grids[v.id], epofs, out / "videos" / v.id,
                                                     artefact_frames(read))  # fmt: skip
         except InputError as e:

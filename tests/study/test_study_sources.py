@@ -108,3 +108,40 @@ def test_thumbnail_frames_of_a_variable_rate_video_are_found_by_their_times(tmp_
     assert sorted(got) == want
     for f in want:
         np.testing.assert_array_equal(got[f], ref[f])
+
+
+def test_a_still_in_a_study_fails_its_viewings_with_one_line_each(tmp_path, capsys):
+    """A still is no video for a study (render and frames take stills as clips): its
+    viewings fail naming the file, the study finishes the rest, each line names the video once."""
+    from simulator.synth import SynthConfig, synthesize
+
+    Image.fromarray(np.full((64, 128, 3), 90, np.uint8)).save(tmp_path / "pano.png")
+    synthesize(SynthConfig("rotate", seconds=1.0, fps=10, size=(128, 64)), tmp_path / "v.mp4")
+    save_headpath_csv(tmp_path / "P01.csv", synth("static", 1.5, rate_hz=30))
+    (tmp_path / "s.toml").write_text("""
+[study]
+name = "still"
+[[videos]]
+id = "pano"
+path = "pano.png"
+[[videos]]
+id = "clip"
+path = "v.mp4"
+[[viewings]]
+video = "pano"
+trace = "P01.csv"
+participant = "P01"
+condition = "GR"
+[[viewings]]
+video = "clip"
+trace = "P01.csv"
+participant = "P01"
+condition = "GR"
+""")
+    rc = main(["study", str(tmp_path / "s.toml"), "-o", str(tmp_path / "out"), "--no-progress"])
+    assert rc == 3  # some viewings failed
+    err = capsys.readouterr().err
+    assert "is a still image" in err and "pano.png" in err
+    assert "video pano: video pano" not in err
+    rows = (tmp_path / "out" / "viewings.csv").read_text()
+    assert "clip-P01-GR" in rows and ",ok," in rows
