@@ -14,6 +14,19 @@ from pathlib import Path
 
 CHROMIUM = "/usr/bin/chromium"
 
+#: The report replay's canvas after a seek to each time (Browser.replay_at).
+_REPLAY_AT = """
+const [times] = args;
+for (let i = 0; i < 600 && !(window.vimsimReplay && window.vimsimReplay.ready); i++)
+  await new Promise((r) => setTimeout(r, 50));
+const out = [];
+for (const t of times) {
+  await window.vimsimReplay.seek(t);
+  out.push(window.vimsimReplay.canvas.toDataURL('image/png'));
+}
+return out;
+"""
+
 
 def data_url_image(url: str):
     """``(h, w, 3)`` uint8 RGB of a ``data:image/png;base64,...`` URL (a canvas's
@@ -109,6 +122,12 @@ class Browser:
             return self.run_async(script, *args)
         finally:
             srv.close()
+
+    def replay_at(self, report, page: str, times) -> list:
+        """The report's replay (``report`` served on loopback, ``page`` a viewing page) after
+        a seek to each of ``times`` (seconds): its canvas as ``(h, w, 3)`` uint8 RGB each."""
+        got = self.run_served(report, page, _REPLAY_AT, list(times))
+        return [data_url_image(u) for u in got]
 
     def gl_renderer(self) -> str:
         return self.driver.execute_script(

@@ -13,12 +13,10 @@ from pathlib import Path
 import imageio_ffmpeg
 import numpy as np
 import pytest
-from browser_support import data_url_image
 from PIL import Image
 
 from simulator.cli import main
 from simulator.media.video import probe
-from simulator.report.serve import start_server
 from simulator.testing.reference import psnr
 from simulator.traces.path import save_headpath_csv, synth
 
@@ -92,26 +90,8 @@ def test_replay_of_a_late_source_shows_the_frame_of_the_players_clock(browser, l
     apart of a moving scene, far below the bar (checked against the source at t - 1 s)."""
     report = late_study / "out" / "report"
     times = [1.25, 2.05, 2.85]
-    srv = start_server(report)
-    try:
-        got = {}
-        for name in CODECS:
-            browser.get(srv.url + f"viewing-{name}-P01-GR.html")
-            got[name] = browser.run_async(
-                """
-                const [times] = args;
-                for (let i = 0; i < 600 && !(window.vimsimReplay && window.vimsimReplay.ready); i++)
-                  await new Promise((r) => setTimeout(r, 50));
-                const out = [];
-                for (const t of times) {
-                  await window.vimsimReplay.seek(t);
-                  out.push(window.vimsimReplay.canvas.toDataURL('image/png'));
-                }
-                return out;""",
-                times,
-            )
-    finally:
-        srv.close()
+    got = {name: browser.replay_at(report, f"viewing-{name}-P01-GR.html", times)
+           for name in CODECS}  # fmt: skip
     for name in CODECS:
         src = late_study / f"{name}.mp4"
         epof = late_study / "out" / "epof" / f"{name}-P01-GR.csv"
@@ -123,7 +103,7 @@ def test_replay_of_a_late_source_shows_the_frame_of_the_players_clock(browser, l
                          f"{EYE[0]}x{EYE[1]}", "--hfov", "100", "--vfov", "80", "--opacity",
                          str(epof), "--grf", "on", "--no-progress"]) == 0  # fmt: skip
             refs[shift] = [np.asarray(Image.open(f).convert("RGB")) for f in sorted(fdir.glob("*.png"))]
-        scores = [(psnr(data_url_image(g), r), psnr(data_url_image(g), w))
+        scores = [(psnr(g, r), psnr(g, w))
                   for g, r, w in zip(got[name], refs[0.0], refs[LATE_S])]  # fmt: skip
         print(f"\n{name}: replay vs the source's frame, and vs the frame 1 s later (PSNR dB): {scores}")
         assert len(scores) == len(times)

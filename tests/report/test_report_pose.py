@@ -7,12 +7,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from browser_support import data_url_image
 from media_helpers import with_pose
 from PIL import Image
 
 from simulator.cli import main
-from simulator.report.serve import start_server
 from simulator.testing.reference import psnr
 from simulator.traces.path import save_headpath_csv, synth
 
@@ -53,26 +51,8 @@ vfov = 80
                      str(out / "epof" / "posed-P01-GR.csv"), "--grf", "on", "--no-progress",
                      *extra]) == 0  # fmt: skip
         refs[name] = [np.asarray(Image.open(f).convert("RGB")) for f in sorted(fdir.glob("*.png"))]
-    srv = start_server(out / "report")
-    try:
-        browser.get(srv.url + "viewing-posed-P01-GR.html")
-        got = browser.run_async(
-            """
-            const [times] = args;
-            for (let i = 0; i < 600 && !(window.vimsimReplay && window.vimsimReplay.ready); i++)
-              await new Promise((r) => setTimeout(r, 50));
-            const out = [];
-            for (const t of times) {
-              await window.vimsimReplay.seek(t);
-              out.push(window.vimsimReplay.canvas.toDataURL('image/png'));
-            }
-            return out;""",
-            times,
-        )
-    finally:
-        srv.close()
-    scores = [(psnr(data_url_image(g), a), psnr(data_url_image(g), b))
-              for g, a, b in zip(got, refs["pose"], refs["nopose"])]  # fmt: skip
+    got = browser.replay_at(out / "report", "viewing-posed-P01-GR.html", times)
+    scores = [(psnr(g, a), psnr(g, b)) for g, a, b in zip(got, refs["pose"], refs["nopose"])]
     print(f"\nreplay vs vimsim frames with / without the pose (PSNR dB): {scores}")
     assert len(scores) == len(times)
     assert all(ok >= 30.0 and ok > off + 8 for ok, off in scores), scores

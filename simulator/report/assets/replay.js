@@ -80,15 +80,19 @@ async function main() {
     T.setCursor(t, state.free ? { t, epof: state.epof } : null);
   }
 
+  // One seek at a time: a "seeked" event answers the seek in flight, so a second seek waits
+  // for it (else both would draw the first one's frame).
+  let seeking = Promise.resolve();
   function seek(t) {
-    video.pause();
-    const f = rt.frameAt(t);
-    return new Promise((ok) => {
+    seeking = seeking.then(() => new Promise((ok) => {
+      video.pause();
+      const f = rt.frameAt(t);
       video.addEventListener("seeked", () => { draw(t, 0); ok(state); }, { once: true });
       // the middle of the frame (its own interval for a variable-rate video): the decoder shows frame f
       const t0 = rt.frameTime(f), t1 = f + 1 < rt.range.endFrame ? rt.frameTime(f + 1) : t0 + 1 / fps;
       video.currentTime = (t0 + t1) / 2 - mediaStart;
-    });
+    }));
+    return seeking;
   }
   T.onSeek((t) => seek(t));
 
@@ -132,8 +136,9 @@ async function main() {
     }
     return (count * 1000) / (performance.now() - t0);
   }
-  window.vimsimReplay = { seek, state, measure, canvas, ready: true };
+  window.vimsimReplay = { seek, state, measure, canvas, ready: false };
   await seek(c.time_s[0]);
+  window.vimsimReplay.ready = true; // the first frame drawn: a caller's seek is not raced by it
 }
 
 async function setupXR(rt, mitigation, video, state, mediaStart) {
