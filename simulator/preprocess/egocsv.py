@@ -10,7 +10,8 @@ equirect frame at frame t-1: +x right, +y up, +z forward; right-handed). The rat
 the same vector about the camera's own axes in vimsim's head conventions: yaw rate
 ``= omega_y`` (+ turning right), pitch rate ``= -omega_x`` (+ looking up), roll rate
 ``= -omega_z`` (+ right ear down). ``rotation_dps = |omega|``; ``confidence`` in [0, 1]
-(:class:`simulator.preprocess.ego.EgoFit`). Frame ``k`` is at ``k / fps`` seconds and
+(:class:`simulator.preprocess.ego.EgoFit`). Frame ``k`` is at ``k / fps`` seconds (a
+variable-rate video: at its timestamp, from the video or the grid's ``frame_times_s``) and
 holds the motion from frame ``k - 1`` to ``k``.
 """
 
@@ -79,9 +80,11 @@ def _from_grid(p: Path) -> EgoTable:
         )
     start = int(g.meta.get("start_frame") or 0)
     frames = start + np.arange(g.n_frames)
+    times = g.meta.get("frame_times_s")  # a variable-rate video's (player's clock)
+    ok = times is not None and len(times) >= g.n_frames
     return EgoTable(
         frames,
-        frames / g.fps,
+        np.asarray(times[: g.n_frames], np.float64) if ok else frames / g.fps,
         g.extras["ego_omega_dps"].astype(np.float64),
         g.extras["ego_confidence"].astype(np.float64),
         str(p),

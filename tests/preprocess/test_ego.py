@@ -138,3 +138,30 @@ def test_ego_command_video_and_grid(tmp_path, capsys):
     assert main(["ego", str(tmp_path / "nope.mp4"), "-o", str(tmp_path / "x.csv")]) == 2
     err = capsys.readouterr().err.strip()
     assert "nope.mp4" in err and "\n" not in err and not (tmp_path / "x.csv").exists()
+
+
+def test_ego_of_a_variable_rate_video_and_its_grid_give_the_frame_times(tmp_path):
+    """vimsim ego of a variable-rate video (every third frame dropped) and of its grid: both
+    CSVs time each row by the frame's timestamp, not frame / fps."""
+    import subprocess
+
+    from simulator.cli import main
+    from simulator.media.video import probe
+    from simulator.testing.reference import ffmpeg_exe
+
+    assert main(["synth", str(tmp_path / "r.mp4"), "--scene", "rotate", "--seconds", "1",
+                 "--fps", "30", "--size", "128x64"]) == 0  # fmt: skip
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i", str(tmp_path / "r.mp4"), "-vf",
+                    "select='not(eq(mod(n\\,3)\\,2))'", "-fps_mode", "vfr", "-c:v", "libx264",
+                    "-crf", "10", str(tmp_path / "vfr.mp4")], check=True)  # fmt: skip
+    truth = probe(tmp_path / "vfr.mp4").times_s()
+    assert main(["ego", str(tmp_path / "vfr.mp4"), "-o", str(tmp_path / "v.csv"),
+                 "--no-progress"]) == 0  # fmt: skip
+    assert main(["preprocess", str(tmp_path / "vfr.mp4"), "-o", str(tmp_path / "g.npz"),
+                 "--method", "sphere", "--cell", "10", "--no-progress"]) == 0  # fmt: skip
+    assert main(["ego", str(tmp_path / "g.npz"), "-o", str(tmp_path / "g.csv")]) == 0
+    for name in ("v.csv", "g.csv"):
+        rows = (tmp_path / name).read_text().splitlines()[1:]
+        t = np.array([float(r.split(",")[1]) for r in rows])
+        np.testing.assert_allclose(t, truth[: len(t)], atol=1e-6, err_msg=name)
+        assert np.ptp(np.diff(t)) > 0.02  # the gaps are there
