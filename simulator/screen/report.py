@@ -152,6 +152,9 @@ def _thumbnails(v, g: dict, moments: list[dict], folder: Path, pitch0: float) ->
         want.setdefault(mo["frame"] + g["start"], []).append(mo)
     src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
                       lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    for f, mine in want.items():  # the frame's own time (a variable-rate video: not frame / fps)
+        for mo in mine:
+            mo["time_s"] = float(src.info.times_s([f])[0])
     for f, frame in src.frames_at(sorted(want)):
         for mo in want[f]:
             view = extract_view(frame, mo["yaw_deg"], pitch0, 0.0, hfov_deg=g["hfov"],

@@ -233,6 +233,8 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         mo["pitch_deg"] = pitch0
     src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
                       lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    for mo in moments:  # the frame's own time (a variable-rate video: not frame / fps)
+        mo["time_s"] = float(src.info.times_s([mo["frame"]])[0])
     _thumbnails(src, moments, grid.hfov_deg, grid.vfov_deg, folder)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0

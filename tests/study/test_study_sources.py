@@ -108,6 +108,16 @@ def test_thumbnail_frames_of_a_variable_rate_video_are_found_by_their_times(tmp_
     assert sorted(got) == want
     for f in want:
         np.testing.assert_array_equal(got[f], ref[f])
+    # the screen's moments are timed by their frames' timestamps too
+    out = tmp_path / "scr"
+    assert main(["screen", str(tmp_path / "vfr.mp4"), "-o", str(out), "--viewers", "2",
+                 "--no-progress", "--cache-dir", str(tmp_path / "cache")]) == 0  # fmt: skip
+    rows = (out / "screen" / "vfr" / "moments.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    times = src.info.times_s()
+    for line in rows[1:]:
+        r = dict(zip(head, line.split(",")))
+        assert float(r["time_s"]) == pytest.approx(times[int(r["frame"])], abs=1e-6), r
 
 
 def test_a_still_in_a_study_fails_its_viewings_with_one_line_each(tmp_path, capsys):
