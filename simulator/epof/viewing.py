@@ -1,7 +1,8 @@
 """The EPOF of one viewing: a head path sampled at every frame of a grid, its opacity, its CSV and plot.
 
 Frame i of a grid is video frame ``start_frame + i`` at ``(start_frame + i) / fps``
-seconds. ``method`` chooses paper mode (:mod:`simulator.epof.overlaps`) or exact sphere
+seconds (a variable-rate video: at its timestamp, the grid's ``meta["frame_times_s"]``, on
+the player's clock). ``method`` chooses paper mode (:mod:`simulator.epof.overlaps`) or exact sphere
 mode (:mod:`simulator.epof.exact`). Units: EPOF in deg/s of visual angle; angles in
 degrees (yaw + right, pitch + up, roll + right ear down); times in seconds.
 """
@@ -56,8 +57,9 @@ EPOF_COLUMNS: tuple[str, ...] = (
 
 @dataclass(frozen=True)
 class EpofResult:
-    """EPOF of one viewing, one row per video frame (frame time = frame / fps; ``frame``
-    counts from the video's first frame, also for a grid of part of it).
+    """EPOF of one viewing, one row per video frame (frame time = frame / fps, or the
+    frame's timestamp for a variable-rate video; ``frame`` counts from the video's first
+    frame, also for a grid of part of it).
 
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
@@ -117,7 +119,8 @@ def compute_epof(
 
     Frame i of the grid is video frame ``start_frame + i`` (``meta["start_frame"]``, 0
     unless the grid was made with ``preprocess --start``) at ``(start_frame + i) / fps``
-    seconds; those are the ``frame`` and ``time_s`` columns. The head path must cover
+    seconds (a variable-rate video: its timestamps, ``meta["frame_times_s"]``); those are
+    the ``frame`` and ``time_s`` columns. The head path must cover
     every such time unless ``hold`` holds its first/last pose (InputError otherwise,
     saying where it ends).
 
