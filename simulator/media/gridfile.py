@@ -88,8 +88,9 @@ class GridFile:
         return float(self.meta["grid"]["vfov_deg"])
 
     def frame_times_s(self) -> NDArray[np.float64]:
-        """Presentation time of each frame, seconds from the video start (``t / fps``, or
-        the stream's timestamps of a variable-rate video, ``meta["frame_times_s"]``)."""
+        """Time of each grid row, seconds from the grid's first row (``t / fps``, or the
+        stream's timestamps of a variable-rate video, ``meta["frame_times_s"]``, less the
+        first; the rows' times on the player's clock: :func:`simulator.epof.overlaps._frames`)."""
         times = self.meta.get("frame_times_s")
         if times is not None and len(times) == self.n_frames:
             return np.asarray(times, float) - float(times[0])
