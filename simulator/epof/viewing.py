@@ -1,10 +1,9 @@
 """The EPOF of one viewing: a head path sampled at every frame of a grid, its opacity, its CSV and plot.
 
-Frame i of a grid is video frame ``start_frame + i`` at ``(start_frame + i) / fps``
-seconds (a variable-rate video: at its timestamp, the grid's ``meta["frame_times_s"]``, on
-the player's clock). ``method`` chooses paper mode (:mod:`simulator.epof.overlaps`) or exact sphere
-mode (:mod:`simulator.epof.exact`). Units: EPOF in deg/s of visual angle; angles in
-degrees (yaw + right, pitch + up, roll + right ear down); times in seconds.
+Frame i of a grid is video frame ``start_frame + i`` at ``(start_frame + i) / fps`` s (a
+variable-rate video: its timestamp). ``method``: paper mode (:mod:`simulator.epof.overlaps`)
+or exact sphere mode (:mod:`simulator.epof.exact`). Units: EPOF in deg/s of visual angle;
+angles in degrees (yaw + right, pitch + up, roll + right ear down); times in seconds.
 """
 
 from __future__ import annotations
@@ -57,9 +56,8 @@ EPOF_COLUMNS: tuple[str, ...] = (
 
 @dataclass(frozen=True)
 class EpofResult:
-    """EPOF of one viewing, one row per video frame (frame time = frame / fps, or the
-    frame's timestamp for a variable-rate video; ``frame`` counts from the video's first
-    frame, also for a grid of part of it).
+    """EPOF of one viewing, one row per video frame (frame time = frame / fps, or its
+    timestamp; ``frame`` counts from the video's first frame, also for a grid of part of it).
 
     Arrays, each shape (T,): ``frame`` (int), ``time_s``, ``yaw_deg``, ``pitch_deg``,
     ``roll_deg``, ``epof_dps`` (deg/s), ``opacity`` (0..1). ``thresholds_dps`` = the
@@ -119,10 +117,9 @@ def compute_epof(
 
     Frame i of the grid is video frame ``start_frame + i`` (``meta["start_frame"]``, 0
     unless the grid was made with ``preprocess --start``) at ``(start_frame + i) / fps``
-    seconds (a variable-rate video: its timestamps, ``meta["frame_times_s"]``); those are
-    the ``frame`` and ``time_s`` columns. The head path must cover
-    every such time unless ``hold`` holds its first/last pose (InputError otherwise,
-    saying where it ends).
+    seconds (a variable-rate video: its timestamps): the ``frame`` and ``time_s`` columns.
+    The head path must cover every such time unless ``hold`` holds its first/last pose
+    (InputError otherwise, saying where it ends).
 
     ``method``: ``"paper"`` = overlap-weighted mean of window POFs (section 3.5);
     ``"sphere"`` = exact EPOF, the grid's sphere-mode field integrated over the actual

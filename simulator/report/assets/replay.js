@@ -81,17 +81,29 @@ async function main() {
   }
 
   // One seek at a time: a "seeked" event answers the seek in flight, so a second seek waits
-  // for it (else both would draw the first one's frame).
+  // for it (else both would draw the first one's frame). The frame is drawn once the seek
+  // is done and its frame presented (requestVideoFrameCallback: before that, a WebGL upload
+  // of the video may still give the previous frame); a seek to the frame already shown
+  // presents none, so that wait ends after 0.5 s.
   let seeking = Promise.resolve();
+  async function seekOnce(t) {
+    video.pause();
+    const f = rt.frameAt(t);
+    const seeked = new Promise((ok) => video.addEventListener("seeked", ok, { once: true }));
+    const shown = new Promise((ok) => {
+      if (video.requestVideoFrameCallback) video.requestVideoFrameCallback(() => ok());
+      else ok();
+    });
+    // the middle of the frame (its own interval for a variable-rate video): the decoder shows frame f
+    const t0 = rt.frameTime(f), t1 = f + 1 < rt.range.endFrame ? rt.frameTime(f + 1) : t0 + 1 / fps;
+    video.currentTime = (t0 + t1) / 2 - mediaStart;
+    await seeked;
+    await Promise.race([shown, new Promise((ok) => setTimeout(ok, 500))]);
+    draw(t, 0);
+    return state;
+  }
   function seek(t) {
-    seeking = seeking.then(() => new Promise((ok) => {
-      video.pause();
-      const f = rt.frameAt(t);
-      video.addEventListener("seeked", () => { draw(t, 0); ok(state); }, { once: true });
-      // the middle of the frame (its own interval for a variable-rate video): the decoder shows frame f
-      const t0 = rt.frameTime(f), t1 = f + 1 < rt.range.endFrame ? rt.frameTime(f + 1) : t0 + 1 / fps;
-      video.currentTime = (t0 + t1) / 2 - mediaStart;
-    }));
+    seeking = seeking.then(() => seekOnce(t));
     return seeking;
   }
   T.onSeek((t) => seek(t));
