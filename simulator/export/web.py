@@ -5,7 +5,7 @@
 ==========================  ==============================================================
 ``vimsim_web.json``         what the runtime loads first: file names, table shape and axes,
                             the grain parameters (``"format": "vimsim-web"``)
-``vimsim_epof.bin``         the Unity export's binary, byte for byte (format 4,
+``vimsim_epof.bin``         the Unity export's binary, byte for byte (format 5,
                             :mod:`simulator.export.unity.binary`): the flow, the grain
                             layout, the GRF and vignette settings, the source's length and
                             the exported range
@@ -104,7 +104,7 @@ def _float16_field(g: GridFile) -> bool:
 
 
 def write_epof(g: GridFile, target: Path, **kw) -> dict:
-    """Write ``vimsim_epof.bin`` to ``target`` as :func:`export_unity` writes it (format 4,
+    """Write ``vimsim_epof.bin`` to ``target`` as :func:`export_unity` writes it (format 5,
     byte for byte); returns its header. ``kw``: export_unity's options.
 
     A float16 field exported as float16 (sphere mode, ``dtype`` auto or float16) is streamed

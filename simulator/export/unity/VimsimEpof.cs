@@ -51,7 +51,7 @@ namespace Vimsim
     public sealed class VimsimEpof
     {
         /// <summary>The binary format version this runtime reads.</summary>
-        public const int FormatVersion = 4;
+        public const int FormatVersion = 5;
         /// <summary>File name of the data inside an export folder.</summary>
         public const string DataFileName = "vimsim_epof.bin";
         /// <summary>Tolerance (frames) of the time-to-frame rule.</summary>
@@ -200,7 +200,7 @@ namespace Vimsim
                     throw new VimsimLoadException(src, "not a vimsim export (no VIMSIMEP signature); make one with vimsim export GRID.npz -o DIR");
             int version = (int)ReadU32(b, 8);
             if (version < FormatVersion)
-                throw new VimsimLoadException(src, "format version " + version + ", made by an older vimsim export (no grain layout, exported range, source length or variable-rate frame times); "
+                throw new VimsimLoadException(src, "format version " + version + ", made by an older vimsim export (no grain layout, exported range, source length, variable-rate frame times, coverage or orientation); "
                     + "export again with vimsim export GRID.npz -o DIR --format unity and copy the new files (version " + FormatVersion + ")");
             if (version != FormatVersion)
                 throw new VimsimLoadException(src, "header of format version " + version + "; this VimsimEpof.cs reads version " + FormatVersion + ": use the VimsimEpof.cs exported with the data");

@@ -55,8 +55,10 @@ FORMAT = "vimsim-epof"
 #: 3: the grain layout (section ``grains``), GRF and vignette settings (``grf``,
 #: ``vignette``, ``mitigation``), the source video's length (``source``) and the exported
 #: range (``range``). 4: a variable-rate video's frame times (``frame_times_s``), which
-#: the frame rule then uses.
-VERSION = 4
+#: the frame rule then uses. 5: a source not covering the sphere (``coverage``) and the
+#: file's initial orientation (``source.orientation_deg``), which the EPOF then uses (a
+#: format-4 runtime would ignore them and give another EPOF: it refuses the file).
+VERSION = 5
 MAGIC = b"VIMSIMEP"
 #: The data file inside an export folder.
 DATA_FILE = "vimsim_epof.bin"

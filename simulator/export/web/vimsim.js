@@ -25,9 +25,9 @@
 
 export const FORMAT = "vimsim-epof";
 /** The vimsim_epof.bin format read here (3: grain layout, GRF and vignette settings, source
- * length and exported range in the file; 4: a variable-rate video's frame times; older files
- * are refused: export again). */
-export const VERSION = 4;
+ * length and exported range in the file; 4: a variable-rate video's frame times; 5: coverage
+ * and initial orientation; older files are refused: export again). */
+export const VERSION = 5;
 /** The vimsim_web.json version read here. */
 export const MANIFEST_VERSION = 2;
 export const FRAME_EPS = 1e-6;
@@ -121,7 +121,7 @@ function checkHeader(h, name) {
     throw headerError(name, "frame_times_s", `expected ${h.n_frames} increasing times before range.end_s`);
 }
 
-/** Parse vimsim_epof.bin (format 4): {header, values (Uint16Array of binary16 or Float32Array,
+/** Parse vimsim_epof.bin (format 5): {header, values (Uint16Array of binary16 or Float32Array,
  * C order), grains (Float32Array, n_grains x 3)}, views of the buffer (no copy). Throws Error
  * naming the file and the problem (an older format: export again). */
 export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
@@ -132,7 +132,7 @@ export function parseEpofBinary(buffer, name = "vimsim_epof.bin") {
   const version = dv.getUint32(8, true), hlen = dv.getUint32(12, true);
   if (version < VERSION)
     throw new Error(`${name}: export format version ${version}, made by an older vimsim (no grain layout, ` +
-      `range, source length or variable-rate frame times); export again with vimsim export (version ${VERSION})`);
+      `range, source length, variable-rate frame times, coverage or orientation); export again with vimsim export (version ${VERSION})`);
   if (version !== VERSION) throw new Error(`${name}: export format version ${version}; this runtime reads version ${VERSION}`);
   if (16 + hlen > b.length) throw new Error(`${name}: truncated header`);
   const header = JSON.parse(new TextDecoder().decode(b.subarray(16, 16 + hlen)));
