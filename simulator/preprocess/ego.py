@@ -358,31 +358,38 @@ class MidpointSplat:
         wt = self._frame_weight(fx, fy)
         den = np.bincount(idx, weights=wt, minlength=C)
         field = self._cell_mean(idx, ang, den, wt)
-        # the fit runs on every other evaluated pixel, in coarser bins of cells (~12 deg)
-        vsum, dsum = self._cell_vectors(idx, fx, fy, ang, wt)
+        # the fit and the residual run on every other evaluated pixel: their (tile, cell)
+        # keys and weights, made once for both
+        n, h = len(self.tile_rot), slice(None, None, 2)
+        sub = (self._tile_key(idx, n, C, h), wt.reshape(n, *self.u0.shape)[:, h, h])
+        # the fit, in coarser bins of cells (~12 deg)
+        vsum, dsum = self._cell_vectors(sub, fx, fy, ang)
         nb = self._bin_dir.shape[0]
         bw = np.bincount(self._bin, weights=dsum, minlength=nb)
         bv = np.stack(
             [np.bincount(self._bin, weights=vsum[:, k], minlength=nb) for k in range(3)], -1
         )
         fit = fit_rotation(bv / np.where(bw > 0, bw, 1.0)[:, None], self._bin_dir, bw)
-        return field, self._trans_field(idx, fit, fx, fy, wt, field), fit
+        return field, self._trans_field(sub, dsum, fit, fx, fy, field), fit
 
-    def _trans_field(self, idx, fit, fx, fy, wt, field):
+    def _tile_key(self, idx, n: int, C: int, h: slice):
+        """``tile * C + cell`` of the evaluated pixels of the slice ``h`` (flat)."""
+        return (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
+
+    def _trans_field(self, sub, den, fit, fx, fy, field):
         """Per cell (radians per frame): the speed of the flow with the rotation removed,
         from the cell's mean residual rotation vector (:func:`residual_speed`), on every
-        other evaluated pixel (stride 4 at DIS ultrafast's: its flow's own resolution)."""
+        other evaluated pixel (stride 4 at DIS ultrafast's: its flow's own resolution);
+        ``sub`` = their (tile, cell) keys and weights, ``den`` (C,) the cells' weights."""
         n, C = len(self.tile_rot), self.cells.n_cells
         h = slice(None, None, 2)
         fx, fy = fx[:, h, h], fy[:, h, h]
         ang, crx, cry, crz, m = self._residual(fit.w, fx, fy, h)
-        wsub = wt.reshape(n, *self.u0.shape)[:, h, h].reshape(-1)
+        key, wsub = sub[0], sub[1].reshape(-1)
         # each pixel's residual as a rotation vector (angle x unit axis), tile coordinates
         k = (ang / np.maximum(m, np.float32(1e-12))).reshape(-1) * wsub
-        key = (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
         parts = [np.bincount(key, weights=k * c.reshape(-1), minlength=n * C) for c in (crx, cry, crz)]
         vec = (np.stack(parts, -1).reshape(n, C, 3) @ self.tile_rot.transpose(0, 2, 1)).sum(axis=0)
-        den = np.bincount(key % C, weights=wsub, minlength=C)
         vec /= np.where(den > 0, den, 1.0)[:, None]
         st = residual_speed(vec, self.cell_dir, fit.t, field, den > 0)
         empty = den <= 0
@@ -405,18 +412,18 @@ class MidpointSplat:
         np.minimum(b, self._blend0, out=b)
         return (self._area * b).reshape(-1)
 
-    def _cell_vectors(self, idx, fx, fy, ang, weight):
+    def _cell_vectors(self, sub, fx, fy, ang):
         """``(C, 3)`` weighted sums of the rotation vectors of every other evaluated pixel
         (each direction) per cell, world frame (summed per (tile, cell) in tile
-        coordinates, then rotated per tile), and ``(C,)`` their weights."""
+        coordinates, then rotated per tile), and ``(C,)`` their weights; ``sub`` = those
+        pixels' (tile, cell) keys and weights."""
         n, C = len(self.tile_rot), self.cells.n_cells
         h = slice(None, None, 2)
         fx, fy, ang = fx[:, h, h], fy[:, h, h], ang[:, h, h]
         du, dv = fx * self.cx, fy * self.cy
         cz = self.u0[h, h] * dv - self.v0[h, h] * du
         scale = ang / np.maximum(np.sqrt(du * du + dv * dv + cz * cz), np.float32(1e-12))
-        wsub = weight.reshape(fx.shape[0], *self.u0.shape)[:, h, h]
-        key = (idx.reshape(n, *self.u0.shape)[:, h, h] + self._tile * C).reshape(-1)
+        key, wsub = sub
         ws = (wsub * scale).reshape(-1)
         parts = [
             np.bincount(key, weights=ws * comp.reshape(-1), minlength=n * C)
