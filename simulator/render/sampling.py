@@ -6,9 +6,9 @@ module gives, per projection and stored eye size, the ``PROJ`` define, the unifo
 cube face's rectangle, the texel box its filter may read, its rotation; a dual fisheye's
 lens FOV) and the frame's largest texel in radians (the filter's scale).
 
-A ``c3x2`` / ``c6x1`` frame is uploaded as a :class:`FaceAtlas`: each face bordered by at
-least 3 pixels of its neighbours (the face plane extended, nearest: the CPU converter's
-atlas), so the bicubic taps across a face edge read the neighbouring face, not a repeated
+A ``c3x2`` / ``c6x1`` frame is uploaded as a face atlas
+(:class:`simulator.sphere.projections.FaceAtlas`, the CPU converter's too): each face
+bordered by at least 3 pixels of its neighbours (the face plane extended, nearest), so the bicubic taps across a face edge read the neighbouring face, not a repeated
 edge (the faces are copied as blocks, the borders gathered: about a frame copy). A cell's
 side is a multiple of 16 (even faces), so mip levels 1-4 halve it exactly and no mip
 texel of them mixes two cells.
@@ -21,15 +21,11 @@ from __future__ import annotations
 import functools
 import math
 
-import numpy as np
-from numpy.typing import NDArray
-
 from simulator.render.gl import _gl_limit
-from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, PROJECTIONS, face_grid, image_to_dirs
+from simulator.sphere.projections import DEFAULT_LENS_FOV_DEG, FaceAtlas, face_grid
 
 __all__ = [
     "PROJ_DEFINE",
-    "FaceAtlas",
     "atlas_pad",
     "face_atlas",
     "sampled_projection",
@@ -103,7 +99,7 @@ def uniforms(name: str, w: int, h: int, lens_fov_deg: float | None = None) -> di
 
 def texture_size(name: str, w: int, h: int) -> tuple[int, int]:
     """``(width, height)`` of the texture a ``w x h`` eye frame of ``name`` is uploaded as
-    (its :class:`FaceAtlas` for ``c3x2`` / ``c6x1``, else the frame's)."""
+    (its face atlas for ``c3x2`` / ``c6x1``, else the frame's)."""
     lay = face_grid(name) if name in ("c3x2", "c6x1") else None
     if lay is None:
         return w, h
@@ -113,59 +109,17 @@ def texture_size(name: str, w: int, h: int) -> tuple[int, int]:
 
 
 def atlas_pad(face: int) -> int:
-    """A :class:`FaceAtlas` border (pixels) for faces of ``face`` pixels: at least 3 (the
+    """A face atlas's border (pixels) for faces of ``face`` pixels: at least 3 (the
     bicubic reaches 2 beyond the last face texel), widened so that the cell's side is a
     multiple of 16 when ``face`` is even."""
     return 3 + (-(face + 6) % 16) // 2
 
 
-class FaceAtlas:
-    """The faces of a ``c3x2`` / ``c6x1`` frame, each bordered by :func:`atlas_pad` pixels
-    of its neighbours: ``atlas(frame)`` for ``(h, w, C)`` frames of one size."""
-
-    def __init__(self, name: str, w: int, h: int):
-        lay = face_grid(name)
-        F = w // lay.cols
-        P = self.pad = atlas_pad(F)
-        A = F + 2 * P
-        self.size, self.face = (w, h), F
-        self.shape = (lay.rows * A, lay.cols * A)
-        self.blocks = [(row * A + P, col * A + P, row * F, col * F) for col, row in lay.cell]
-        ring = np.ones((A, A), bool)
-        ring[P : P + F, P : P + F] = False
-        ry, rx = np.nonzero(ring)
-        t = (np.arange(A) - P + 0.5) / F * 2 - 1  # face coordinate of the cell's pixel centres
-        dst_y, dst_x, src_y, src_x = [], [], [], []
-        for col, row in lay.cell:  # a border pixel: the face plane extended, nearest pixel
-            d = image_to_dirs(name, col, row, t[rx], t[ry])
-            sx, sy, _ = PROJECTIONS[name].to_image(d, w, h, None)
-            dst_y.append(ry + row * A)
-            dst_x.append(rx + col * A)
-            src_y.append(np.clip(np.rint(sy), 0, h - 1).astype(np.intp))
-            src_x.append(np.clip(np.rint(sx), 0, w - 1).astype(np.intp))
-        # flat pixel indices (a gather of whole pixels is 2x faster than of 2-d indices)
-        self.dst = np.concatenate(dst_y) * self.shape[1] + np.concatenate(dst_x)
-        self.src = np.concatenate(src_y) * w + np.concatenate(src_x)
-
-    def __call__(self, frame: NDArray, out: NDArray | None = None) -> NDArray:
-        """The atlas of ``frame``, written into ``out`` when it fits (an earlier result:
-        reused, so that an 8K frame's atlas is not a fresh allocation per frame)."""
-        F = self.face
-        frame = np.ascontiguousarray(frame)
-        shape = self.shape + frame.shape[2:]
-        if out is None or out.shape != shape or out.dtype != frame.dtype:
-            out = np.empty(shape, frame.dtype)
-        for ay, ax, fy, fx in self.blocks:
-            out[ay : ay + F, ax : ax + F] = frame[fy : fy + F, fx : fx + F]
-        px = f"V{frame.itemsize * int(np.prod(frame.shape[2:]))}"  # one pixel, any channels
-        out.reshape(-1).view(px)[self.dst] = frame.reshape(-1).view(px)[self.src]
-        return out
-
-
 @functools.lru_cache(maxsize=4)
 def face_atlas(name: str, w: int, h: int) -> FaceAtlas:
-    """The (cached) :class:`FaceAtlas` of a cubemap projection and eye size."""
-    return FaceAtlas(name, w, h)
+    """The (cached) :class:`simulator.sphere.projections.FaceAtlas` of a cubemap projection
+    and eye size, its border :func:`atlas_pad` wide."""
+    return FaceAtlas(name, w, h, atlas_pad(w // face_grid(name).cols))
 
 
 def sampled_projection(ctx, source) -> str:

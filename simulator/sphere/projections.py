@@ -49,6 +49,7 @@ __all__ = [
     "DEFAULT_LENS_FOV_DEG",
     "PROJECTIONS",
     "EquirectConverter",
+    "FaceAtlas",
     "Projection",
     "converter",
     "face_grid",
@@ -267,6 +268,51 @@ def image_to_dirs(proj: str, face_col: int, face_row: int, u: NDArray, v: NDArra
     return _face_dirs(k, uu, vv)
 
 
+class FaceAtlas:
+    """The faces of a ``c3x2`` / ``c6x1`` frame, each bordered by ``pad`` pixels of its
+    neighbours (the face plane extended, nearest pixel): ``atlas(frame)`` for ``(h, w)`` or
+    ``(h, w, C)`` frames of one size. The faces are copied as blocks and the borders
+    gathered (about a frame copy)."""
+
+    def __init__(self, name: str, w: int, h: int, pad: int):
+        lay = face_grid(name)
+        F = w // lay.cols
+        P = self.pad = int(pad)
+        A = F + 2 * P
+        self.size, self.face = (w, h), F
+        self.shape = (lay.rows * A, lay.cols * A)
+        self.blocks = [(row * A + P, col * A + P, row * F, col * F) for col, row in lay.cell]
+        ring = np.ones((A, A), bool)
+        ring[P : P + F, P : P + F] = False
+        ry, rx = np.nonzero(ring)
+        t = (np.arange(A) - P + 0.5) / F * 2 - 1  # face coordinate of the cell's pixel centres
+        dst_y, dst_x, src_y, src_x = [], [], [], []
+        for col, row in lay.cell:  # a border pixel: the face plane extended, nearest pixel
+            d = image_to_dirs(name, col, row, t[rx], t[ry])
+            sx, sy, _ = PROJECTIONS[name].to_image(d, w, h, None)
+            dst_y.append(ry + row * A)
+            dst_x.append(rx + col * A)
+            src_y.append(np.clip(np.rint(sy), 0, h - 1).astype(np.intp))
+            src_x.append(np.clip(np.rint(sx), 0, w - 1).astype(np.intp))
+        # flat pixel indices (a gather of whole pixels is 2x faster than of 2-d indices)
+        self.dst = np.concatenate(dst_y) * self.shape[1] + np.concatenate(dst_x)
+        self.src = np.concatenate(src_y) * w + np.concatenate(src_x)
+
+    def __call__(self, frame: NDArray, out: NDArray | None = None) -> NDArray:
+        """The atlas of ``frame``, written into ``out`` when it fits (an earlier result:
+        reused, so that an 8K frame's atlas is not a fresh allocation per frame)."""
+        F = self.face
+        frame = np.ascontiguousarray(frame)
+        shape = self.shape + frame.shape[2:]
+        if out is None or out.shape != shape or out.dtype != frame.dtype:
+            out = np.empty(shape, frame.dtype)
+        for ay, ax, fy, fx in self.blocks:
+            out[ay : ay + F, ax : ax + F] = frame[fy : fy + F, fx : fx + F]
+        px = f"V{frame.itemsize * int(np.prod(frame.shape[2:]))}"  # one pixel, any channels
+        out.reshape(-1).view(px)[self.dst] = frame.reshape(-1).view(px)[self.src]
+        return out
+
+
 class EquirectConverter:
     """Converts frames of one projection and eye size to the equirect working frame.
 
@@ -288,7 +334,7 @@ class EquirectConverter:
             raise InputError(f"--projection {name}: {problem}")
         self.name, self.size, self._p = name, (w, h), p
         self.lens_fov_deg = DEFAULT_LENS_FOV_DEG if lens_fov_deg is None else float(lens_fov_deg)
-        self._atlas = self._atlas_maps() if p.cube is not None else None
+        self._atlas = FaceAtlas(name, w, h, self.PAD) if p.cube is not None else None
         W, H = p.equirect(w, h)
         self.equirect_size = (W, H)
         lon, lat = equirect_pixel_lonlat(W, H)
@@ -310,29 +356,11 @@ class EquirectConverter:
             dirn = cube[0]
             x = x + (2 * np.asarray([c for c, _ in lay.cell])[dirn] + 1) * P
             y = y + (2 * np.asarray([r for _, r in lay.cell])[dirn] + 1) * P
-            lim_h, lim_w = (n - 1 for n in self._atlas[0].shape)
+            lim_h, lim_w = (n - 1 for n in self._atlas.shape)
         x = np.clip(x, 0, lim_w)
         y = np.clip(y, 0, lim_h)
         x = np.where(ok, x, -16.0)  # constant border: black
         return x.astype(np.float32), y.astype(np.float32), ok
-
-    def _atlas_maps(self):
-        """Nearest-pixel maps building an atlas of the faces, each padded by PAD pixels of
-        its neighbours (the face plane extended), from a frame."""
-        p, (w, h) = self._p, self.size
-        lay, P = p.cube, self.PAD
-        F = w // lay.cols
-        A = F + 2 * P
-        ax = np.zeros((lay.rows * A, lay.cols * A), np.float32)
-        ay = np.zeros_like(ax)
-        t = (np.arange(A) - P + 0.5) / F * 2 - 1  # face coordinate of atlas pixel centres
-        uu, vv = np.meshgrid(t, t)
-        for col, row in lay.cell:
-            d = image_to_dirs(self.name, col, row, uu, vv)
-            sx, sy, _ = p.to_image(d, w, h, self.lens_fov_deg)
-            ax[row * A : (row + 1) * A, col * A : (col + 1) * A] = np.clip(np.rint(sx), 0, w - 1)
-            ay[row * A : (row + 1) * A, col * A : (col + 1) * A] = np.clip(np.rint(sy), 0, h - 1)
-        return ax, ay
 
     def atlas(self, frame: NDArray) -> NDArray:
         """``frame`` as :meth:`maps` index it: the padded face atlas of a cubemap, else the
@@ -346,9 +374,7 @@ class EquirectConverter:
                 f"expected {self.size[0]}x{self.size[1]}"
             )
         src = np.ascontiguousarray(frame)
-        if self._atlas is not None:
-            src = cv2.remap(src, self._atlas[0], self._atlas[1], cv2.INTER_NEAREST)
-        return src
+        return src if self._atlas is None else self._atlas(src)
 
     def sample(self, frame: NDArray, dirs: NDArray, *, interp: int = cv2.INTER_CUBIC) -> NDArray:
         """``frame`` (this projection) sampled at world directions ``(..., 3)``; black where

@@ -24,7 +24,7 @@ from media_helpers import write_clip
 from simulator.media.source import Source
 from simulator.media.video import iter_frames
 from simulator.render import EyeRenderer, RenderConfig, render_video
-from simulator.render.sampling import FaceAtlas, sampled_projection
+from simulator.render.sampling import face_atlas, sampled_projection
 from simulator.sphere.geometry import head_rotation, perspective_rays
 from simulator.sphere.projections import EquirectConverter, converter
 from simulator.testing.reference import v360_convert
@@ -100,7 +100,7 @@ def test_shader_sampling_at_least_as_close_as_the_cpu_conversion(ctx, original, 
 def test_face_atlas_is_the_cpu_converters_atlas(name, size):
     rng = np.random.default_rng(0)
     frame = rng.integers(0, 256, (size[1], size[0], 3), dtype=np.uint8)
-    atlas = FaceAtlas(name, *size)
+    atlas = face_atlas(name, *size)  # the renderer's (its border for the mips)
     assert atlas.pad == 8 and atlas.shape[0] % 16 == 0  # 32 + 2 * 8: mips halve the cells
     cpu = EquirectConverter(name, size, pad=atlas.pad)  # the CPU converter's atlas, same border
     np.testing.assert_array_equal(atlas(frame), cpu.atlas(frame))
