@@ -270,29 +270,39 @@ class Source:
         file is closed on every exit. ``convert=False``: in the source's projection, as
         stored (for a renderer sampling it). A still's clip yields one read-only tuple,
         the same at every frame (its frames are the same: made once, not copied per frame)."""
+        kw = {"fmt": fmt, "threads": threads, "convert": convert}
+        if not self.still:
+            yield from self._eye_frames(start=start, end=end, **kw)
+            return
+        n = self._info.n_frames
+        count = len(range(max(0, start), n if end is None else min(int(end), n)))
+        if count == 0:
+            return
+        it = self._eye_frames(start=0, end=1, **kw)
+        try:
+            made = next(it)
+        finally:
+            it.close()
+        for a in made:
+            a.setflags(write=False)
+        for _ in range(count):
+            yield made
+
+    def _eye_frames(self, *, fmt, start, end, threads, convert):
+        """:meth:`eye_frames`, a fresh copy per frame."""
         if self.right is None:
             eyes = EYES if self.stereo else (self.eye,)
             it = self._decode(self.path, fmt, start, end, threads)
-            made = None
             try:
                 for f in it:
-                    if made is not None:
-                        yield made
-                        continue
-                    out = tuple(
+                    yield tuple(
                         np.array(self.eye_view(f, e, convert=convert), order="C") for e in eyes
                     )
-                    if self.still:
-                        for a in out:
-                            a.setflags(write=False)
-                        made = out
-                    yield out
             finally:
                 it.close()
             return
         kw = {"fmt": fmt, "start": start, "end": end, "threads": threads, "convert": convert}
         left, right = self.frames(eye="left", **kw), self.frames(eye="right", **kw)
-        made = None
         try:
             for fl in left:
                 fr = next(right, None)
@@ -300,15 +310,7 @@ class Source:
                     raise InputError(
                         f"{self.right}: right eye ends before the left eye ({self.path})"
                     )
-                if made is None:
-                    out = np.array(fl), np.array(fr)
-                    if self.still:  # two stills: the same pair at every frame
-                        for a in out:
-                            a.setflags(write=False)
-                        made = out
-                    yield out
-                else:
-                    yield made
+                yield np.array(fl), np.array(fr)
         finally:
             left.close()
             right.close()
