@@ -198,7 +198,7 @@ def render_video(
                                         on_frame, crf=crf, preset=preset, audio=audio, threads=threads,
                                         times_s=_out_times(source.info, start_frame, total))  # fmt: skip
             loop = _FrameLoop(renderer, rots, op, cell_opacity, eyes, stereo, workers,
-                              on_frame is not None, review_eye, timings, still=source.still)  # fmt: skip
+                              on_frame is not None, review_eye, timings)  # fmt: skip
             try:
                 # Decoding overlaps rendering; decoder buffers are reused, so copy there.
                 decoded = source.eye_frames(start=start_frame, end=start_frame + total,
@@ -284,9 +284,8 @@ class _FrameLoop:
     timing each step; poses and opacities beyond their last row hold the last."""
 
     def __init__(self, renderer, rots, op, cell_opacity, eyes, stereo, workers, review,
-                 review_eye, timings, still: bool = False):  # fmt: skip
+                 review_eye, timings):  # fmt: skip
         self.renderer, self.rots, self.op, self.cell_op = renderer, rots, op, cell_opacity
-        self.still = still  # a still image's clip: every frame is the same, uploaded once
         self.eyes, self.stereo, self.workers, self.timings = eyes, stereo, workers, timings
         self.review = review
         self.k = eyes.index(review_eye) if review_eye in eyes else 0  # the review's eye
@@ -314,14 +313,15 @@ class _FrameLoop:
 
     def run(self, frames, bar) -> int:
         """Draw every frame of ``frames``; the number drawn."""
-        timings, n = self.timings, 0
+        timings, n, shown = self.timings, 0, None
         t0 = time.perf_counter()
         for frame in frames:
             t1 = time.perf_counter()
             timings["decode_wait"] += t1 - t0
-            if not (self.still and n > 0):
+            if frame is not shown:  # a still's clip repeats one read-only frame: uploaded once
                 for e, f in zip(EYES, frame):  # (left, right) or (mono,)
                     self.renderer.upload(f, e)
+                shown = frame
             t2 = time.perf_counter()
             outs = self._draw(frame, n)
             t3 = time.perf_counter()
