@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from simulator.commands._opacity import add_opacity_arguments
+from simulator.commands._progress import progress_stream
 from simulator.commands._source import add_source_arguments
 from simulator.commands._types import nonneg_int
 from simulator.core.choices import LAYOUTS
@@ -73,11 +74,14 @@ def run(args: argparse.Namespace) -> int:
             "opacity_rule": "absolute" if rule.is_absolute else args.opacity_rule,
             "low_dps": rule.low_dps, "high_dps": rule.high_dps}  # fmt: skip
     bars: list = []
+    stream = None if args.no_progress else progress_stream()  # a terminal only, as study's
 
     def progress(done: int, failed: int, total: int) -> None:
+        if stream is None:
+            return
         if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="screen", disable=args.no_progress,
-                             file=sys.stderr, dynamic_ncols=True))  # fmt: skip
+            bars.append(tqdm(total=total, unit="task", desc="screen", file=stream,
+                             dynamic_ncols=True))  # fmt: skip
         bars[0].total = total
         bars[0].n = done + failed
         bars[0].refresh()

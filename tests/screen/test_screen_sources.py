@@ -16,7 +16,7 @@ from simulator.sphere.geometry import extract_view
 from simulator.testing.reference import ffmpeg_exe
 
 
-def test_screen_of_a_vr180_video(tmp_path):
+def test_screen_of_a_vr180_video(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "eq.mp4"), "--scene", "forward", "--seconds", "1.5",
                  "--fps", "10", "--size", "256x128"]) == 0  # fmt: skip
     subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i", str(tmp_path / "eq.mp4"), "-vf",
@@ -39,8 +39,11 @@ def test_screen_of_a_vr180_video(tmp_path):
     with open(folder / "sphere_flow.csv", newline="") as f:
         sphere = np.array([float(r["sphere_mean_dps"]) for r in csv.DictReader(f)])
     # the covered half's mean: about the equirect source's whole-sphere mean, not half of it
+    capsys.readouterr()
     assert main(["screen", str(tmp_path / "eq.mp4"), "-o", str(tmp_path / "eqout"), "--viewers",
-                 "3", "--no-progress", "--cache-dir", str(tmp_path / "cache")]) == 0  # fmt: skip
+                 "3", "--cache-dir", str(tmp_path / "cache")]) == 0  # fmt: skip
+    err = capsys.readouterr().err
+    assert "task/s" not in err and "%|" not in err, err  # no progress bar off a terminal
     with open(tmp_path / "eqout" / "screen" / "eq" / "sphere_flow.csv", newline="") as f:
         whole = np.array([float(r["sphere_mean_dps"]) for r in csv.DictReader(f)])
     assert 0.7 < np.median(sphere[1:]) / np.median(whole[1:]) < 1.4, (sphere, whole)
