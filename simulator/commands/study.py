@@ -113,7 +113,7 @@ def _dry_run(args: argparse.Namespace, manifest) -> int:
 
 def run(args: argparse.Namespace) -> int:
     """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
-    from simulator.commands._progress import progress_stream
+    from simulator.commands._progress import progress_bar
     from simulator.study import load_manifest, run_study
     from simulator.study.executors import parse_executor
 
@@ -127,23 +127,7 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import check_report_folder
 
         check_report_folder(Path(args.output) / "report")
-    from tqdm import tqdm  # not for a dry run: importing it costs 0.2 s
-    bars: list = []  # made on the first report: nothing is drawn before the work starts
-    stream = None if args.no_progress else progress_stream()  # a terminal only
-
-    def progress(done: int, failed: int, total: int) -> None:
-        if stream is None:
-            return
-        if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="study", file=stream,
-                             dynamic_ncols=True))  # fmt: skip
-        bar = bars[0]
-        bar.total = total
-        bar.n = done + failed
-        bar.set_postfix_str(f"done {done}, failed {failed}", refresh=False)
-        bar.refresh()
-
-    try:
+    with progress_bar("study", unit="task", enabled=not args.no_progress) as bar:
         s = run_study(
             manifest,
             args.output,
@@ -151,11 +135,8 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             cache_dir=args.cache_dir,
             resume=args.resume,
-            progress=progress,
+            progress=None if bar is None else (lambda done, failed, total: bar(done, total, failed)),
         )
-    finally:
-        for bar in bars:
-            bar.close()
     c = s["counts"]
     report_error = None
     if not args.no_report:
