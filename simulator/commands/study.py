@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from simulator.commands._types import positive_int
+from simulator.commands.report import add_browser_width
 
 __all__ = ["register", "run"]
 
@@ -68,6 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not write OUTDIR/report/ (the HTML report; vimsim report OUTDIR makes it later)",
     )
+    add_browser_width(p)
     p.set_defaults(func=run)
 
 
@@ -111,6 +113,22 @@ def _dry_run(args: argparse.Namespace, manifest) -> int:
     return 2 if plan["problems"] else 0
 
 
+def _check_browser_width(width, manifest) -> None:
+    """InputError unless ``--browser-width`` is an even width no wider than any mono
+    equirect video of the study (other layouts are checked when their copy is made)."""
+    from simulator.core.errors import InputError
+    from simulator.media.video import probe
+    from simulator.report.build import check_browser_width
+
+    w = check_browser_width(width)
+    for v in manifest.videos:
+        if v.layout == "mono" and v.projection == "equirect" and v.path.is_file():
+            vw = probe(v.path).width
+            if w > vw:
+                raise InputError(f"{v.path}: --browser-width {w} is wider than the video "
+                                 f"({vw} px); give at most {vw - vw % 2}")  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
     from simulator.commands._progress import progress_bar
@@ -127,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import check_report_folder
 
         check_report_folder(Path(args.output) / "report")
+        if args.browser_width is not None:  # a bad width: refused before any work
+            _check_browser_width(args.browser_width, manifest)
     with progress_bar("study", unit="task", enabled=not args.no_progress) as bar:
         s = run_study(
             manifest,
@@ -144,7 +164,8 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import build_report
 
         try:
-            rep = build_report(args.output)
+            with progress_bar("report (browser copy)", enabled=not args.no_progress) as bar:
+                rep = build_report(args.output, browser_width=args.browser_width, progress=bar)
             print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables "
                   f"{s['timings_s']['outputs']:.1f} s) -> {rep.index}", file=sys.stderr)  # fmt: skip
         except InputError as e:  # the study is complete; only its report is missing
