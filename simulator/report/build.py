@@ -21,6 +21,7 @@ import os
 import shutil
 import time
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -233,13 +234,17 @@ def _scaled_copy(src, dst: Path, info, size, times, progress) -> None:
     import av
 
     counter = Counter(progress, info.n_frames)
+    # each frame at its own time (constant rate too): pts in the writer's 1/90000 s
+    times = info.times_s() if times is None else times
     with av.open(str(src)) as ic, VideoWriter(dst, info.fps, size, crf=BROWSER_CRF,
                                               preset=BROWSER_PRESET, times_s=times) as vw:  # fmt: skip
         st = ic.streams.video[0]
         st.thread_type = "AUTO"
         for f in ic.decode(st):
-            vw.encode(f.reformat(width=size[0], height=size[1], format="yuv420p",
-                                 interpolation="AREA"))  # fmt: skip
+            nf = f.reformat(width=size[0], height=size[1], format="yuv420p", interpolation="AREA")
+            nf.time_base = Fraction(1, 90000)
+            vw.encode(nf)
+            vw.n_written += 1
             counter.update()
 
 
