@@ -20,6 +20,7 @@ __all__ = [
     "OutputFolder",
     "PendingOutput",
     "atomic_output",
+    "before_output",
     "check_input_file",
     "check_not_input",
     "check_output_dir",
@@ -41,6 +42,9 @@ _SCOPES: list[set[Path]] = []
 #: The temporary-name pattern of :func:`atomic_output`: ``.<stem>.tmp-<pid><suffix>``.
 _TMP_RE = re.compile(r"^\.(?P<stem>.*)\.tmp-(?P<pid>\d+)(?P<suffix>(\.[^.]*)?)$")
 
+#: Callbacks run once before the first output of a run is created (:func:`before_output`).
+_BEFORE_OUTPUT: list = []
+
 #: The manifest a folder output keeps of the files it wrote (see :class:`OutputFolder`).
 MANIFEST_NAME = ".vimsim-manifest.json"
 
@@ -59,6 +63,24 @@ def input_scope(inputs: Iterable[str | os.PathLike] = ()) -> Iterator[None]:
     finally:
         _INPUTS.clear()
         _INPUTS.update(_SCOPES.pop())
+
+
+@contextlib.contextmanager
+def before_output(callback) -> Iterator[None]:
+    """Within it, ``callback()`` runs once, just before the first output file or folder is
+    created (:class:`PendingOutput`, :func:`check_output_dir`): the moment a run's checks
+    have passed (the CLI opens its ``--log`` file then). It may raise InputError to refuse."""
+    _BEFORE_OUTPUT.append(callback)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            _BEFORE_OUTPUT.remove(callback)
+
+
+def _run_before_output() -> None:
+    while _BEFORE_OUTPUT:
+        _BEFORE_OUTPUT.pop()()
 
 
 def register_input(path: str | os.PathLike) -> None:
@@ -164,6 +186,7 @@ class PendingOutput:
 
     def __init__(self, path: str | os.PathLike):
         self.target = check_output_file(path)
+        _run_before_output()
         parent = self.target.parent if str(self.target.parent) else Path(".")
         remove_stale_temporaries(self.target)
         self.tmp = parent / f".{self.target.stem}.tmp-{os.getpid()}{self.target.suffix}"
@@ -301,6 +324,7 @@ def check_output_dir(path: str | os.PathLike) -> Path:
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise InputError(f"{p}: output folder is an existing file; expected a folder")
+    _run_before_output()
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as e:

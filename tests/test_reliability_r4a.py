@@ -1,0 +1,114 @@
+"""Reliability corpus, round 4 (part A): ``--log`` as an output, folder manifests of every
+folder a command writes, the report server, CSV cells, bad input named, sv3d cubemap tags.
+
+The table runs as ``test_reliability_r3``'s does (``{d}`` = a fresh copy of the base
+corpus; no input changed, no new file or folder beyond the outputs named, one error
+line); the cases that need more than a command line are functions below it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import subprocess
+from pathlib import Path
+
+import pytest
+from test_reliability import HPC, _both, _copy, _mkdir, _text, base, run_case  # noqa: F401
+from test_reliability_r3 import _snapshot, _study
+
+from simulator.cli import main
+
+FRAMES = ["frames", "{d}/v.mp4", "{d}/P.csv", "--eye-size", "32x32", "--no-progress", "--at", "0.1"]
+RENDER = ["render", "{d}/v.mp4", "{d}/P.csv", "--eye-size", "32x32", "--no-progress", "--opacity", "0.5"]
+STUDY = ["study", "{d}/S.toml", "-o", "{d}/o", "--cache-dir", "{d}/c", "--no-progress", "--workers", "1"]
+_VIDEO_A = '[[videos]]\nid = "a"\npath = "v.mp4"\nwindow_size = 32\nmethod = "sphere"\ncell = 10\n'
+CONVERT = [*HPC, "{d}/P.csv", "-o", "{d}/h.csv"]
+
+
+def _manifest_folder(d: Path) -> None:
+    """m/: a folder an earlier vimsim run wrote (a manifest, a viewings.csv, a summary.json)."""
+    (d / "m").mkdir()
+    (d / "m" / ".vimsim-manifest.json").write_text('{"command": "study", "state": "complete", "files": []}\n')
+    (d / "m" / "viewings.csv").write_text("viewing,video\n1,a\n")
+    (d / "m" / "sub").mkdir()
+    (d / "m" / "sub" / "summary.json").write_text("{}\n")
+
+
+# (id, setup, argv, status, message fragment ('!...' = must not appear), outputs a success leaves)
+CASES: list[tuple] = [
+    # --- --log is an output: never an input, never among the outputs, never in a vimsim folder
+    ("log-study-trace", _study(_VIDEO_A), [*STUDY, "--log", "{d}/P.csv"], 2, "--log", ()),
+    ("log-study-video", _study(_VIDEO_A), [*STUDY, "--log", "{d}/v.mp4"], 2, "--log", ()),
+    ("log-study-trace-dry", _study(_VIDEO_A), [*STUDY, "--dry-run", "--log", "{d}/P.csv"], 2, "--log", ()),
+    ("log-viewings-csv", _manifest_folder, [*CONVERT, "--log", "{d}/m/viewings.csv"], 2, "manifest", ()),
+    ("log-summary-json", _manifest_folder, [*CONVERT, "--log", "{d}/m/sub/summary.json"], 2, "manifest", ()),
+    ("log-render-left", None, [*RENDER, "-o", "{d}/o", "--log", "{d}/o/left.mp4"], 2, "inside the output folder", ()),
+    ("log-frames-json", None, [*FRAMES, "-o", "{d}/o", "--log", "{d}/o/frames.json"], 2, "inside the output folder", ()),
+    ("log-export-js", None, ["export", "{d}/G.npz", "-o", "{d}/o", "--format", "web", "--log", "{d}/o/vimsim.js"], 2, "inside the output folder", ()),
+    ("log-report-index", _mkdir("o"), ["report", "{d}/o", "--log", "{d}/o/report/index.html"], 2, "inside the output folder", ()),
+    ("log-is-output", None, [*CONVERT, "--log", "{d}/h.csv"], 2, "--log", ()),
+    ("log-is-plot", None, ["epof", "{d}/G.npz", "{d}/P.csv", "-o", "{d}/e.csv", "--plot", "{d}/e.png", "--log", "{d}/e.png"], 2, "--log", ()),
+    ("log-refusal-no-log", None, [*HPC, "{d}/nope.csv", "-o", "{d}/h.csv", "--log", "{d}/run.log"], 2, "nope.csv", ()),
+    ("log-ok", None, [*CONVERT, "--log", "{d}/run.log"], 0, "wrote", ("h.csv", "run.log")),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_corpus_r4a(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
+    status, fragment, outputs = case[3:]
+    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
+    err = cap.err
+    assert rc == status, err[:2000]
+    if fragment.startswith("!"):
+        assert fragment[1:] not in err + cap.out, err[:2000]
+    else:
+        assert fragment in err + cap.out, err[:2000] + cap.out[:2000]
+    assert "Traceback" not in err and "internal error" not in err, err[:2000]
+    if status == 2:
+        assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err[:2000]
+    after = _snapshot(d)
+    for name, h in before.items():  # no input changed (nor any other file that was there)
+        if name not in outputs:
+            assert after.get(name) == h, f"{name} changed or vanished"
+    new = set(after) - set(before)
+    assert new <= set(outputs), f"left behind: {sorted(new - set(outputs))[:5]}"
+    assert not [n for n in after if ".tmp-" in n]
+
+
+def test_log_gets_the_run_once_checks_pass(base, tmp_path, capsys):  # noqa: F811
+    """A run that passes its checks appends a header, its notes and its result line; an
+    existing log is appended to, never replaced."""
+    log = tmp_path / "run.log"
+    log.write_text("earlier\n")
+    out = tmp_path / "h.csv"
+    assert main([*HPC, str(base / "P.csv"), "-o", str(out), "--log", str(log)]) == 0
+    text = log.read_text()
+    assert text.startswith("earlier\n# ") and "wrote" in text.splitlines()[-1], text
+
+
+@contextlib.contextmanager
+def _full_tmpfs(path: Path):
+    path.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8k", "tmpfs", str(path)],
+                       check=False, capture_output=True, text=True)  # fmt: skip
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs ({r.stderr.strip()[:80]}): needs root/CAP_SYS_ADMIN")
+    try:
+        with contextlib.suppress(OSError), open(path / "fill", "wb") as f:
+            while True:
+                f.write(b"x" * 1024)
+                f.flush()
+        yield path
+    finally:
+        subprocess.run(["umount", str(path)], check=False)
+
+
+def test_log_on_a_full_disk_is_one_line_naming_it(base, tmp_path, capsys):  # noqa: F811
+    with _full_tmpfs(tmp_path / "full") as m:
+        rc = main([*HPC, str(base / "P.csv"), "-o", str(tmp_path / "h.csv"),
+                   "--log", str(m / "run.log")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    lines = [ln for ln in err.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "No space left on device" in lines[0], err
+    assert str(m / "run.log") in lines[0] and "Traceback" not in err, err
