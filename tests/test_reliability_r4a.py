@@ -19,16 +19,45 @@ from test_reliability_r3 import _snapshot, _study
 from simulator.cli import main
 
 FRAMES = ["frames", "{d}/v.mp4", "{d}/P.csv", "--eye-size", "32x32", "--no-progress", "--at", "0.1"]
-RENDER = ["render", "{d}/v.mp4", "{d}/P.csv", "--eye-size", "32x32", "--no-progress", "--opacity", "0.5"]
-STUDY = ["study", "{d}/S.toml", "-o", "{d}/o", "--cache-dir", "{d}/c", "--no-progress", "--workers", "1"]
+RENDER = [
+    "render",
+    "{d}/v.mp4",
+    "{d}/P.csv",
+    "--eye-size",
+    "32x32",
+    "--no-progress",
+    "--opacity",
+    "0.5",
+]
+STUDY = [
+    "study",
+    "{d}/S.toml",
+    "-o",
+    "{d}/o",
+    "--cache-dir",
+    "{d}/c",
+    "--no-progress",
+    "--workers",
+    "1",
+]
 _VIDEO_A = '[[videos]]\nid = "a"\npath = "v.mp4"\nwindow_size = 32\nmethod = "sphere"\ncell = 10\n'
 CONVERT = [*HPC, "{d}/P.csv", "-o", "{d}/h.csv"]
+
+
+def _file(name: str, text: str):
+    def make(d: Path) -> None:
+        (d / name).parent.mkdir(parents=True, exist_ok=True)
+        (d / name).write_text(text)
+
+    return make
 
 
 def _manifest_folder(d: Path) -> None:
     """m/: a folder an earlier vimsim run wrote (a manifest, a viewings.csv, a summary.json)."""
     (d / "m").mkdir()
-    (d / "m" / ".vimsim-manifest.json").write_text('{"command": "study", "state": "complete", "files": []}\n')
+    (d / "m" / ".vimsim-manifest.json").write_text(
+        '{"command": "study", "state": "complete", "files": []}\n'
+    )
     (d / "m" / "viewings.csv").write_text("viewing,video\n1,a\n")
     (d / "m" / "sub").mkdir()
     (d / "m" / "sub" / "summary.json").write_text("{}\n")
@@ -51,28 +80,6 @@ CASES: list[tuple] = [
     ("log-refusal-no-log", None, [*HPC, "{d}/nope.csv", "-o", "{d}/h.csv", "--log", "{d}/run.log"], 2, "nope.csv", ()),
     ("log-ok", None, [*CONVERT, "--log", "{d}/run.log"], 0, "wrote", ("h.csv", "run.log")),
 ]  # fmt: skip
-
-
-@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
-def test_corpus_r4a(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
-    status, fragment, outputs = case[3:]
-    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
-    err = cap.err
-    assert rc == status, err[:2000]
-    if fragment.startswith("!"):
-        assert fragment[1:] not in err + cap.out, err[:2000]
-    else:
-        assert fragment in err + cap.out, err[:2000] + cap.out[:2000]
-    assert "Traceback" not in err and "internal error" not in err, err[:2000]
-    if status == 2:
-        assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err[:2000]
-    after = _snapshot(d)
-    for name, h in before.items():  # no input changed (nor any other file that was there)
-        if name not in outputs:
-            assert after.get(name) == h, f"{name} changed or vanished"
-    new = set(after) - set(before)
-    assert new <= set(outputs), f"left behind: {sorted(new - set(outputs))[:5]}"
-    assert not [n for n in after if ".tmp-" in n]
 
 
 def test_log_gets_the_run_once_checks_pass(base, tmp_path, capsys):  # noqa: F811
@@ -112,3 +119,106 @@ def test_log_on_a_full_disk_is_one_line_naming_it(base, tmp_path, capsys):  # no
     lines = [ln for ln in err.splitlines() if "error" in ln]
     assert len(lines) == 1 and "No space left on device" in lines[0], err
     assert str(m / "run.log") in lines[0] and "Traceback" not in err, err
+
+
+# ----------------------------------------------------------------- screen's folders
+SCREEN = ["screen", "{d}/v.mp4", "-o", "{d}/o", "--viewers", "2", "--cache-dir", "{d}/c",
+          "--workers", "1", "--no-progress"]  # fmt: skip
+CASES += [
+    ("screen-foreign-index", _file("o/screen/index.html", "<p>mine</p>"), SCREEN, 2, "not written by vimsim screen", ()),
+    ("screen-foreign-video-file", _file("o/screen/v/map.csv", "mine"), SCREEN, 2, "not written by vimsim screen", ()),
+    ("screen-video-folder-is-file", _file("o/screen/v", "mine"), SCREEN, 2, "existing file", ()),
+]  # fmt: skip
+
+
+@pytest.mark.slow
+def test_screen_folders_keep_manifests_and_rerun(base, tmp_path, capsys):  # noqa: F811
+    import json
+
+    argv = [a.replace("{d}", str(base)).replace(f"{base}/o", str(tmp_path / "o"))
+            .replace(f"{base}/c", str(tmp_path / "c")) for a in SCREEN]  # fmt: skip
+    assert main(argv) == 0, capsys.readouterr().err
+    for sub in ("screen", "screen/v"):
+        m = json.loads((tmp_path / "o" / sub / ".vimsim-manifest.json").read_text())
+        assert m["command"] == "screen" and m["state"] == "complete", m
+    assert {"index.html", "comparison.csv", "screen.json"} <= set(
+        json.loads((tmp_path / "o" / "screen" / ".vimsim-manifest.json").read_text())["files"]
+    )
+    assert main(argv) == 0, capsys.readouterr().err  # a rerun replaces its own files
+
+
+# ----------------------------------------------------------------- the table, run
+@pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
+def test_corpus_r4a(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
+    status, fragment, outputs = case[3:]
+    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
+    err = cap.err
+    assert rc == status, err[:2000]
+    if fragment.startswith("!"):
+        assert fragment[1:] not in err + cap.out, err[:2000]
+    else:
+        assert fragment in err + cap.out, err[:2000] + cap.out[:2000]
+    assert "Traceback" not in err and "internal error" not in err, err[:2000]
+    if status == 2:
+        assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err[:2000]
+    after = _snapshot(d)
+    for name, h in before.items():  # no input changed (nor any other file that was there)
+        if name not in outputs:
+            assert after.get(name) == h, f"{name} changed or vanished"
+    new = set(after) - set(before)
+    assert new <= set(outputs), f"left behind: {sorted(new - set(outputs))[:5]}"
+    assert not [n for n in after if ".tmp-" in n]
+
+
+# ----------------------------------------------------------------- CSV cells
+def test_write_csv_guards_text_cells_only(tmp_path):
+    from simulator.core.fileio import csv_uncell, write_csv
+
+    p = write_csv(tmp_path / "t.csv", ["id", "x", "y"],
+                  [["=HYPERLINK(1)", -3.5, "-3.5"], ["-cmd", float("nan"), "@SUM(A1)"],
+                   ["+x", None, "P01"]])  # fmt: skip
+    rows = [ln.split(",") for ln in p.read_text().splitlines()]
+    assert rows[1] == ["'=HYPERLINK(1)", "-3.5", "-3.5"]  # numbers stay numbers
+    assert rows[2] == ["'-cmd", "", "'@SUM(A1)"] and rows[3] == ["'+x", "", "P01"]
+    assert csv_uncell("'=HYPERLINK(1)") == "=HYPERLINK(1)" and csv_uncell("'P01") == "'P01"
+
+
+@pytest.mark.slow
+def test_study_csvs_guard_participant_and_condition(base, tmp_path, capsys):  # noqa: F811
+    """viewings.csv and analysis/DATA.csv of a study whose participants and conditions
+    start with = - + @: text cells guarded, numeric cells untouched."""
+    import csv
+    import shutil
+
+    from test_reliability import EXAMPLE
+
+    d = tmp_path / "d"
+    shutil.copytree(base, d)
+    rows = list(csv.reader(ln for ln in EXAMPLE.read_text().splitlines() if ln[:1] != "#"))
+    head, data = rows[0], rows[1:]
+    pids = ["=HYPERLINK(1)", "-cmd", "@x", "+y"]
+    with open(d / "q.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["participant", *(c for c in head if c not in ("id", "condition", "flow"))])
+        for pid, r in zip(pids, data):
+            w.writerow([pid, *(v for c, v in zip(head, r) if c not in ("id", "condition", "flow"))])
+    views = "".join(
+        f'[[viewings]]\nid = "v{k}"\nvideo = "a"\ntrace = "P.csv"\nparticipant = "{pid}"\n'
+        f'condition = "{"=GR" if k % 2 else "-NR"}"\n'
+        for k, pid in enumerate(pids)
+    )
+    (d / "S.toml").write_text('[study]\nname = "t"\n\n' + _VIDEO_A + "\n" + views
+                              + '\n[questionnaires]\npath = "q.csv"\n')  # fmt: skip
+    out = tmp_path / "o"
+    rc = main(["study", str(d / "S.toml"), "-o", str(out), "--cache-dir", str(tmp_path / "c"),
+               "--no-progress", "--workers", "1"])  # fmt: skip
+    assert rc in (0, 3), capsys.readouterr().err
+    with open(out / "viewings.csv", newline="") as fh:
+        vrows = list(csv.DictReader(fh))
+    assert [r["participant"] for r in vrows] == ["'" + p for p in pids]
+    assert {r["condition"] for r in vrows} == {"'=GR", "'-NR"}
+    assert all(float(r["epof_mean_dps"]) >= 0 for r in vrows)  # numbers stay numbers
+    with open(out / "analysis" / "DATA.csv", newline="") as fh:
+        drows = [r for r in csv.DictReader(ln for ln in fh if ln[:1] != "#")]
+    assert sorted(r["id"] for r in drows) == sorted("'" + p for p in pids)
+    assert all(not r["condition"] or r["condition"][0] == "'" for r in drows)

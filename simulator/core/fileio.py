@@ -7,6 +7,8 @@ when complete, so an interrupted run never leaves a file that looks finished.
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import json
 import math
 import os
@@ -26,11 +28,14 @@ __all__ = [
     "check_output_dir",
     "check_output_file",
     "csv_cell",
+    "csv_text",
+    "csv_uncell",
     "input_scope",
     "json_text",
     "known_inputs",
     "register_input",
     "remove_stale_temporaries",
+    "write_csv",
 ]
 
 #: Every file read through :func:`check_input_file` inside :func:`input_scope` (the CLI
@@ -344,6 +349,48 @@ def csv_cell(value: str) -> str:
     ):
         return "'" + s
     return s
+
+
+def csv_uncell(value: str) -> str:
+    """The text :func:`csv_cell` guarded, as it was (for vimsim reading its own CSVs)."""
+    s = str(value)
+    return s[1:] if s[:1] == "'" and csv_cell(s[1:]) == s else s
+
+
+def _csv_number(v) -> str:
+    """A non-text cell: empty for None and non-finite floats, 10 significant digits."""
+    if v is None:
+        return ""
+    if hasattr(v, "item") and not isinstance(v, (str, bytes)):  # a numpy scalar
+        v = v.item()
+    if isinstance(v, float):
+        return f"{v + 0.0:.10g}" if math.isfinite(v) else ""
+    return str(v)
+
+
+def csv_text(header, rows, *, comments=(), fmt=None) -> str:
+    """CSV text (``#`` comment lines, the header, the rows) as :func:`write_csv` writes it."""
+    fmt = fmt or _csv_number
+    buf = io.StringIO()
+    for c in comments:
+        buf.write(f"# {c}\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([csv_cell(h) for h in header])
+    for r in rows:
+        w.writerow([csv_cell(v) if isinstance(v, str) else fmt(v) for v in r])
+    return buf.getvalue()
+
+
+def write_csv(path: str | os.PathLike, header, rows, *, comments=(), fmt=None) -> Path:
+    """The one CSV writer of every table a command writes (``viewings.csv``, ``DATA.csv``,
+    ``comparison.csv``, screen and study tables): atomic (:func:`atomic_output`), every
+    text cell through :func:`csv_cell` (a participant ``=HYPERLINK(...)`` cannot run as a
+    spreadsheet formula; ``-3.5`` stays a number), other cells through ``fmt`` (default: 10
+    significant digits, empty for None and NaN)."""
+    text = csv_text(header, rows, comments=comments, fmt=fmt)
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+    return Path(path)
 
 
 def _json_safe(x):

@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, json_text
+from simulator.core.fileio import atomic_output, csv_uncell, json_text
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.export.unity import VERSION as DATA_VERSION
 from simulator.export.web import JS_FILES, MANIFEST_VERSION, export_web, js_source
@@ -111,7 +111,8 @@ def check_report_folder(folder: Path) -> set[str]:
 def _viewings(out: Path) -> list[dict]:
     """viewings.csv rows (columns read by name; extra columns kept)."""
     with open(out / "viewings.csv", newline="", encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
+        rows = [{k: csv_uncell(v) if isinstance(v, str) else v for k, v in r.items()}
+                for r in csv.DictReader(f)]  # fmt: skip -- the text as written, unguarded
     for need in ("viewing", "video", "status"):
         if rows and need not in rows[0]:
             raise InputError(f"{out / 'viewings.csv'}: no {need!r} column")

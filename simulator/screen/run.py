@@ -20,7 +20,7 @@ from simulator.core.fileio import check_input_file
 from simulator.media.gridfile import content_hash
 from simulator.media.source import Source
 from simulator.media.video import probe
-from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
+from simulator.screen.report import SCREEN_COLUMNS, screen_folders, write_screen_outputs
 from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
 from simulator.study.runner import run_study
 from simulator.study.tasks import write_json
@@ -127,6 +127,9 @@ def screen_videos(
         for k in range(1, viewers + 1):
             views.append(ViewingSpec(f"{spec.id}-viewer{k:0{width}d}", spec.id, None,
                                      SCRIPTED + kind, seed + k - 1, f"viewer{k:0{width}d}"))  # fmt: skip
+    folders = screen_folders(out, [spec.id for spec in specs])
+    for f in folders:  # a user's file under OUTDIR/screen/: refused before any work
+        f.check()
     opts = _epof_options(epof or {}, artefacts)
     m = Manifest(path=(out / "screen.toml").resolve(), name="screen", videos=tuple(specs),
                  viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip
@@ -141,6 +144,7 @@ def screen_videos(
     summary["screen"]["artefacts"] = artefacts
     write_json(out / "screen" / "screen.json", {"format": "vimsim-screen", "version": 1,
                "study": "study.json", **summary["screen"]})  # fmt: skip
+    folders[0].complete()
     return summary
 
 
