@@ -147,6 +147,56 @@ def test_screen_folders_keep_manifests_and_rerun(base, tmp_path, capsys):  # noq
     assert main(argv) == 0, capsys.readouterr().err  # a rerun replaces its own files
 
 
+# ----------------------------------------------------------------- bad input named
+def _bomb_png(d: Path) -> None:
+    """B.png: a PNG whose header claims 30000x15000 px (a decompression bomb), a few bytes."""
+    import struct
+    import zlib
+
+    def chunk(kind: bytes, data: bytes) -> bytes:
+        crc = zlib.crc32(kind + data) & 0xFFFFFFFF
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", crc)
+
+    ihdr = struct.pack(">IIBBBBB", 30000, 15000, 8, 2, 0, 0, 0)
+    (d / "B.png").write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr)
+                              + chunk(b"IDAT", zlib.compress(b"")) + chunk(b"IEND", b""))  # fmt: skip
+
+
+def _deep_settings(d: Path) -> None:
+    """B.csv: an EPOF CSV whose settings line holds JSON nested 200,000 deep."""
+    assert main(["epof", str(d / "G.npz"), str(d / "P.csv"), "-o", str(d / "e.csv")]) == 0
+    text = (d / "e.csv").read_text()
+    (d / "e.csv").unlink()
+    (d / "B.csv").write_text("# method: " + "[" * 200_000 + "]" * 200_000 + "\n" + text)
+
+
+def _pickled_member(d: Path) -> None:
+    """B.npz: S.npz (v.mp4's sphere grid) plus a pickled object member."""
+    import numpy as np
+
+    with np.load(d / "S.npz", allow_pickle=False) as z:
+        a = {k: z[k] for k in z.files}
+    a["extra"] = np.array([{"x": 1}], dtype=object)
+    with open(d / "B.npz", "wb") as fh:
+        np.savez(fh, **a)  # pickles the object member; a reader must refuse, never unpickle
+
+
+_STILL_A = '[[videos]]\nid = "a"\npath = "p.png"\nwindow_size = 32\n'
+_EAC_A = '[[videos]]\nid = "a"\npath = "v.mp4"\nwindow_size = 32\nprojection = "eac"\n'
+DRY = ["study", "{d}/S.toml", "-o", "{d}/o", "--cache-dir", "{d}/c", "--dry-run"]
+CASES += [
+    ("bomb-viewport", _bomb_png, ["viewport", "{d}/B.png", "--yaw", "0", "--pitch", "0", "--size", "32x32", "-o", "{d}/o.png"], 2, "B.png", ()),
+    ("bomb-render", _bomb_png, ["render", "{d}/B.png", "{d}/P.csv", "-o", "{d}/o", "--eye-size", "32x32", "--opacity", "0.5"], 2, "B.png", ()),
+    ("bomb-texture", _bomb_png, ["synth", "{d}/s.mp4", "--scene", "rotate", "--texture", "{d}/B.png"], 2, "B.png", ()),
+    ("deep-epof-settings", _deep_settings, [*RENDER[:-2], "-o", "{d}/o", "--opacity", "{d}/B.csv"], 2, "B.csv", ()),
+    ("screen-grid-pickled", _pickled_member, [*SCREEN, "--grid", "{d}/B.npz"], 2, "B.npz", ()),
+    ("still-seconds-huge", None, ["render", "{d}/p.png", "{d}/P.csv", "-o", "{d}/o", "--eye-size", "32x32", "--opacity", "0.5", "--seconds", "1e9"], 2, "at most 100,000", ()),
+    ("still-fps-huge", None, ["frames", "{d}/p.png", "{d}/P.csv", "-o", "{d}/o", "--eye-size", "32x32", "--at", "0.1", "--fps", "1e6"], 2, "--fps", ()),
+    ("dry-run-still", _study(_STILL_A), DRY, 2, "still image", ()),
+    ("dry-run-eac-2to1", _study(_EAC_A), DRY, 2, "eac", ()),
+]  # fmt: skip
+
+
 # ----------------------------------------------------------------- the table, run
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_corpus_r4a(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
@@ -222,3 +272,20 @@ def test_study_csvs_guard_participant_and_condition(base, tmp_path, capsys):  # 
         drows = [r for r in csv.DictReader(ln for ln in fh if ln[:1] != "#")]
     assert sorted(r["id"] for r in drows) == sorted("'" + p for p in pids)
     assert all(not r["condition"] or r["condition"][0] == "'" for r in drows)
+
+
+def test_web_export_full_temporary_disk_names_the_output(base, tmp_path, capsys, monkeypatch):  # noqa: F811
+    """The web export's data file is made under a temporary name first: a full disk there
+    is one line naming the output file, exit 1, nothing left."""
+    import tempfile
+
+    with _full_tmpfs(tmp_path / "full") as m:
+        monkeypatch.setattr(tempfile, "tempdir", str(m))
+        rc = main(["export", str(base / "S.npz"), "-o", str(tmp_path / "o"), "--format", "web"])
+        left = sorted(p.name for p in m.iterdir())
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    lines = [ln for ln in err.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "No space left on device" in lines[0], err
+    assert str(tmp_path / "o" / "vimsim_epof.bin") in lines[0] and str(m) not in lines[0], err
+    assert left == ["fill"] and not (tmp_path / "o" / "vimsim_epof.bin").exists()

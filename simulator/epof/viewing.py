@@ -423,6 +423,11 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
                     settings[key.strip()] = json.loads(val)
                 except ValueError:
                     settings[key.strip()] = val.strip()
+                except RecursionError:
+                    raise InputError(
+                        f"{p}: settings line '# {key.strip()[:40]}:' holds JSON nested too "
+                        "deeply; not an EPOF CSV written by vimsim"
+                    ) from None
             continue
         lines.append(ln)
     if not lines:

@@ -76,7 +76,7 @@ def check_study(outdir: str | os.PathLike) -> tuple[Path, dict]:
         raise InputError(
             f"{out}: not a complete vimsim study (no study.json: the study did not finish)"
         ) from None
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, RecursionError) as e:
         raise InputError(f"{sj}: unreadable study summary ({e.__class__.__name__})") from None
     if not isinstance(s, dict) or s.get("format") != "vimsim-study":
         raise InputError(f"{sj}: not a vimsim study summary")
@@ -94,7 +94,7 @@ def check_report_folder(folder: Path) -> set[str]:
         raise InputError(f"{folder}: exists and is not a folder; refusing to replace it")
     try:
         listed = set(json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["files"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
         listed = set()
     for p in sorted(folder.rglob("*")):
         rel = p.relative_to(folder).as_posix()
@@ -307,6 +307,15 @@ def _write(folder: Path, rel: str, data: bytes | str, written: list[str]) -> Non
     written.append(rel)
 
 
+def _as_output_error(e: OSError, tmp: Path, folder: Path) -> OSError:
+    """``e`` naming the file of ``folder`` that a failed write under ``tmp`` was for."""
+    name = folder
+    if e.filename is not None:
+        with contextlib.suppress(ValueError):
+            name = folder / Path(os.fsdecode(e.filename)).relative_to(tmp)
+    return OSError(e.errno, e.strerror or str(e), str(name))
+
+
 def build_report(outdir: str | os.PathLike) -> ReportResult:
     """Write ``OUTDIR/report/`` for a complete study (see the module docstring)."""
     t0 = time.perf_counter()
@@ -315,7 +324,7 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
     listed = check_report_folder(folder)
     rows = _viewings(out)
     old_copies = {}
-    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError, RecursionError):
         old_copies = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["copies"]
     _remove_stale(out)
     tmp = out / f".report-tmp-{os.getpid()}"
@@ -353,6 +362,8 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
             json_text({"command": "report", "files": sorted(written), "copies": copies}) + "\n"
         )
         _swap(folder, tmp, listed)
+    except OSError as e:  # a full disk: named as the report's file, not the temporary one
+        raise _as_output_error(e, tmp, folder) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return ReportResult(folder, folder / "index.html", len(written), time.perf_counter() - t0,

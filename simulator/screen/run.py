@@ -17,7 +17,7 @@ from pathlib import Path
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.media.gridfile import content_hash
+from simulator.media.gridfile import content_hash, load_grid
 from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.screen.report import SCREEN_COLUMNS, screen_folders, write_screen_outputs
@@ -49,20 +49,14 @@ def _matching_grid(
     video: Path, grids: list[Path], layout: str, projection: str = "equirect"
 ) -> Path | None:
     """The first of ``grids`` made of ``video`` (the content hash its meta records) with
-    ``layout`` and ``projection``."""
-    import json
-
-    import numpy as np
-
+    ``layout`` and ``projection``. Every grid is validated as ``epof`` does
+    (:func:`~simulator.media.gridfile.load_grid`: InputError naming it for pickled or
+    object members, a bad header or meta), matching or not."""
     if not grids:
         return None
     want = content_hash(video)
     for g in grids:
-        try:
-            with np.load(g, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-        except (OSError, ValueError, KeyError):
-            raise InputError(f"{g}: not a vimsim grid file") from None
+        meta = load_grid(g).meta
         if (meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout
                 and (meta.get("projection") or "equirect") == projection):  # fmt: skip
             return g
