@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from test_reliability import HPC, _both, _copy, _mkdir, _text, base, run_case  # noqa: F401
-from test_reliability_r3 import _snapshot, _study
+from test_reliability_r3 import _multi, _snapshot, _study
 
 from simulator.cli import main
 
@@ -194,6 +194,15 @@ CASES += [
     ("still-fps-huge", None, ["frames", "{d}/p.png", "{d}/P.csv", "-o", "{d}/o", "--eye-size", "32x32", "--at", "0.1", "--fps", "1e6"], 2, "--fps", ()),
     ("dry-run-still", _study(_STILL_A), DRY, 2, "still image", ()),
     ("dry-run-eac-2to1", _study(_EAC_A), DRY, 2, "eac", ()),
+]  # fmt: skip
+
+
+# ----------------------------------------------------------------- --columns with --user
+_COLS = ["--columns", "time=t,yaw=y,pitch=p"]
+CASES += [
+    ("hp-all-columns", _multi, [*HPC, "{d}/M.txt", "--user", "all", *_COLS, "-o", "{d}/o"], 2, "--columns with --user all", ()),
+    ("hp-user-columns", _multi, [*HPC, "{d}/M.txt", "--user", "2", *_COLS, "-o", "{d}/o.csv"], 2, "--columns with --user 2", ()),
+    ("epof-user-columns", None, ["epof", "{d}/G.npz", "{d}/P.csv", "--user", "2", *_COLS, "-o", "{d}/e.csv"], 2, "--columns with --user", ()),
 ]  # fmt: skip
 
 
