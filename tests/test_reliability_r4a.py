@@ -93,18 +93,24 @@ def test_log_gets_the_run_once_checks_pass(base, tmp_path, capsys):  # noqa: F81
     assert text.startswith("earlier\n# ") and "wrote" in text.splitlines()[-1], text
 
 
+def _fill(path: Path) -> None:
+    with contextlib.suppress(OSError), open(path / "fill", "wb") as f:
+        while True:
+            f.write(b"x" * 1024)
+            f.flush()
+
+
 @contextlib.contextmanager
-def _full_tmpfs(path: Path):
+def _full_tmpfs(path: Path, size: str = "8k", fill: bool = True):
+    """A tmpfs at ``path`` (filled up unless ``fill`` is False); skipped without root."""
     path.mkdir()
-    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8k", "tmpfs", str(path)],
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(path)],
                        check=False, capture_output=True, text=True)  # fmt: skip
     if r.returncode != 0:
         pytest.skip(f"cannot mount a tmpfs ({r.stderr.strip()[:80]}): needs root/CAP_SYS_ADMIN")
     try:
-        with contextlib.suppress(OSError), open(path / "fill", "wb") as f:
-            while True:
-                f.write(b"x" * 1024)
-                f.flush()
+        if fill:
+            _fill(path)
         yield path
     finally:
         subprocess.run(["umount", str(path)], check=False)
@@ -298,3 +304,30 @@ def test_web_export_full_temporary_disk_names_the_output(base, tmp_path, capsys,
     assert len(lines) == 1 and "No space left on device" in lines[0], err
     assert str(tmp_path / "o" / "vimsim_epof.bin") in lines[0] and str(m) not in lines[0], err
     assert left == ["fill"] and not (tmp_path / "o" / "vimsim_epof.bin").exists()
+
+
+@pytest.mark.slow
+def test_report_full_disk_names_the_report_file(base, tmp_path, capsys):  # noqa: F811
+    """report builds into a temporary folder: a full disk is one line naming the report's
+    file (not the temporary one), exit 1, no temporary left."""
+    import shutil
+
+    d = tmp_path / "d"
+    shutil.copytree(base, d)
+    (d / "S.toml").write_text('[study]\nname = "t"\n\n' + _VIDEO_A + '\n[[viewings]]\nvideo = "a"\n'
+                              'trace = "P.csv"\n')  # fmt: skip
+    study = tmp_path / "o"
+    assert main(["study", str(d / "S.toml"), "-o", str(study), "--cache-dir", str(tmp_path / "c"),
+                 "--no-progress", "--workers", "1", "--no-report"]) == 0  # fmt: skip
+    capsys.readouterr()
+    with _full_tmpfs(tmp_path / "full", size="4m", fill=False) as m:
+        shutil.copytree(study, m / "o")
+        _fill(m)
+        rc = main(["report", str(m / "o")])
+        left = sorted(p.name for p in (m / "o").iterdir())
+    err = capsys.readouterr().err
+    assert rc == 1, err
+    lines = [ln for ln in err.splitlines() if "error" in ln]
+    assert len(lines) == 1 and "No space left on device" in lines[0], err
+    assert str(m / "o" / "report") in lines[0] and ".report-tmp" not in lines[0], err
+    assert not [n for n in left if "tmp" in n], left
