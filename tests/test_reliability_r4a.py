@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from test_reliability import HPC, _both, _copy, _mkdir, _text, base, run_case  # noqa: F401
-from test_reliability_r3 import _multi, _snapshot, _study
+from test_reliability_r3 import _frames_pair, _multi, _snapshot, _study
 
 from simulator.cli import main
 
@@ -75,6 +75,7 @@ CASES: list[tuple] = [
     ("log-frames-json", None, [*FRAMES, "-o", "{d}/o", "--log", "{d}/o/frames.json"], 2, "inside the output folder", ()),
     ("log-export-js", None, ["export", "{d}/G.npz", "-o", "{d}/o", "--format", "web", "--log", "{d}/o/vimsim.js"], 2, "inside the output folder", ()),
     ("log-report-index", _mkdir("o"), ["report", "{d}/o", "--log", "{d}/o/report/index.html"], 2, "inside the output folder", ()),
+    ("log-compare-golden", _frames_pair, ["compare", "{d}/n", "{d}/g", "--log", "{d}/g/run.log"], 2, "inside the output folder", ()),
     ("log-is-output", None, [*CONVERT, "--log", "{d}/h.csv"], 2, "--log", ()),
     ("log-is-plot", None, ["epof", "{d}/G.npz", "{d}/P.csv", "-o", "{d}/e.csv", "--plot", "{d}/e.png", "--log", "{d}/e.png"], 2, "--log", ()),
     ("log-refusal-no-log", None, [*HPC, "{d}/nope.csv", "-o", "{d}/h.csv", "--log", "{d}/run.log"], 2, "nope.csv", ()),

@@ -24,15 +24,18 @@ from simulator.core.errors import InputError
 __all__ = ["LazyLog", "open_log"]
 
 
-def _output_folder(args: argparse.Namespace, folder_commands) -> str | None:
-    """The folder the command writes into, or None for a one-file command."""
+def _output_folders(args: argparse.Namespace, folder_commands) -> list[str]:
+    """The folders the command writes into (or, for ``compare``, reads and updates)."""
     if args.command == "report":
-        return getattr(args, "outdir", None)
+        return [args.outdir] if getattr(args, "outdir", None) else []
+    if args.command == "compare":
+        keys = ("frames_dir", "golden_dir", "report")
+        return [v for k in keys if isinstance(v := getattr(args, k, None), str) and v.strip()]
     if args.command in folder_commands or (
         args.command == "headpath" and getattr(args, "user", None) == "all"
     ):
-        return getattr(args, "output", None)
-    return None
+        return [args.output] if getattr(args, "output", None) else []
+    return []
 
 
 def _within(path: Path, folder: str | None) -> bool:
@@ -84,12 +87,12 @@ class LazyLog:
                 "append to it (choose another log file)"
             ) from None
         real = Path(path).resolve()
-        folder = _output_folder(args, self.folder_commands)
-        if _within(real, folder):
-            raise InputError(
-                f"--log {path}: is inside the output folder {folder}; refusing to write the "
-                "log among the outputs (choose a log file outside it)"
-            )
+        for folder in _output_folders(args, self.folder_commands):
+            if _within(real, folder):
+                raise InputError(
+                    f"--log {path}: is inside the output folder {folder}; refusing to write "
+                    "the log among the outputs (choose a log file outside it)"
+                )
         held = _manifest_folder(real)
         if held is not None:
             raise InputError(

@@ -32,6 +32,7 @@ __all__ = [
     "csv_uncell",
     "input_scope",
     "json_text",
+    "json_value",
     "known_inputs",
     "register_input",
     "remove_stale_temporaries",
@@ -412,3 +413,12 @@ def json_text(obj, *, indent: int | None = 2) -> str:
     ``null``; numpy values become numbers or lists; anything else unknown becomes its
     ``str``."""
     return json.dumps(_json_safe(obj), indent=indent, allow_nan=False, default=str)
+
+
+def json_value(text: str, where: str | os.PathLike):
+    """``json.loads(text)``; JSON nested too deeply to parse (``RecursionError``: e.g.
+    200,000 ``[``) is an InputError naming ``where`` (bad input, not an internal error)."""
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise InputError(f"{where}: holds JSON nested too deeply to read") from None
