@@ -204,6 +204,15 @@ CASES += [
 ]  # fmt: skip
 
 
+_HUGE = '"' + "[" * 200_000 + '"'  # one CSV field over the csv module's 128 KiB limit
+CASES += [
+    ("deep-study-toml", _text("S.toml", "a = " + "[" * 200_000 + "]" * 200_000 + "\n"), DRY, 2, "S.toml", ()),
+    ("csv-field-analyze", _text("B.csv", f"id,condition\n{_HUGE},GR\n"), ["analyze", "{d}/B.csv", "-o", "{d}/o"], 2, "B.csv", ()),
+    ("csv-field-headpath", _text("B.csv", f"time_s,yaw_deg,pitch_deg\n0,1,2\n{_HUGE},1,2\n"), [*HPC, "{d}/B.csv", "-o", "{d}/o.csv"], 2, "B.csv", ()),
+    ("csv-field-camera", _text("C.csv", f"time_s,x_m,y_m,z_m,yaw_deg,pitch_deg,roll_deg\n{_HUGE},0,0,0,0,0,0\n"), ["synth", "{d}/s.mp4", "--scene", "trajectory", "--camera", "{d}/C.csv"], 2, "C.csv", ()),
+]  # fmt: skip
+
+
 # ----------------------------------------------------------------- --columns with --user
 _COLS = ["--columns", "time=t,yaw=y,pitch=p"]
 CASES += [

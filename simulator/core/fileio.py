@@ -28,6 +28,7 @@ __all__ = [
     "check_output_dir",
     "check_output_file",
     "csv_cell",
+    "csv_row",
     "csv_text",
     "csv_uncell",
     "input_scope",
@@ -350,6 +351,15 @@ def csv_cell(value: str) -> str:
     ):
         return "'" + s
     return s
+
+
+def csv_row(line: str, where: str | os.PathLike) -> list[str]:
+    """The fields of one CSV line; a line the csv module refuses (a field over its 128 KiB
+    limit, a NUL) is an InputError naming ``where`` (bad input, not an internal error)."""
+    try:
+        return next(csv.reader([line]), [])
+    except csv.Error as e:
+        raise InputError(f"{where}: not a readable CSV line ({e})") from None
 
 
 def csv_uncell(value: str) -> str:
