@@ -425,10 +425,18 @@ def json_text(obj, *, indent: int | None = 2) -> str:
     return json.dumps(_json_safe(obj), indent=indent, allow_nan=False, default=str)
 
 
-def json_value(text: str, where: str | os.PathLike):
-    """``json.loads(text)``; JSON nested too deeply to parse (``RecursionError``: e.g.
-    200,000 ``[``) is an InputError naming ``where`` (bad input, not an internal error)."""
+_NO_DEFAULT = object()
+
+
+def json_value(text: str, where: str | os.PathLike, *, default=_NO_DEFAULT):
+    """``json.loads(text)`` (``default`` instead for text that is not JSON, if given); JSON
+    nested too deeply to parse (``RecursionError``: e.g. 200,000 ``[``) is an InputError
+    naming ``where`` (bad input, not an internal error)."""
     try:
         return json.loads(text)
+    except json.JSONDecodeError:
+        if default is _NO_DEFAULT:
+            raise
+        return default
     except RecursionError:
         raise InputError(f"{where}: holds JSON nested too deeply to read") from None
