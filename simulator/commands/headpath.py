@@ -256,6 +256,19 @@ def load_headpath_args(args: argparse.Namespace, path, prog: str):
         )
 
 
+def _check_columns_without_user(args: argparse.Namespace) -> None:
+    """InputError for ``--columns`` with ``--user``: a column map reads the one trace of a
+    lab log; ``--user`` picks one of a multi-user (360VidStr) file's and would be ignored."""
+    from simulator.core.errors import InputError
+
+    user = getattr(args, "user", None)
+    if getattr(args, "columns", None) and user is not None:
+        raise InputError(
+            f"--columns with --user {user}: a column map reads the one head path of a lab log; "
+            "--user picks a user of a 360VidStr file (use one or the other)"
+        )
+
+
 def load_columns_args(args: argparse.Namespace, path):
     """The head path ``path`` read through ``args.columns`` and the other column options."""
     from simulator.core.errors import InputError
@@ -263,6 +276,7 @@ def load_columns_args(args: argparse.Namespace, path):
 
     if getattr(args, "format", "auto") != "auto":
         raise InputError("--columns and --format exclude each other: a column map is the format")
+    _check_columns_without_user(args)
     return load_columns(
         path,
         args.columns,
@@ -304,6 +318,7 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
         if args.headpath_command == "convert" and args.user == "all":
+            _check_columns_without_user(args)  # not silently ignored
             return _convert_all(args)
         if args.columns:
             hp = load_columns_args(args, args.input)

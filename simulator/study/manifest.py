@@ -317,8 +317,9 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
         check_input_file(path, "questionnaire CSV")
         with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = [r for r in csv.reader(ln for ln in fh if not ln.lstrip().startswith("#"))]
-    except (InputError, UnicodeDecodeError) as err:
-        e.fail(str(err) if isinstance(err, InputError) else f"{path}: not UTF-8 text")
+    except (InputError, UnicodeDecodeError, csv.Error) as err:
+        bad = "not UTF-8 text" if isinstance(err, UnicodeDecodeError) else f"not CSV ({err})"
+        e.fail(str(err) if isinstance(err, InputError) else f"{path}: {bad}")
     header = [c.strip().lower() for c in (rows[0] if rows else [])]
     if "participant" not in header and "id" not in header:
         e.fail(f"{path}: no 'participant' (or 'id') column to key rows by; found {header}")
@@ -487,6 +488,8 @@ def load_manifest(path) -> Manifest:
         raise InputError(f"{m}: not UTF-8 text; expected a TOML study manifest") from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{m}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise InputError(f"{m}: TOML nested too deeply to read") from None
     unknown = [k for k in data if k not in _TOP_KEYS]
     if unknown:
         raise InputError(f"{m}: unknown table {unknown[0]!r}; expected {', '.join(_TOP_KEYS)}")

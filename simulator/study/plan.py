@@ -24,6 +24,7 @@ from simulator.core.fileio import OutputFolder, atomic_output
 from simulator.core.mapcache import cache_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
+from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.study.manifest import SCRIPTED, Manifest, VideoSpec, ViewingSpec
 from simulator.traces.path import synth
@@ -89,7 +90,7 @@ def read_state(p: Path) -> dict | None:
     """A viewing's resume record, or None (missing or unreadable: recomputed)."""
     try:
         d = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return d if isinstance(d, dict) else None
 
@@ -164,6 +165,18 @@ def _trace_of(w: ViewingSpec, parsed: dict, length_s: float):
     return parsed[key].user(w.user)
 
 
+def _open_as_the_run(v: VideoSpec):
+    """The video's MediaInfo, opened as the run opens it (its layout, eye, projection and
+    lens; a still refused as preprocessing refuses it): InputError for the same problems."""
+    src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
+                      lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    if not src.info.is_video or src.info.n_frames < 2:
+        raise InputError(
+            f"{v.path}: is a still image; preprocess needs a video with at least 2 frames"
+        )
+    return src.info
+
+
 def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
     """What a dry run checks beyond the manifest: each viewing still to compute has a
     readable trace covering its video (unless ``[epof] hold_last``), and a render range
@@ -173,10 +186,10 @@ def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
     for v in m.videos:
         if any(w.video == v.id for w in plan.todo):
             try:
-                info = probe(v.path)
+                info = _open_as_the_run(v)
                 videos[v.id] = ((info.n_frames - 1) / info.fps, info.n_frames / info.fps)
             except InputError as e:
-                plan.problems.append(f"video {v.id}: {e}")
+                plan.problems.append(f"video {v.id}: {' '.join(str(e).split())}")
     parsed: dict = {}
     found: dict[str, list[str]] = {}
     for w in plan.todo:
