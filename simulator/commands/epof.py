@@ -52,11 +52,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="use only the K largest overlaps (the paper's figure shows 4); default all",
     )
     p.add_argument(
-        "--hold-last",
-        action="store_true",
-        help="hold the first/last pose where the head path does not cover the video",
-    )
-    p.add_argument(
         "--flow-weights",
         default=None,
         metavar="rot=A,trans=B",
@@ -96,6 +91,8 @@ def _check_output_file(path: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
+    from pathlib import Path
+
     from simulator.commands._progress import warnings_to_stderr
     from simulator.commands.headpath import load_headpath_args
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
@@ -111,7 +108,10 @@ def run(args: argparse.Namespace) -> int:
     with warnings_to_stderr("vimsim epof"):
         rule = rule_from_args(args)
         grid = load_grid(args.grid)
-    hp = load_headpath_args(args, args.headpath, "vimsim epof")
+    vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+    n_video = int(vid.get("n_frames") or grid.n_frames)  # the whole video, not the grid's part
+    hp = load_headpath_args(args, args.headpath, "vimsim epof", n_video / grid.fps,
+                            Path(str(vid.get("path") or args.grid)).name)  # fmt: skip
     art = None
     if args.artefacts:
         from simulator.preprocess.artefacts import artefacts_for_grid

@@ -151,11 +151,6 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
         metavar="M",
         help="grain distance, metres, for stereo parallax (default: at infinity, identical for both eyes)",
     )
-    p.add_argument(
-        "--hold-last",
-        action="store_true",
-        help="hold the head path's first/last pose where it does not cover the video",
-    )
 
 
 def view_from_args(args: argparse.Namespace, command: str = "render"):
@@ -180,6 +175,21 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     if args.layout is None and layout != "mono":
         note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
     return hp, grid, view, note, layout
+
+
+def check_trace_span(args: argparse.Namespace, hp, source, command: str = "render") -> None:
+    """The head path's span checked against the source video's duration (a still: not),
+    as every command where a trace meets a video (:func:`simulator.traces.clock.check_span`)."""
+    from simulator.commands._progress import warnings_to_stderr
+    from simulator.commands.headpath import trace_options
+    import os
+
+    from simulator.traces.clock import check_span
+
+    info = source.info
+    if info.is_video:
+        with warnings_to_stderr(f"vimsim {command}"):
+            check_span(hp, info.n_frames / info.fps, trace_options(args), video=os.path.basename(source.path))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -277,6 +287,7 @@ def run(args: argparse.Namespace) -> int:
     source = source_from_args(
         args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
     )
+    check_trace_span(args, hp, source)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
