@@ -4,8 +4,9 @@ Trace time ``t`` becomes video time ``t * time_scale + time_offset`` (seconds), 
 trace starting 5 s before the video takes ``time_offset = -5``. A trace whose span is
 implausible for its video (over :data:`LONG_FACTOR` times the video's duration, or over a
 day) is refused, naming the likely time unit and the ``time_scale`` that fixes it, unless
-the user gave ``time_scale`` or ``allow_long_trace``; one covering less than 90 % or more
-than 150 % of the video gives a :class:`TraceSpanWarning`.
+the user gave ``time_scale`` or ``allow_long_trace``; one covering more than 150 % of the video, or less than 90 % with
+``hold_last`` (without it, such a trace does not cover the video and is refused), gives a
+:class:`TraceSpanWarning`.
 """
 
 from __future__ import annotations
@@ -102,7 +103,8 @@ def check_span(
     if not video_s or hp.n < 2:
         return
     ratio = span / video_s
-    if not COVER_RANGE[0] <= ratio <= COVER_RANGE[1]:
+    # short and not held: the coverage check refuses it (one line); held, it warns here
+    if (ratio < COVER_RANGE[0] and opts.hold_last) or ratio > COVER_RANGE[1]:
         fix = spell("time_offset", opts.origin, "S")
         warnings.warn(
             f"head path {src} spans {span:.4g} s, {ratio:.0%} of the video{of}: the right "
