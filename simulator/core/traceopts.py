@@ -98,18 +98,37 @@ def option(key: str) -> TraceOption:
 
 def spell(key: str, origin: str = "cli", value: object = None) -> str:
     """How the user sets option ``key`` where the options came from: ``--time-scale 1e-6``
-    (``origin="cli"``) or ``time_scale = 1e-6`` (``"manifest"``); a flag without value."""
+    (``origin="cli"``) or ``time_scale = 1e-6`` (``"manifest"``; text values quoted as
+    TOML writes them); a flag without value."""
     o = _BY_KEY[key]
     if origin == "cli":
         return o.flag if o.kind == "flag" or value is None else f"{o.flag} {value}"
     if o.kind == "flag":
         return f"{key} = true"
-    return f"{key} = {'...' if value is None else value}"
+    if value is None:
+        return f"{key} = ..."
+    text = str(value)
+    numeric = o.kind in ("float", "int", "user") and re.fullmatch(r"-?[\d.e+-]+", text)
+    bare = numeric or re.fullmatch(r"[A-Z]+", text)  # a number, or a placeholder (S, FMT)
+    return f"{key} = {text}" if bare else f'{key} = "{text}"'
 
 
 _FLAG_RE = re.compile(
-    r"--(" + "|".join(o.flag[2:] for o in TRACE_OPTIONS) + r")\b(?!-)(?: (-?\d[\d.e+-]*|[A-Za-z]\S*\.mp4))?"
+    r"--(" + "|".join(o.flag[2:] for o in TRACE_OPTIONS) + r")\b(?!-)(:)?(?: (-?[^\s(;,'\"-][^\s;]*))?"
 )
+
+
+def _manifest_term(m: re.Match) -> str:
+    key = m.group(1).replace("-", "_")
+    rest = f" {m.group(3)}" if m.group(3) is not None else ""
+    if m.group(2):  # "--columns: ..." (the option named as a message's subject)
+        return f"{key}:{rest}"
+    if _BY_KEY[key].kind == "flag":  # takes no value: the next word is the sentence's
+        return spell(key, "manifest") + rest
+    value = m.group(3)
+    if value is not None and value.endswith((")", ".")):  # the end of a sentence
+        return spell(key, "manifest", value.rstrip(").")) + value[len(value.rstrip(").")):]
+    return spell(key, "manifest", value)
 
 
 def translate(message: str, origin: str) -> str:
@@ -117,7 +136,7 @@ def translate(message: str, origin: str) -> str:
     manifest's errors name its keys: ``--hold-last`` -> ``hold_last = true``)."""
     if origin == "cli":
         return message
-    return _FLAG_RE.sub(lambda m: spell(m.group(1).replace("-", "_"), origin, m.group(2)), message)
+    return _FLAG_RE.sub(_manifest_term, message)
 
 
 @dataclass(frozen=True)
