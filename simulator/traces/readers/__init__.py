@@ -55,10 +55,11 @@ def detect_format(path: str | os.PathLike) -> str:
     what = "a JSON log of no known dataset" if sniff.is_json else (
         f"its first line has {n} fields, not a known header")  # fmt: skip
     raise InputError(  # the line itself is not quoted: messages never echo file content
-        f"{p}: cannot tell the head path format ({what}); a lab's own log reads through a "
-        f"column map, e.g. --columns {columns_example(p) or 'time=t,yaw=yaw,pitch=pitch'} "
-        f"(check signs and units: docs/headpath.md), or pass --format, one of "
-        f"{', '.join(FORMATS)}, or write a CSV with header {','.join(CANONICAL_COLUMNS)}"
+        f"{p}: cannot tell the head path format ({what}); expected a CSV with header "
+        f"{','.join(CANONICAL_COLUMNS)}, or --format (one of {', '.join(FORMATS)}), or a lab's "
+        f"own log through a column map, e.g. --columns "
+        f"{columns_example(p) or 'time=t,yaw=yaw,pitch=pitch'} (check signs and units: "
+        "docs/headpath.md)"
     )
 
 
