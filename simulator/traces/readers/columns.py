@@ -170,32 +170,33 @@ def _read_table(p) -> tuple[list[str], list[tuple[str, dict]]]:
 
 def _unknown_message(p, unknown: list[str], rows) -> str:
     """One line: the unknown columns and the closest field names of one sample (difflib,
-    at most 5), else that sample's first 8; names only, each cut to 30 characters."""
+    at most 5, each cut to 30 characters); none close, only how many fields it has (a
+    header is never listed: docs/reliability.md)."""
     label, sample = rows[0] if rows else ("", {})
     names = [str(c) for c in sample]
-    close = difflib.get_close_matches(unknown[0], names, n=5, cutoff=0.3)
-    shown = close or names[:8]
-    what = "closest fields" if close else "fields"
-    more = f" (of {len(names)})" if not close and len(names) > 8 else ""
-    return (f"{p}: no column {', '.join(map(repr, unknown))}; {what} of one sample "
-            f"({label}){more}: {', '.join(_value(n) for n in shown)}")  # fmt: skip
+    close = difflib.get_close_matches(unknown[0], names, n=5, cutoff=0.5)
+    miss = f"{p}: no column {', '.join(map(repr, unknown))}"
+    if not close:
+        return f"{miss}; none of the {len(names)} fields of one sample ({label}) is close"
+    return f"{miss}; closest fields of one sample ({label}): {', '.join(_value(n) for n in close)}"
 
 
 #: Field names that look like each quantity: exact (lower case), then name endings.
 _GUESS = {
-    "time": (("key", "time", "t", "timestamp", "time_s", "sec", "seconds", "ms"), ("time",)),
-    "yaw": (("yaw", "ey", "y", "ry", "heading"), ("rot.y", "yaw", ".ey")),
-    "pitch": (("pitch", "ex", "x", "rx"), ("rot.x", "pitch", ".ex")),
-    "roll": (("roll", "ez", "z", "rz"), ("rot.z", "roll", ".ez")),
-}
+    "time": (("key", "time", "t", "timestamp", "time_s", "sec", "seconds", "ms", "stamp"),
+             ("time", "stamp", "_t", "_ms", "_s")),
+    "yaw": (("yaw", "ey", "ry", "heading"), ("rot.y", "yaw", ".ey")),
+    "pitch": (("pitch", "ex", "rx"), ("rot.x", "pitch", ".ex")),
+    "roll": (("roll", "ez", "rz"), ("rot.z", "roll", ".ez")),
+}  # fmt: skip
 
 
 def columns_example(path: str | os.PathLike) -> str:
-    """A ``--columns`` map built from the file's own fields (names that look like each
-    quantity, else the first unused fields in order; ``--time-format FMT`` after it when
-    the time field is not a number), for messages; ``""`` if the file
-    cannot be read as a table of at least three fields. Signs and units still need the
-    user's check."""
+    """A ``--columns`` map of the file's own fields that look like each quantity (``COL``
+    for a quantity none looks like; ``--time-format FMT`` after it when the time field is
+    not a number), for messages: only names that match a known pattern are quoted (a
+    header is never listed: docs/reliability.md); ``""`` if the file is no table of at
+    least three fields or none looks like an angle. Signs and units need the user's check."""
     try:
         cols, rows = _read_table(path)
     except (InputError, OSError, ValueError):
@@ -207,13 +208,13 @@ def columns_example(path: str | os.PathLike) -> str:
     for key, (exact, ends) in _GUESS.items():
         hit = next((n for n in free if n.lower() in exact), None)
         hit = hit or next((n for n in free if n.lower().endswith(ends)), None)
-        if hit is None and key != "roll":
-            hit = free[0]
         if hit is not None:
-            out[key] = hit
+            out[key] = hit[:30]
             free.remove(hit)
-    text = ",".join(f"{k}={v}" for k, v in out.items())
-    t0 = rows[0][1].get(out["time"]) if rows else None
+    if not out.keys() & {"yaw", "pitch"}:
+        return ""
+    text = ",".join(f"{k}={out.get(k, 'COL')}" for k in COLUMN_KEYS if k in out or k != "roll")
+    t0 = rows[0][1].get(out["time"]) if rows and "time" in out else 0.0
     try:
         float(t0)
     except (TypeError, ValueError):  # a clock time such as 20210510Z-200400_686Z
