@@ -94,7 +94,7 @@ def run(args: argparse.Namespace) -> int:
     from pathlib import Path
 
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.commands.headpath import load_headpath_args
+    from simulator.commands.headpath import load_headpath_args, print_warnings
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
     from simulator.media.gridfile import load_grid
 
@@ -110,8 +110,9 @@ def run(args: argparse.Namespace) -> int:
         grid = load_grid(args.grid)
     vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
     n_video = int(vid.get("n_frames") or grid.n_frames)  # the whole video, not the grid's part
+    notes: list[str] = []  # span warnings: printed once the EPOF is written
     hp = load_headpath_args(args, args.headpath, "vimsim epof", n_video / grid.fps,
-                            Path(str(vid.get("path") or args.grid)).name)  # fmt: skip
+                            Path(str(vid.get("path") or args.grid)).name, notes)  # fmt: skip
     art = None
     if args.artefacts:
         from simulator.preprocess.artefacts import artefacts_for_grid
@@ -137,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
     write_epof_csv(args.output, res)  # the CSV first: a plot is never left without it
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
+    print_warnings("vimsim epof", notes)
     lo, hi = res.thresholds_dps
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "

@@ -14,7 +14,7 @@ from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
 from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
 
-__all__ = ["add_reader_options", "load_headpath_args", "register", "run", "trace_options"]
+__all__ = ["add_reader_options", "load_headpath_args", "print_warnings", "register", "run", "trace_options"]
 
 
 _user = number("expected a user number >= 1", "1", integer=True, lo=1)
@@ -210,19 +210,28 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def load_headpath_args(args: argparse.Namespace, path, prog: str, video_s: float | None = None,
-                       video: str = ""):  # fmt: skip
+                       video: str = "", notes: list | None = None):  # fmt: skip
     """Load the head path ``path`` with the trace options in ``args`` (missing ones =
     defaults; :func:`simulator.traces.clock.read_trace`), reader warnings printed as
     ``<prog>: warning: ...`` on stderr; its span checked against a video of ``video_s``
-    seconds (None: only the one-day limit; :func:`simulator.traces.clock.check_span`).
-    InputError on bad input."""
+    seconds (None: only the one-day limit; :func:`simulator.traces.clock.check_span`), the
+    span warnings appended to ``notes`` (printed by the caller once its work is done; None:
+    printed now). InputError on bad input."""
     from simulator.traces.clock import check_span, read_trace
 
     opts = trace_options(args)
     with warnings_to_stderr(prog):
         hp = read_trace(path, opts)
-        check_span(hp, video_s, opts, video=video)
+        found = check_span(hp, video_s, opts, video=video, warn=notes is None)
+    if notes is not None:
+        notes.extend(found)
     return hp
+
+
+def print_warnings(prog: str, notes: list[str]) -> None:
+    """``<prog>: warning: <note>`` on stderr for each of ``notes`` (after the work)."""
+    for n in notes:
+        print(f"{prog}: warning: {n}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:

@@ -177,19 +177,20 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     return hp, grid, view, note, layout
 
 
-def check_trace_span(args: argparse.Namespace, hp, source, command: str = "render") -> None:
+def check_trace_span(args: argparse.Namespace, hp, source) -> list[str]:
     """The head path's span checked against the source video's duration (a still: not),
-    as every command where a trace meets a video (:func:`simulator.traces.clock.check_span`)."""
-    from simulator.commands._progress import warnings_to_stderr
-    from simulator.commands.headpath import trace_options
+    as every command where a trace meets a video (:func:`simulator.traces.clock.check_span`);
+    returns the span warnings, which the command prints once its work is done."""
     import os
 
+    from simulator.commands.headpath import trace_options
     from simulator.traces.clock import check_span
 
     info = source.info
-    if info.is_video:
-        with warnings_to_stderr(f"vimsim {command}"):
-            check_span(hp, info.n_frames / info.fps, trace_options(args), video=os.path.basename(source.path))
+    if not info.is_video:
+        return []
+    return check_span(hp, info.n_frames / info.fps, trace_options(args),
+                      video=os.path.basename(source.path), warn=False)  # fmt: skip
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -287,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
     source = source_from_args(
         args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
     )
-    check_trace_span(args, hp, source)
+    notes = check_trace_span(args, hp, source)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
@@ -308,6 +309,9 @@ def run(args: argparse.Namespace) -> int:
             eyes=args.eyes,
             audio=not args.no_audio,
         )
+    from simulator.commands.headpath import print_warnings
+
+    print_warnings("vimsim render", notes)
     w, h = s["eye_size"]
     files = {"left": ["left.mp4"], "right": ["right.mp4"], "both": ["left.mp4", "right.mp4"]}
     names = files[s["eyes"]] + (s["review"] or [])

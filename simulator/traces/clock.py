@@ -82,12 +82,14 @@ def _likely_unit(span_s: float, ref_s: float) -> tuple[float, str, str]:
 
 
 def check_span(
-    hp: HeadPath, video_s: float | None, opts: TraceOptions, *, video: str = ""
-) -> None:
+    hp: HeadPath, video_s: float | None, opts: TraceOptions, *, video: str = "", warn: bool = True
+) -> list[str]:
     """Refuse (InputError) a span implausible for a video of ``video_s`` seconds (None:
     no video, only the one-day limit) unless ``opts`` gives ``time_scale`` or
     ``allow_long_trace``; warn (:class:`TraceSpanWarning`) when the span is outside
-    :data:`COVER_RANGE` of the video's duration. ``video`` names it in messages."""
+    :data:`COVER_RANGE` of the video's duration. ``video`` names it in messages.
+    Returns the warnings' texts; ``warn=False`` only returns them (a command that prints
+    them once its work is done, so that bad input still ends in one line)."""
     span = hp.end_s - hp.start_s
     src = hp.source or "(unnamed)"
     of = f" for video {video} ({video_s:.3g} s)" if video and video_s else (
@@ -101,14 +103,14 @@ def check_span(
             f"{spell('allow_long_trace', opts.origin)} if it really is that long)"
         )
     if not video_s or hp.n < 2:
-        return
+        return []
     ratio = span / video_s
     # short and not held: the coverage check refuses it (one line); held, it warns here
     if (ratio < COVER_RANGE[0] and opts.hold_last) or ratio > COVER_RANGE[1]:
         fix = spell("time_offset", opts.origin, "S")
-        warnings.warn(
-            f"head path {src} spans {span:.4g} s, {ratio:.0%} of the video{of}: the right "
-            f"trace and time unit? ({fix} places a trace starting before or after the video)",
-            TraceSpanWarning,
-            stacklevel=2,
-        )
+        msg = (f"head path {src} spans {span:.4g} s, {ratio:.0%} of the video{of}: the right "
+               f"trace and time unit? ({fix} places a trace starting before or after the video)")  # fmt: skip
+        if warn:
+            warnings.warn(msg, TraceSpanWarning, stacklevel=2)
+        return [msg]
+    return []

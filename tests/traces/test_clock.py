@@ -125,3 +125,18 @@ def test_cli_without_columns_refuses_a_columns_only_option(tmp_path, capsys):
     assert main(["headpath", "convert", str(path), "-o", str(tmp_path / "o.csv"), "--skip-rows", "2"]) == 2
     err = capsys.readouterr().err
     assert "--skip-rows has no effect without a column map" in err and "--columns" in err
+
+
+@pytest.mark.parametrize("command", ["render", "frames"])
+def test_render_and_frames_refuse_an_implausible_span_before_any_work(command, tmp_path, capsys):
+    from simulator.synth import SynthConfig, synthesize
+
+    clip = tmp_path / "clip.mp4"
+    synthesize(SynthConfig("rotate", seconds=1.0, fps=10, size=(128, 64)), clip)
+    path, out = tmp_path / "p.csv", tmp_path / "out"
+    save_headpath_csv(path, synth("sweep", 40.0, rate_hz=2))  # 40 s on a 1 s clip
+    extra = ["--at", "0.5"] if command == "frames" else []
+    assert main([command, str(clip), str(path), "-o", str(out), "--opacity", "0.5", *extra]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--time-scale 0.001" in err and "clip.mp4 (1 s)" in err
+    assert not out.exists()
