@@ -12,7 +12,7 @@ import sys
 
 from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
-from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
+from simulator.core.choices import SYNTH_KINDS
 
 __all__ = ["add_reader_options", "load_headpath_args", "print_warnings", "register", "run", "trace_options"]
 

@@ -114,7 +114,9 @@ def spell(key: str, origin: str = "cli", value: object = None) -> str:
 
 
 _FLAG_RE = re.compile(
-    r"--(" + "|".join(o.flag[2:] for o in TRACE_OPTIONS) + r")\b(?!-)(:)?(?: (-?[^\s(;,'\"-][^\s;]*))?"
+    r"--("
+    + "|".join(o.flag[2:] for o in TRACE_OPTIONS)
+    + r")\b(?!-)(:)?(?: (-?[^\s(;,'\"-][^\s;]*))?"
 )
 
 
@@ -127,7 +129,7 @@ def _manifest_term(m: re.Match) -> str:
         return spell(key, "manifest") + rest
     value = m.group(3)
     if value is not None and value.endswith((")", ".")):  # the end of a sentence
-        return spell(key, "manifest", value.rstrip(").")) + value[len(value.rstrip(").")):]
+        return spell(key, "manifest", value.rstrip(").")) + value[len(value.rstrip(").")) :]
     return spell(key, "manifest", value)
 
 
@@ -163,12 +165,14 @@ class TraceOptions:
     origin: str = field(default="cli", compare=False)
 
     def __post_init__(self) -> None:
-        s = lambda k, v=None: spell(k, self.origin, v)  # noqa: E731
+        s = lambda k, v=None: spell(k, self.origin, v)
         if self.columns and self.format != "auto":
             raise InputError(f"{s('columns')} and {s('format')} exclude each other: a column "
                              f"map is the format; drop {s('format')}")  # fmt: skip
         if not self.columns:
-            given = [o.key for o in TRACE_OPTIONS if o.columns_only and getattr(self, o.key) != o.default]
+            given = [
+                o.key for o in TRACE_OPTIONS if o.columns_only and getattr(self, o.key) != o.default
+            ]
             if given:
                 raise InputError(f"{s(given[0])} has no effect without a column map; add "
                                  f"{s('columns', 'time=COL,yaw=COL,pitch=COL')} or drop it")  # fmt: skip
@@ -180,7 +184,9 @@ class TraceOptions:
             if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v)):
                 raise InputError(f"{s(k)}: expected a finite number; got {v!r}")
         if self.time_scale is not None and self.time_scale <= 0:
-            raise InputError(f"{s('time_scale')}: expected a number > 0, e.g. 0.001; got {self.time_scale!r}")
+            raise InputError(
+                f"{s('time_scale')}: expected a number > 0, e.g. 0.001; got {self.time_scale!r}"
+            )
 
     @classmethod
     def from_values(cls, get, origin: str = "cli") -> TraceOptions:

@@ -19,9 +19,9 @@ from pathlib import Path
 from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
+from simulator.core.traceopts import TraceOptions
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.core.traceopts import TraceOptions
 from simulator.study.entry import Entry, user_numbers
 from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
@@ -114,7 +114,7 @@ class ViewingSpec:
     #: Also plot this viewing's EPOF (``epof/<id>.png``).
     plot: bool = False
     #: How its trace is read and placed on the video's clock ([traces] and its own keys).
-    trace_opts: TraceOptions = TraceOptions(origin="manifest")
+    trace_opts: TraceOptions = field(default_factory=lambda: TraceOptions(origin="manifest"))
 
 
 @dataclass(frozen=True)

@@ -25,8 +25,8 @@ from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
 from simulator.media.video import probe
 from simulator.study.manifest import SCRIPTED, Manifest, VideoSpec, ViewingSpec
-from simulator.traces.path import synth
 from simulator.traces.clock import check_span, place, read_trace
+from simulator.traces.path import synth
 from simulator.traces.readers import TraceFile
 
 #: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).

@@ -36,8 +36,8 @@ from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.study.viewers import SCRIPTED
-from simulator.traces.path import HeadPath, synth
 from simulator.traces.clock import check_span, place, read_trace
+from simulator.traces.path import HeadPath, synth
 from simulator.traces.readers import TraceFile
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec

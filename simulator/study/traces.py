@@ -70,7 +70,9 @@ def _options(e: Entry, given: dict, rename: dict) -> TraceOptions:
         e.fail(msg)
 
 
-def viewing_trace_options(e: Entry, defaults: dict, *, scripted: bool) -> tuple[TraceOptions, object]:
+def viewing_trace_options(
+    e: Entry, defaults: dict, *, scripted: bool
+) -> tuple[TraceOptions, object]:
     """``(options, user spec)`` of one ``[[viewings]]`` entry: ``[traces]`` with the
     entry's own keys over them. A scripted viewer (``scripted``) takes none: its trace
     keys are refused (they belong on an entry with a ``trace`` file)."""

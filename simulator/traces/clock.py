@@ -37,7 +37,11 @@ LONG_FACTOR = 10.0
 #: A span outside this fraction of the video's duration warns.
 COVER_RANGE = (0.9, 1.5)
 #: Units a trace's clock may have been in, with the factor to seconds.
-_UNITS = ((1e-3, "0.001", "milliseconds"), (1e-6, "1e-6", "microseconds"), (1e-9, "1e-9", "nanoseconds"))
+_UNITS = (
+    (1e-3, "0.001", "milliseconds"),
+    (1e-6, "1e-6", "microseconds"),
+    (1e-9, "1e-9", "nanoseconds"),
+)
 
 
 class TraceSpanWarning(UserWarning):

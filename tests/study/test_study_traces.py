@@ -39,7 +39,9 @@ def base(tmp_path_factory):
 
 def _write(d, name: str, viewings: str, extra: str = "") -> object:
     m = d / f"{name}.toml"
-    m.write_text(f'[[videos]]\nid = "clip"\npath = "clip.mp4"\nwindow_size = 64\n{viewings}\n{extra}\n')
+    m.write_text(
+        f'[[videos]]\nid = "clip"\npath = "clip.mp4"\nwindow_size = 64\n{viewings}\n{extra}\n'
+    )
     return m
 
 
@@ -57,7 +59,9 @@ def test_traces_defaults_and_viewing_keys_reach_the_viewing(base):
                '[render]\neye_size = "64x64"\n')  # fmt: skip
     with pytest.raises(InputError, match=r"\[traces\]: time_format = \.\.\. has no effect without"):
         load_manifest(m)  # a [traces] time_format needs a column map in [traces] too
-    m.write_text(m.read_text().replace('[traces]\n', '[traces]\ncolumns = "time=key,yaw=Ey,pitch=-Ex"\n'))
+    m.write_text(
+        m.read_text().replace("[traces]\n", '[traces]\ncolumns = "time=key,yaw=Ey,pitch=-Ex"\n')
+    )
     man = load_manifest(m)
     sit, short = man.viewings
     o = sit.trace_opts
@@ -76,16 +80,16 @@ BAD = {
                          "time_format = ... has no effect without a column map; add columns = "),
     "scripted": ('[[viewings]]\nvideo = "clip"\nviewers = { n = 2 }\nhold_last = true\n',
                  "hold_last has no effect on scripted viewers"),
-    "user with columns": ('[[viewings]]\nvideo = "clip"\ntrace = "sit.json"\ncolumns = "time=key,yaw=Ey,pitch=Ex"\n'
-                          'time_format = "%S"\nuser = 2\n', "user has no effect with a column map"),
+    "user with columns": (('[[viewings]]\nvideo = "clip"\ntrace = "sit.json"\ncolumns = "time=key,yaw=Ey,pitch=Ex"\n'
+                          'time_format = "%S"\nuser = 2\n'), "user has no effect with a column map"),
     "trace_video on a csv": ('[[viewings]]\nvideo = "clip"\ntrace = "ok.csv"\ntrace_video = "6.mp4"\n',
                              "trace_video = '6.mp4' belongs on an AVTrack360 trace"),
     "unknown in traces": ('[[viewings]]\nvideo = "clip"\ntrace = "ok.csv"\n[traces]\nhold = true\n',
                           "[traces]: unknown key 'hold'"),
     "bad scale": ('[[viewings]]\nvideo = "clip"\ntrace = "ok.csv"\ntime_scale = 0\n',
                   "time_scale = 0: expected a number in (0.0, inf]"),
-    "format and columns": ('[[viewings]]\nvideo = "clip"\ntrace = "sit.json"\nformat = "canonical"\n'
-                           'columns = "time=key,yaw=Ey,pitch=Ex"\n', "columns = ... and format = ... exclude"),
+    "format and columns": (('[[viewings]]\nvideo = "clip"\ntrace = "sit.json"\nformat = "canonical"\n'
+                           'columns = "time=key,yaw=Ey,pitch=Ex"\n'), "columns = ... and format = ... exclude"),
 }  # fmt: skip
 
 
@@ -133,7 +137,9 @@ def test_hold_last_of_a_viewing_reaches_the_epof(base, tmp_path, capsys):
     capsys.readouterr()
     rows = {r["viewing"]: r for r in _csv(out / "viewings.csv")}
     assert rows["held"]["status"] == "ok" and (out / "epof" / "held.csv").is_file()
-    assert "hold_last = true" in rows["not"]["status"] and "--hold-last" not in rows["not"]["status"]
+    assert (
+        "hold_last = true" in rows["not"]["status"] and "--hold-last" not in rows["not"]["status"]
+    )
     lines = [ln for ln in (out / "epof" / "held.csv").read_text().splitlines() if ln[0].isdigit()]
     assert len(lines) == 15 and np.isfinite([float(ln.split(",")[5]) for ln in lines]).all()
 

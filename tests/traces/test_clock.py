@@ -122,7 +122,10 @@ def test_option_table_checks_speak_the_origin_terms():
 def test_cli_without_columns_refuses_a_columns_only_option(tmp_path, capsys):
     path = tmp_path / "p.csv"
     save_headpath_csv(path, synth("static", 1.0))
-    assert main(["headpath", "convert", str(path), "-o", str(tmp_path / "o.csv"), "--skip-rows", "2"]) == 2
+    assert (
+        main(["headpath", "convert", str(path), "-o", str(tmp_path / "o.csv"), "--skip-rows", "2"])
+        == 2
+    )
     err = capsys.readouterr().err
     assert "--skip-rows has no effect without a column map" in err and "--columns" in err
 
