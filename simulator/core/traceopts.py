@@ -105,6 +105,9 @@ def spell(key: str, origin: str = "cli", value: object = None) -> str:
         return o.flag if o.kind == "flag" or value is None else f"{o.flag} {value}"
     if o.kind == "flag":
         return f"{key} = true"
+    if key == "video":  # a viewing's own `video` is its [[videos]] id
+        v = "..." if value is None else f'"{value}"'
+        return f"trace_video = {v} (video = {v} in [traces])"
     if value is None:
         return f"{key} = ..."
     text = str(value)

@@ -198,7 +198,7 @@ def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | N
         tfmt, n = n_users(check_input_file(trace, "head path"), fmt)  # counts lines only
     except InputError as err:
         e.fail(opts.fix(str(err)))
-    if opts.video is not None and tfmt != "avtrack360":
+    if "trace_video" in e.t and tfmt != "avtrack360":  # (a [traces] default: other files')
         e.fail(f"{trace}: a {tfmt} trace holds one video; trace_video = {opts.video!r} belongs "
                "on an AVTrack360 trace")  # fmt: skip
     if user is None:

@@ -124,7 +124,21 @@ def test_avtrack360_error_says_the_manifest_key(base, real_dir, tmp_path):
     src = real_dir / "headtraces" / "avtrack360" / "Head_rotation" / "2.json"
     m = _write(base, "avt", f'[[viewings]]\nvideo = "clip"\ntrace = "{src}"\n')
     probs = dry_run(load_manifest(m), tmp_path / "o", cache_dir=tmp_path / "c")["problems"]
-    assert len(probs) == 1 and "video = ..." in probs[0] and "--video" not in probs[0], probs
+    assert len(probs) == 1 and "trace_video = ..." in probs[0] and "--video" not in probs[0], probs
+    m.write_text(m.read_text().replace('trace = "', 'trace_video = "2.mp4"\ntrace = "'))
+    # the viewing's choice reads the trace; the span of another video's trace then warns
+    plan = dry_run(load_manifest(m), tmp_path / "o", cache_dir=tmp_path / "c")
+    assert not [p for p in plan["problems"] if "video" in p and "choose" in p], plan["problems"]
+
+
+def test_a_traces_default_video_choice_is_not_refused_on_other_files(base, tmp_path):
+    m = _write(
+        base,
+        "tv",
+        '[[viewings]]\nvideo = "clip"\ntrace = "ok.csv"\n',
+        '[traces]\nvideo = "6.mp4"\n',
+    )
+    assert load_manifest(m).viewings[0].trace_opts.video == "6.mp4"
 
 
 @pytest.mark.slow

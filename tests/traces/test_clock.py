@@ -113,7 +113,8 @@ def test_option_table_checks_speak_the_origin_terms():
     assert spell("hold_last", "manifest") == "hold_last = true"
     msg = "p.csv ends at 1 s (use --hold-last to hold); choose one with --video (one of 1.mp4)"
     assert translate(msg, "manifest") == (
-        "p.csv ends at 1 s (use hold_last = true to hold); choose one with video = ... (one of 1.mp4)"
+        "p.csv ends at 1 s (use hold_last = true to hold); choose one with trace_video = ... "
+        "(video = ... in [traces]) (one of 1.mp4)"
     )
     assert translate("pass --time-scale 1e-6", "manifest") == "pass time_scale = 1e-6"
     assert len({o.key for o in TRACE_OPTIONS}) == len(TRACE_OPTIONS)
