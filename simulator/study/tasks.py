@@ -126,6 +126,16 @@ def _trace(item: dict, grid: GridFile | None = None) -> HeadPath:
     return place(_TRACES[key].user(user), opts)
 
 
+def _check_span(item: dict, hp: HeadPath, grid: GridFile) -> None:
+    """A viewing's trace span checked against its grid's whole video (a scripted viewer's
+    covers it): :func:`simulator.traces.clock.check_span`, in the manifest's terms."""
+    if not item["format"].startswith(SCRIPTED):
+        vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+        n_video = int(vid.get("n_frames") or grid.n_frames)
+        name = Path(str(vid.get("path", ""))).name
+        check_span(hp, n_video / grid.fps, _trace_opts(item), video=name)
+
+
 def _trace_opts(item: dict) -> TraceOptions:
     """A viewing's trace options (the manifest's: errors name its keys)."""
     given = {k: v for k, v in (item.get("trace_opts") or {}).items() if k != "origin"}
@@ -238,10 +248,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                 warnings.simplefilter("always")
                 try:
                     hp, topts = _trace(it, grid), _trace_opts(it)
-                    if not it["format"].startswith(SCRIPTED):
-                        n_video = int((grid.meta.get("video") or {}).get("n_frames") or grid.n_frames)
-                        check_span(hp, n_video / grid.fps, topts,
-                                   video=Path(str((grid.meta.get("video") or {}).get("path", ""))).name)  # fmt: skip
+                    _check_span(it, hp, grid)
                     res = compute_epof(
                         grid,
                         hp,
@@ -293,6 +300,7 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             warnings.simplefilter("ignore")
             grid = _grid(grid_path)
             hp = _trace(item, grid)
+            _check_span(item, hp, grid)  # as the EPOF task: an implausible span is refused
         s = render_viewing(
             dataclasses.replace(_source(video), eye="left"),
             hp,
