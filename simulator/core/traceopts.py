@@ -65,7 +65,7 @@ TRACE_OPTIONS: tuple[TraceOption, ...] = (
                 "nested JSON fields by dotted names, time=key for a JSON object keyed by "
                 "timestamps (a single wrapper key is descended), e.g. the SIT-VR Unity log: "
                 "time=key,yaw=Ey,pitch=-Ex,roll=-Ez", metavar="MAP"),
-    TraceOption("angles", "choice", "deg", "columns: angle unit", choices=("deg", "rad"),
+    TraceOption("angles", "choice", "deg", "columns: angle unit (default deg)", choices=("deg", "rad"),
                 columns_only=True),
     TraceOption("time_format", "str", None, "columns: the time column is a clock time in "
                 "this strptime format, e.g. %Y%m%dZ-%H%M%S_%fZ (counted from the first row)",

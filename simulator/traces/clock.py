@@ -111,8 +111,11 @@ def check_span(
     ratio = span / video_s
     # short and not held: the coverage check refuses it (one line); held, it warns here
     if (ratio < COVER_RANGE[0] and opts.hold_last) or ratio > COVER_RANGE[1]:
-        fix = spell("time_offset", opts.origin, "S")
-        msg = (f"head path {src} spans {span:.4g} s, {ratio:.0%} of the video{of}: the right "
+        fix, vid = (
+            spell("time_offset", opts.origin, "S"),
+            f"video {video}" if video else "the video",
+        )
+        msg = (f"head path {src} spans {span:.4g} s, {ratio:.0%} of {vid} ({video_s:.3g} s): the right "
                f"trace and time unit? ({fix} places a trace starting before or after the video)")  # fmt: skip
         if warn:
             warnings.warn(msg, TraceSpanWarning, stacklevel=2)
