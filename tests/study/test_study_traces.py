@@ -131,6 +131,19 @@ def test_avtrack360_error_says_the_manifest_key(base, real_dir, tmp_path):
     assert not [p for p in plan["problems"] if "video" in p and "choose" in p], plan["problems"]
 
 
+def test_hold_last_of_a_viewing_reaches_its_render_view(base):
+    m = _write(base, "held_render", '[[viewings]]\nvideo = "clip"\ntrace = "short.csv"\n'
+               'hold_last = true\nrender = true\nid = "held"\n'
+               '[[viewings]]\nvideo = "clip"\ntrace = "ok.csv"\nrender = true\nid = "free"\n',
+               '[render]\neye_size = "64x64"\n')  # fmt: skip
+    held, free = load_manifest(m).viewings
+    assert held.render_opts["hold_last"] and held.render_opts["view"]["hold_last"] is True
+    assert not free.render_opts["hold_last"] and "hold_last" not in free.render_opts["view"]
+    from simulator.viewing.spec import ViewSpec
+
+    assert ViewSpec.from_options(held.render_opts["view"]).hold is True
+
+
 def test_a_traces_default_video_choice_is_not_refused_on_other_files(base, tmp_path):
     m = _write(
         base,
