@@ -211,7 +211,7 @@ def _run_cao_csv(args: argparse.Namespace, rule) -> int:
         pct, how = (float(lo), float(hi)), f"pof_px percentiles {rule.low_pct:g}/{rule.high_pct:g}"
     files = export_cao_csv(g, args.output, percentiles_px=pct)
     print(
-        f"wrote {args.output}: {len(files) - 1} window CSVs of {g.n_frames} frames and "
-        f"percentileData.csv ({pct[0]:.4g}, {pct[1]:.4g} px/frame: {how})"
+        f"wrote {args.output}: {len(files) - 3} window CSVs of {g.n_frames} frames, the "
+        f"runtimes VimsimCao2021.cs and vimsim_cao2021.js, and percentileData.csv ({pct[0]:.4g}, {pct[1]:.4g} px/frame: {how})"
     )
     return 0

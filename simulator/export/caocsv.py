@@ -24,10 +24,13 @@ from simulator.core.fileio import OutputFolder, atomic_output
 from simulator.media.gridfile import GridFile, load_grid, save_grid
 from simulator.sphere.windows import WindowGrid, grid_preset
 
-__all__ = ["PERCENTILE_FILE", "CaoFolder", "export_cao_csv", "import_cao_csv", "read_cao_folder",
+__all__ = ["PERCENTILE_FILE", "RUNTIME_FILES", "CaoFolder", "export_cao_csv", "import_cao_csv", "read_cao_folder",
            "window_file_name"]  # fmt: skip
 
 PERCENTILE_FILE = "percentileData.csv"
+#: The rule's runtimes written beside the CSVs: ``name -> package folder`` (C# for Unity, an ES
+#: module for web players; no engine dependency).
+RUNTIME_FILES = {"VimsimCao2021.cs": "export/unity", "vimsim_cao2021.js": "export/web"}
 _NAME = re.compile(r"^horizontal_(-?\d+(?:\.\d+)?)_vertical_(-?\d+(?:\.\d+)?)\.csv$")
 
 
@@ -238,7 +241,8 @@ def export_cao_csv(
         for i, p in enumerate(g.pitch_deg) for j, y in enumerate(g.yaw_deg)
     }  # fmt: skip
     inputs = [g.path] if g.path else []
-    folder = OutputFolder(out_dir, [*names, PERCENTILE_FILE], "export --format cao-csv")
+    folder = OutputFolder(out_dir, [*names, PERCENTILE_FILE, *RUNTIME_FILES],
+                          "export --format cao-csv")  # fmt: skip
     out = folder.prepare(inputs)
     for name, (i, j) in names.items():
         col = g.pof_px[:, i, j]
@@ -247,5 +251,15 @@ def export_cao_csv(
             t.write_text(text, encoding="utf-8")
     with atomic_output(out / PERCENTILE_FILE) as t:
         t.write_text(f"{_value_text(lo)}\n{_value_text(hi)}\n", encoding="utf-8")
+    for name, pkg in RUNTIME_FILES.items():
+        with atomic_output(out / name) as t:
+            t.write_bytes(runtime_source(name, pkg))
     folder.complete()
-    return [out / n for n in [*names, PERCENTILE_FILE]]
+    return [out / n for n in [*names, PERCENTILE_FILE, *RUNTIME_FILES]]
+
+
+def runtime_source(name: str, pkg: str) -> bytes:
+    """The bytes of one of :data:`RUNTIME_FILES` (package data)."""
+    from importlib.resources import files
+
+    return files("simulator").joinpath(pkg, name).read_bytes()
