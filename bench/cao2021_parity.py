@@ -63,7 +63,9 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         d = Path(tmp)
         grids = {
-            "calm": _clip(d, "calm", SynthConfig("rotate", a.seconds, a.fps, (512, 256), omega_dps=3.0)),
+            "calm": _clip(
+                d, "calm", SynthConfig("rotate", a.seconds, a.fps, (512, 256), omega_dps=3.0)
+            ),
             "busy": _clip(d, "busy", SynthConfig("coaster", a.seconds, a.fps, (512, 256))),
         }
         print("1. nearest window vs overlap-weighted EPOF (deg/s), cao2021 grid")
@@ -79,15 +81,23 @@ def main() -> None:
                 yaw, pitch, roll = hp.sample_angles_deg(t, hold=True)
                 over = epof_from_grid(g, yaw, pitch, roll, frames)
                 # same frame: nearest_flow reads row k-2, so ask for frame + 2
-                near = nearest_flow(g.pof_dps, frames + 2, yaw, pitch, g.yaw_deg, g.pitch_deg, **steps)
+                near = nearest_flow(
+                    g.pof_dps, frames + 2, yaw, pitch, g.yaw_deg, g.pitch_deg, **steps
+                )
                 lag = nearest_flow(g.pof_dps, frames, yaw, pitch, g.yaw_deg, g.pitch_deg, **steps)
                 o_op, n_op, l_op = (_pct_rule(x, lo, hi) for x in (over, near, lag))
                 m = over.mean()
-                print(f"{clip:5s} {name:12s} {np.abs(near - over).mean() / m:12.3f}  "
-                      f"{np.corrcoef(near, over)[0, 1]:5.3f}  {np.abs(n_op - o_op).mean():9.3f}  "
-                      f"{np.abs(lag - over).mean() / m:19.3f}  {np.abs(l_op - o_op).mean():5.3f}")
-        print("\n2. fixed px/frame scale vs per-video percentiles (nearest window's flow, px at 1600 px)")
-        print("clip  path         flow px median  fixed: mean op  >0.5   pct(10/90): lo..hi px  mean op  >0.5")
+                print(
+                    f"{clip:5s} {name:12s} {np.abs(near - over).mean() / m:12.3f}  "
+                    f"{np.corrcoef(near, over)[0, 1]:5.3f}  {np.abs(n_op - o_op).mean():9.3f}  "
+                    f"{np.abs(lag - over).mean() / m:19.3f}  {np.abs(l_op - o_op).mean():5.3f}"
+                )
+        print(
+            "\n2. fixed px/frame scale vs per-video percentiles (nearest window's flow, px at 1600 px)"
+        )
+        print(
+            "clip  path         flow px median  fixed: mean op  >0.5   pct(10/90): lo..hi px  mean op  >0.5"
+        )
         for clip, g in grids.items():
             frames = np.arange(g.n_frames)
             t = frames / g.fps
@@ -96,12 +106,22 @@ def main() -> None:
             gg = g.grid
             for name, hp in _paths(a.seconds).items():
                 yaw, pitch, _ = hp.sample_angles_deg(t, hold=True)
-                px = SCALE * nearest_flow(g.pof_px, frames + 2, yaw, pitch, g.yaw_deg, g.pitch_deg,
-                                          yaw_step_deg=gg.yaw_step_deg, pitch_step_deg=gg.pitch_step_deg)
+                px = SCALE * nearest_flow(
+                    g.pof_px,
+                    frames + 2,
+                    yaw,
+                    pitch,
+                    g.yaw_deg,
+                    g.pitch_deg,
+                    yaw_step_deg=gg.yaw_step_deg,
+                    pitch_step_deg=gg.pitch_step_deg,
+                )
                 f_op, p_op = fixed(px), _pct_rule(px, lo, hi)
-                print(f"{clip:5s} {name:12s} {np.median(px):14.2f}  {f_op.mean():14.3f}  "
-                      f"{(f_op > 0.5).mean():4.2f}   {lo:8.2f}..{hi:<8.2f}    {p_op.mean():7.3f}  "
-                      f"{(p_op > 0.5).mean():4.2f}")
+                print(
+                    f"{clip:5s} {name:12s} {np.median(px):14.2f}  {f_op.mean():14.3f}  "
+                    f"{(f_op > 0.5).mean():4.2f}   {lo:8.2f}..{hi:<8.2f}    {p_op.mean():7.3f}  "
+                    f"{(p_op > 0.5).mean():4.2f}"
+                )
 
 
 if __name__ == "__main__":

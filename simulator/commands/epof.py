@@ -184,8 +184,11 @@ def _run_nearest(args: argparse.Namespace, grid, hp) -> int:
     """``--preset cao2021-code``: the authors' runtime, with the ``flow_px`` column."""
     from simulator.epof import plot_epof, write_epof_csv
     from simulator.epof.nearest import FLOW_PX_COLUMN, nearest_epof
+    from simulator.mitigation.cao2021 import FixedPxRule
 
-    res = nearest_epof(grid, hp, hold=args.hold_last)
+    pct = (grid.meta.get("cao") or {}).get("percentiles_px")  # an imported percentile file
+    rule = FixedPxRule(*pct) if pct else FixedPxRule()
+    res = nearest_epof(grid, hp, rule=rule, hold=args.hold_last)
     write_epof_csv(args.output, res, extra={FLOW_PX_COLUMN: res.meta["flow_px"]})
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid} (cao2021-code)")

@@ -6,7 +6,6 @@ from __future__ import annotations
 import argparse
 
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
-from simulator.core.choices import SYSTEM_PRESETS
 from simulator.commands._types import (
     add_fov_arguments,
     fov_from_args,
@@ -14,6 +13,7 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
 )
+from simulator.core.choices import SYSTEM_PRESETS
 
 __all__ = ["register", "run"]
 
@@ -191,6 +191,8 @@ def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation) -> int
 def _run_cao_csv(args: argparse.Namespace, rule) -> int:
     """``--format cao-csv``: the percentile file from the chosen rule (fixed px/frame for
     ``--preset cao2021-code``, else the grid's pof_px percentiles; absolute deg/s refused)."""
+    import dataclasses
+
     import numpy as np
 
     from simulator.core.errors import InputError
@@ -200,7 +202,10 @@ def _run_cao_csv(args: argparse.Namespace, rule) -> int:
 
     g = load_grid(args.grid)
     if args.preset == "cao2021-code":
+        from simulator.epof.nearest import preset_pof_px
+
         pct, how = (CAO_LOW_PX, CAO_HIGH_PX), "the authors' fixed scale"
+        g = dataclasses.replace(g, pof_px=preset_pof_px(g))  # their frame-0 row, if measured
     elif rule.is_absolute:
         raise InputError(
             "--format cao-csv writes px/frame thresholds; an absolute deg/s rule has none: "

@@ -14,7 +14,9 @@ def _size(text: str) -> tuple[int, int]:
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected WxH pixels, e.g. 1600x1440; got {text!r}") from None
+        raise argparse.ArgumentTypeError(
+            f"expected WxH pixels, e.g. 1600x1440; got {text!r}"
+        ) from None
     if not (16 <= w <= 8192 and 16 <= h <= 8192):
         raise argparse.ArgumentTypeError(f"window size must be 16..8192 px a side; got {text!r}")
     return w, h

@@ -103,7 +103,9 @@ def _steps(centres: list[float], what: str, folder: Path, full_circle: bool) -> 
     d = np.diff(np.asarray(centres, float))
     if len(centres) < 2:
         if full_circle:
-            raise InputError(f"{folder}: one {what} centre only; the yaw windows must go round 360 deg")
+            raise InputError(
+                f"{folder}: one {what} centre only; the yaw windows must go round 360 deg"
+            )
         return 15.0
     step = float(d[0])
     if np.abs(d - step).max() > 1e-6 or (full_circle and abs(step * len(centres) - 360) > 1e-6):
@@ -121,7 +123,9 @@ def read_cao_folder(folder: str | os.PathLike) -> CaoFolder:
     """
     d = Path(folder)
     if not d.is_dir():
-        raise InputError(f"{d}: not a folder of window CSVs (horizontal_<yaw>_vertical_<pitch>.csv)")
+        raise InputError(
+            f"{d}: not a folder of window CSVs (horizontal_<yaw>_vertical_<pitch>.csv)"
+        )
     found: dict[tuple[float, float], Path] = {}
     for f in sorted(d.iterdir()):
         m = _NAME.match(f.name)
@@ -130,7 +134,9 @@ def read_cao_folder(folder: str | os.PathLike) -> CaoFolder:
         yaw = (float(m.group(1)) + 180.0) % 360.0 - 180.0  # 180 and -180 are one window
         key = (yaw, float(m.group(2)))
         if key in found or not (-90.0 <= key[1] <= 90.0):
-            raise InputError(f"{f}: window yaw {key[0]:g} pitch {key[1]:g} is a duplicate or beyond the poles")
+            raise InputError(
+                f"{f}: window yaw {key[0]:g} pitch {key[1]:g} is a duplicate or beyond the poles"
+            )
         found[key] = f
     if not found:
         raise InputError(f"{d}: no window files horizontal_<yaw>_vertical_<pitch>.csv")
@@ -212,8 +218,11 @@ def import_cao_csv(
         "layout": "mono",
         "eye": "left",
         "video": {"path": "", "n_frames": T},
-        "cao": {"folder": str(folder), "percentiles_px": c.percentiles_px,
-                "pof_dps": "pof_px * hfov_deg / width * fps (centre pixel pitch)"},  # fmt: skip
+        "cao": {
+            "folder": str(folder),
+            "percentiles_px": c.percentiles_px,
+            "pof_dps": "pof_px * hfov_deg / width * fps (centre pixel pitch)",
+        },
     }
     save_grid(output, dps, c.pof_px, grid, meta)
     return load_grid(output)

@@ -66,7 +66,9 @@ class FixedPxRule:
     def __post_init__(self) -> None:
         lo, hi = self.low_px, self.high_px
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
-            raise InputError(f"fixed px/frame opacity scale needs finite low < high; got {lo}, {hi}")
+            raise InputError(
+                f"fixed px/frame opacity scale needs finite low < high; got {lo}, {hi}"
+            )
 
     def __call__(self, flow_px) -> NDArray[np.float64]:
         f = np.asarray(flow_px, np.float64)

@@ -129,7 +129,7 @@ def test_fixed_px_rule():
 
 def test_nearest_window_refuses_off_step_grid():
     g = grid_preset("default", size=(16, 16))  # pitch multiples of 7.5: fine with step 7.5
-    p, y = nearest_window(0.0, 80.0, g.yaw_deg, g.pitch_deg, pitch_step_deg=7.5)
+    p, _y = nearest_window(0.0, 80.0, g.yaw_deg, g.pitch_deg, pitch_step_deg=7.5)
     assert g.pitch_deg[p] == 37.5  # beyond the rows: clamped to the last
     with pytest.raises(InputError):
         nearest_window(0.0, 0.0, g.yaw_deg, g.pitch_deg, pitch_step_deg=10.0)
