@@ -9,6 +9,7 @@ window's px per degree being 10 x), and three scripted head paths per clip. Prin
    mean |difference| as a ratio to the mean EPOF, the correlation, and the mean |difference|
    of the paper's opacity (10th/90th percentiles of the grid) driven by each; then the same
    with the authors' list indexing (row k-2 at frame k).
+0. their frame-0 row against the later rows, and the opacity it gives at video frame 2.
 2. the fixed px/frame scale (0.18..53.73) vs the per-video 10th/90th percentiles, both on
    the nearest window's flow: mean opacity and share of frames with opacity > 0.5, calm
    and busy clips.
@@ -68,9 +69,19 @@ def main() -> None:
             ),
             "busy": _clip(d, "busy", SynthConfig("coaster", a.seconds, a.fps, (512, 256))),
         }
+        print("0. their frame-0 defect (frame 0's windows at 88 deg, frame 1's at 107 deg)")
+        for clip, g in grids.items():
+            row0 = np.asarray(g.meta["cao"]["row0_px"])
+            later = np.asarray(g.pof_px[1:], np.float64).mean(axis=0)
+            r = row0 / np.maximum(later, 1e-6)
+            print(
+                f"{clip:5s} row 0 / mean of later rows per window: median {np.median(r):.1f}x, "
+                f"range {r.min():.1f}..{r.max():.1f}x; fixed-scale opacity at frame 2: "
+                f"{FixedPxRule()(SCALE * row0).mean():.2f} (mean over windows)"
+            )
+        print()
         print("1. nearest window vs overlap-weighted EPOF (deg/s), cao2021 grid")
         print("clip  path         |n-o|/mean(o)  corr   |dOpacity|  with k-2: |n-o|/mean  |dOp|")
-        fixed = FixedPxRule()
         for clip, g in grids.items():
             frames = np.arange(g.n_frames)
             t = frames / g.fps
@@ -104,6 +115,7 @@ def main() -> None:
             px_grid = np.asarray(g.pof_px, np.float64) * SCALE
             lo, hi = np.percentile(px_grid, [10, 90])
             gg = g.grid
+            fixed = FixedPxRule()
             for name, hp in _paths(a.seconds).items():
                 yaw, pitch, _ = hp.sample_angles_deg(t, hold=True)
                 px = SCALE * nearest_flow(
