@@ -172,7 +172,10 @@ def _apply_preset(args: argparse.Namespace) -> None:
     if args.preset == "cao2021-code":
         given += [o for o, on in (("--top-k", args.top_k is not None),
                                   ("--artefacts", args.artefacts),
-                                  ("--method paper", args.method == "paper"))
+                                  ("--method paper", args.method == "paper"),
+                                  ("a viewport FOV (the nearest window has none)",
+                                   any(getattr(args, k, None) is not None
+                                       for k in ("fov", "hfov", "vfov", "headset"))))
                   if on]  # fmt: skip
     if given:
         raise InputError(f"--preset {args.preset} cannot be combined with {', '.join(given)}")

@@ -56,7 +56,8 @@ def test_epof_preset_refusals(tmp_path, cao_grid, capsys):
     path = tmp_path / "p.csv"
     path.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n3,10,0,0\n")
     out = tmp_path / "e.csv"
-    for extra in (["--top-k", "2"], ["--method", "sphere"], ["--opacity-rule", "absolute"]):
+    for extra in (["--top-k", "2"], ["--method", "sphere"], ["--opacity-rule", "absolute"],
+                  ["--fov", "90"]):  # fmt: skip
         assert main(["epof", str(cao_grid), str(path), "-o", str(out), "--preset",
                      "cao2021-code", *extra]) == 2  # fmt: skip
         err = capsys.readouterr().err.strip()
