@@ -1,6 +1,7 @@
 """The cao2021-code rule in the exported C# (Mono) and JS (node) runtimes equals the Python rule
 to 1e-7 (frames 0, 1, 2, past the end; the +-165..180 yaw wraps; the poles), read from the
-folder ``vimsim export --format cao-csv`` writes."""
+folder ``vimsim export --format cao-csv`` writes, and from ``DIR/cao2021/`` of ``vimsim export
+--format unity|web --preset cao2021-code`` (whose header records the preset)."""
 
 from __future__ import annotations
 
@@ -20,9 +21,10 @@ from simulator.mitigation.cao2021 import FixedPxRule, nearest_flow
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
-    """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again."""
+@pytest.fixture(scope="module", params=["cao-csv", "unity", "web"])
+def exported(tmp_path_factory, request):
+    """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again
+    (cao-csv: the folder itself; unity / web: the package's cao2021/ folder)."""
     d = tmp_path_factory.mktemp("cao")
     src = d / "src"
     src.mkdir()
@@ -33,9 +35,17 @@ def exported(tmp_path_factory):
             rows = "".join(f"{t},{float(x)!r}\n" for t, x in enumerate(v))
             (src / window_file_name(y, p)).write_text(",0\n" + rows)
     assert main(["grid", "import", str(src), "-o", str(d / "g.npz"), "--fps", "30"]) == 0
-    assert main(["export", str(d / "g.npz"), "--format", "cao-csv", "--preset", "cao2021-code",
-                 "-o", str(d / "out")]) == 0  # fmt: skip
-    return load_grid(d / "g.npz"), d / "out"
+    assert main(["export", str(d / "g.npz"), "--format", request.param, "--preset",
+                 "cao2021-code", "-o", str(d / "out")]) == 0  # fmt: skip
+    if request.param == "cao-csv":
+        return load_grid(d / "g.npz"), d / "out"
+    from simulator.export.unity import read_export
+
+    h, _ = read_export(d / "out" / "vimsim_epof.bin")
+    assert h["preset"]["name"] == "cao2021-code" and h["preset"]["folder"] == "cao2021"
+    assert (h["preset"]["low_px"], h["preset"]["high_px"]) == (0.18, 53.73)
+    assert h["grf"]["n_grains"] == 129_600  # their grains, in the file
+    return load_grid(d / "g.npz"), d / "out" / "cao2021"
 
 
 def _queries(n=2000, seed=3):
