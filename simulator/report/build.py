@@ -34,6 +34,7 @@ from simulator.export.unity import VERSION as DATA_VERSION
 from simulator.export.web import JS_FILES, MANIFEST_VERSION, export_web, js_source
 from simulator.media.source import Source
 from simulator.media.video import VideoWriter, probe
+from simulator.mitigation.cao2021 import cao_grf_config
 from simulator.mitigation.grf import GrfConfig
 from simulator.report import pages
 from simulator.study.tasks import _rule as study_rule
@@ -299,7 +300,10 @@ def _asset(name: str) -> bytes:
 
 
 def _grf(settings: dict) -> GrfConfig:
+    """The replay's grains: the study's ``[grf]``, or the authors' with ``preset = "cao2021-code"``."""
     g = settings.get("grf") or {}
+    if (settings.get("epof") or {}).get("preset") == "cao2021-code":
+        return cao_grf_config(seed=int(g.get("seed", 0)))
     return GrfConfig(**{k: g[k] for k in ("grain_deg", "density", "inner_deg", "outer_deg",
                                           "seed") if k in g})  # fmt: skip
 
