@@ -181,7 +181,7 @@ def _features_csv(ratings: Ratings, X: np.ndarray, pred: np.ndarray) -> str:
         rel = [os.path.relpath(q, base) if q is not None else "" for q in (r.video, r.trace)]
         cells = [rel[0], r.group or "", rel[1], r.participant]
         buf.write(",".join(csv_cell(c) for c in cells) + f",{r.rating:.10g},{p:.6g},")
-        buf.write(",".join(f"{v:.6g}" for v in x) + "\n")
+        buf.write(",".join(f"{v:.10g}" for v in x) + "\n")
     return buf.getvalue()
 
 

@@ -1,0 +1,175 @@
+"""vimsim calibrate: a synthetic rating rule recovered, the model's JSON round trip, the refusals of bad input."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from simulator.cli import main
+from simulator.core.errors import InputError
+from simulator.discomfort.model import load_model, validate_model
+
+
+@pytest.fixture(scope="module")
+def calibrated(rated_clips, tmp_path_factory):
+    """The 12 rated clips calibrated once (the grid cache filled on the way)."""
+    out = tmp_path_factory.mktemp("model") / "model.json"
+    args = [
+        "calibrate",
+        str(rated_clips.ratings),
+        "-o",
+        str(out),
+        "--grids",
+        str(rated_clips.grids),
+    ]
+    assert main(args) == 0
+    return out
+
+
+@pytest.mark.slow  # 12 synthetic clips made and calibrated once (~10 s CPU)
+def test_a_rule_weighing_roll_5x_and_pitch_3x_is_recovered(calibrated, rated_clips):
+    """Ratings = |yaw| + 3 |pitch| + 5 |roll| (deg/s) on 12 clips in 4 scenes: held out by
+    scene (GroupKFold), SROCC >= 0.9; the per-axis weights come out in the rule's order."""
+    m = load_model(calibrated)
+    cv = m.cv
+    assert cv["grouped"] is True and cv["folds"] == 4 and cv["n"] == 12
+    assert cv["srocc"] >= 0.9, cv
+    assert cv["srocc_ci"][0] <= cv["srocc"] <= cv["srocc_ci"][1]
+    assert cv["rmse_ci"][0] <= cv["rmse"] <= cv["rmse_ci"][1]
+    coef = {f["name"]: f["coef"] for f in m.data["features"]}
+    w = {a: coef[f"{a}_rate_mean_dps"] / next(
+        f["scale"] for f in m.data["features"] if f["name"] == f"{a}_rate_mean_dps")
+        for a in ("yaw", "pitch", "roll")}  # fmt: skip
+    assert w["roll"] > w["pitch"] > w["yaw"], w
+
+
+@pytest.mark.slow  # 12 synthetic clips made and calibrated once (~10 s CPU)
+def test_outputs_beside_the_model(calibrated):
+    d = calibrated.parent
+    assert {p.name for p in d.iterdir()} >= {
+        "model.json", "model.weights.csv", "model.calibration.png", "model.features.csv",
+    }  # fmt: skip
+    rows = (d / "model.weights.csv").read_text().splitlines()
+    assert rows[0] == "feature,unit,weight_per_sd,coef_per_unit,mean,sd" and len(rows) == 17
+    assert rows[1].split(",")[0].startswith("roll_rate")  # the largest weight first
+    assert (d / "model.calibration.png").read_bytes()[:4] == b"\x89PNG"
+    data = json.loads(calibrated.read_text())
+    for key in ("training_set_hash", "vimsim_version", "ratings", "alpha", "intercept"):
+        assert key in data
+    assert data["ratings"]["min"] < data["ratings"]["max"]
+
+
+@pytest.mark.slow  # 12 synthetic clips made and calibrated once (~10 s CPU)
+def test_model_round_trip_predicts_as_the_pipeline(calibrated, rated_clips):
+    """MODEL.json read back predicts each clip's features as the fitted pipeline does."""
+    from simulator.discomfort.features import feature_names
+    from simulator.discomfort.fit import fit_pipeline
+
+    table = (calibrated.parent / "model.features.csv").read_text().splitlines()
+    head = table[0].split(",")
+    rows = [ln.split(",") for ln in table[1:]]
+    names = feature_names()
+    X = np.array([[float(r[head.index(n)]) for n in names] for r in rows])
+    y = np.array([float(r[head.index("rating")]) for r in rows])
+    m = load_model(calibrated)
+    pipe_pred = fit_pipeline(X, y).predict(X)
+    ours = [m.predict(dict(zip(names, x, strict=True))) for x in X]
+    assert np.allclose([p.value for p in ours], pipe_pred, rtol=1e-6, atol=1e-6)
+    assert all(p.low < p.value < p.high for p in ours)
+    far = dict(zip(names, X[0] * 10, strict=True))
+    assert m.predict(far).extrapolated and not ours[int(np.argmin(abs(y - y.mean())))].extrapolated
+    again = validate_model(json.loads(json.dumps(m.data)))
+    assert again.data == m.data
+
+
+@pytest.mark.slow  # 12 synthetic clips made and calibrated once (~10 s CPU)
+def test_rerun_replaces_its_own_files_and_reuses_the_grids(calibrated, rated_clips, capsys):
+    before = sorted(p.name for p in rated_clips.grids.iterdir())
+    args = [
+        "calibrate",
+        str(rated_clips.ratings),
+        "-o",
+        str(calibrated),
+        "--grids",
+        str(rated_clips.grids),
+    ]
+    assert main(args) == 0
+    assert sorted(p.name for p in rated_clips.grids.iterdir()) == before
+    out = capsys.readouterr().out
+    assert "held-out SROCC" in out and "GroupKFold" in out
+
+
+def _bad(tmp_path, capsys, text, *, videos=8, model=None, names="r.csv"):
+    for i in range(videos):
+        (tmp_path / f"v{i}.mp4").write_bytes(b"not decoded before the checks")
+    (tmp_path / "r.csv").write_text(text)
+    out = model or tmp_path / "m.json"
+    before = set(tmp_path.iterdir())
+    rc = main(["calibrate", str(tmp_path / "r.csv"), "-o", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and names in err, err
+    assert set(tmp_path.iterdir()) == before  # nothing written
+    return err
+
+
+def _rows(n=8, group=True, rating=lambda i: i):
+    head = "video,rating,group" if group else "video,rating"
+    return (
+        head
+        + "\n"
+        + "".join(
+            f"v{i}.mp4,{rating(i)}" + (f",g{i % 3}" if group else "") + "\n" for i in range(n)
+        )
+    )
+
+
+@pytest.mark.parametrize(
+    "text, words",
+    [
+        (_rows(7), "7 rated video(s)"),
+        (_rows(8).replace(",g2\n", ",g1\n").replace(",g0\n", ",g1\n"), "1 group(s)"),
+        (_rows(8, rating=lambda i: "nan" if i == 3 else i), "row 5: rating 'nan'"),
+        (_rows(8, rating=lambda i: "x" if i == 0 else i), "row 2: rating 'x'"),
+        (_rows(8) + "v9.mp4,3,g0\n", "v9.mp4: video file not found"),
+        (_rows(8) + "v1.mp4,3,g0\n", "row 10: duplicate of row 3"),
+        (_rows(8).replace("video,rating,group", "video,rating,scene"), "unknown column(s) scene"),
+        (_rows(8).replace("video,rating,group", "video,group"), "rating missing"),
+        (_rows(8).replace("v2.mp4,2,g2", "v2.mp4,2,"), "row 4: group is empty"),
+    ],
+)
+def test_bad_ratings_are_refused_naming_file_and_row(tmp_path, capsys, text, words):
+    assert words in _bad(tmp_path, capsys, text)
+
+
+def test_a_user_file_beside_the_model_is_never_replaced(tmp_path, capsys):
+    (tmp_path / "m.weights.csv").write_text("mine\n")
+    err = _bad(tmp_path, capsys, _rows(8), names="m.weights.csv")  # before any video is read
+    assert "not written by vimsim calibrate" in err
+    assert (tmp_path / "m.weights.csv").read_text() == "mine\n"
+
+
+@pytest.mark.slow  # 12 synthetic clips made and calibrated once (~10 s CPU)
+def test_models_failing_the_schema_are_refused(calibrated, tmp_path):
+    data = json.loads(calibrated.read_text())
+    cases = [
+        ({**data, "features_version": "0"}, "features version '0'"),
+        ({**data, "cross_validation": {}}, "cross_validation"),
+        ({**data, "features": [{"name": "no_such", "mean": 0, "scale": 1, "coef": 1}]}, "unknown"),
+        ({**data, "intercept": "1"}, "intercept"),
+        ([1, 2], "not a JSON object"),
+    ]
+    for i, (d, words) in enumerate(cases):
+        p = tmp_path / f"bad{i}.json"
+        p.write_text(json.dumps(d))
+        with pytest.raises(InputError, match=words) as e:
+            load_model(p)
+        assert str(p) in str(e.value)
+    p = tmp_path / "pickle.json"
+    p.write_bytes(b"\x80\x04\x95")
+    with pytest.raises(InputError, match="not JSON"):
+        load_model(p)
+    shutil.copy(calibrated, tmp_path / "ok.json")
+    assert load_model(tmp_path / "ok.json").names
