@@ -17,6 +17,7 @@ from pathlib import Path
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
+from simulator.discomfort.model import Model, load_model
 from simulator.media.gridfile import content_hash
 from simulator.media.source import Source
 from simulator.media.video import probe
@@ -86,6 +87,7 @@ def screen_videos(
     workers: int | None = None,
     cache_dir=None,
     progress=None,
+    model=None,
 ) -> dict:
     """Screen ``videos`` into ``outdir``; returns the study summary with ``screen`` added.
 
@@ -93,9 +95,13 @@ def screen_videos(
     grid files the user already made (used for the video whose content they match);
     ``layout``: of every video (stereo: the left eye is screened); ``projection``,
     ``lens_fov_deg``: of every video (None: each file's spherical metadata, else equirect).
+    ``model``: a discomfort model (:class:`simulator.discomfort.model.Model`, or the path of
+    its JSON, checked before any work) whose predictions join the comparison table.
     InputError (nothing written) for no video, a still image, a missing file, bad viewers.
     """
     check_viewers(viewers, kind)
+    if model is not None and not isinstance(model, Model):
+        model = load_model(model)
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         raise InputError(f"--seed must be an integer >= 0; got {seed!r}")
     paths = [check_input_file(v, "video") for v in videos]
@@ -132,7 +138,7 @@ def screen_videos(
                  viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip
     summary = run_study(m, out, executor=executor, workers=workers, cache_dir=cache_dir,
                         progress=progress, video_outputs=False)  # fmt: skip
-    summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts)
+    summary["screen"] = write_screen_outputs(m, out, summary, artefacts=artefacts, model=model)
     summary["screen"]["reused_grids"] = reused
     summary["screen"]["unused_grids"] = [
         str(g) for g in grid_files if str(g) not in reused.values()
