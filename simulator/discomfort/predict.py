@@ -12,12 +12,14 @@ them: the model's held-out SROCC and RMSE.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 
+from simulator.core.errors import InputError
 from simulator.discomfort.features import features_from_grid
-from simulator.discomfort.model import Model
+from simulator.discomfort.model import Model, load_model
 from simulator.media.gridfile import load_grid
 
-__all__ = ["MODEL_COLUMNS", "model_note", "model_summary", "predict_columns"]
+__all__ = ["MODEL_COLUMNS", "model_note", "model_summary", "predict_columns", "study_model"]
 
 MODEL_COLUMNS: tuple[str, ...] = (
     "predicted_discomfort", "predicted_low", "predicted_high", "predicted_extrapolated",
@@ -54,3 +56,29 @@ def model_note(model: Model) -> str:
         f"({how}, {s['folds']} folds); ratings {s['ratings_min']:.3g} to {s['ratings_max']:.3g}, "
         "predictions outside are extrapolated"
     )
+
+
+def study_model(manifest: Path, base: Path, table, videos) -> Path | None:
+    """A study manifest's ``[model]`` table (``path = "MODEL.json"``, relative to the
+    manifest's folder ``base``): the model's path, its JSON checked now (schema, features
+    version); ``videos``: ``(id, method)`` of each video, all of which must be in sphere
+    mode (the features need its field). None without the table; InputError naming the
+    manifest, ``[model]`` and the problem."""
+    if table is None:
+        return None
+    where = f"{manifest}: [model]"
+    if not isinstance(table, dict) or set(table) != {"path"} or not isinstance(table["path"], str):
+        raise InputError(f'{where}: expected exactly one key, path = "MODEL.json"')
+    p = Path(table["path"])
+    p = p if p.is_absolute() else base / p
+    try:
+        load_model(p)
+    except InputError as e:
+        raise InputError(f"{where}: {e}") from None
+    for vid, method in videos:
+        if method != "sphere":
+            raise InputError(
+                f'{where}: video {vid!r} is preprocessed in {method} mode; the model\'s features '
+                'need method = "sphere"'
+            )
+    return p

@@ -19,7 +19,7 @@ from pathlib import Path
 from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.discomfort.model import load_model
+from simulator.discomfort.predict import study_model
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.study.entry import Entry, user_numbers
@@ -126,8 +126,7 @@ class Manifest:
     grf: dict = field(default_factory=dict)
     questionnaires: dict | None = None
     cache: Path | None = None
-    #: ``[model] path``: a discomfort model (vimsim calibrate) predicting each viewing.
-    model: Path | None = None
+    model: Path | None = None  # [model] path: simulator.discomfort.predict.study_model
 
     def video(self, vid: str) -> VideoSpec:
         return next(v for v in self.videos if v.id == vid)
@@ -138,9 +137,7 @@ class Manifest:
         files += [w.trace for w in self.viewings if w.trace is not None]
         if self.questionnaires:
             files.append(self.questionnaires["path"])
-        if self.model is not None:
-            files.append(self.model)
-        return files
+        return files + ([self.model] if self.model is not None else [])
 
 
 def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
@@ -483,24 +480,6 @@ def _view(m: Path, data: dict, own: dict | None = None, own_where: str = "") -> 
     return options
 
 
-def _model(m: Path, base: Path, t, videos) -> Path | None:
-    """``[model] path``: the model file, checked (schema, features version) now; its
-    features need every video in sphere mode."""
-    if t is None:
-        return None
-    e = Entry(m, "[model]", t, ("path",))
-    p = e.path("path", base)
-    try:
-        load_model(p)
-    except InputError as err:
-        e.fail(str(err))
-    for v in videos:
-        if v.method != "sphere":
-            e.fail(f"video {v.id!r} is preprocessed in {v.method} mode; the model's features "
-                   'need method = "sphere"')  # fmt: skip
-    return p
-
-
 def load_manifest(path) -> Manifest:
     """Read and validate ``STUDY.toml``; InputError (one line: manifest, entry, problem)."""
     m = check_input_file(path, "study manifest")
@@ -531,5 +510,5 @@ def load_manifest(path) -> Manifest:
         grf=_grf(m, data.get("grf")),
         questionnaires=_questionnaires(m, base, data.get("questionnaires")),
         cache=st.path("cache", base, required=False),
-        model=_model(m, base, data.get("model"), videos),
+        model=study_model(m, base, data.get("model"), [(v.id, v.method) for v in videos]),
     )
