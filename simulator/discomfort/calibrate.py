@@ -102,7 +102,8 @@ def _check_outputs(model_path: Path, inputs: list[Path]) -> dict[str, Path]:
 
 
 def grid_for(video: Path, cache: Path, *, progress: Progress | None = None) -> Path:
-    """The sphere-mode grid of ``video`` in the folder ``cache`` (made when missing)."""
+    """The sphere-mode grid of ``video`` in the folder ``cache`` (both made when missing)."""
+    check_output_dir(cache)
     want = content_hash(video)
     g = cache / f"{want.removeprefix('sha256:')[:20]}.npz"
     if g.exists():
@@ -137,7 +138,6 @@ def _features(ratings: Ratings, cache: Path, progress) -> tuple[np.ndarray, dict
                 traces[r.trace] = load_headpath(r.trace)
             except InputError as e:
                 raise InputError(f"{ratings.path}: row {r.line}: {e}") from None
-    check_output_dir(cache)
     grids, hashes, per_video = {}, {}, {}
     for k, v in enumerate(ratings.videos):
         grids[v] = grid_for(v, cache)

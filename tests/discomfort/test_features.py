@@ -97,3 +97,21 @@ def test_a_grid_without_the_camera_rotation_is_refused(tmp_path):
     g = load_grid(preprocess_video(v, tmp_path / "p.npz", grid=grid_preset("paper-198")))
     with pytest.raises(InputError, match="p.npz.*sphere"):
         features_from_grid(g)
+
+
+def test_a_poorly_fitted_frame_weighs_less_in_the_rates():
+    """Frames whose ego fit has confidence 0 do not count in the rates' means and blocks;
+    equal confidences give the plain mean."""
+    from types import SimpleNamespace
+
+    from simulator.discomfort.features import _rate_features
+
+    om = np.zeros((7, 3))
+    om[:, 1] = [10, 10, 10, 10, 10, 90, 90]  # yaw rate = omega_y
+    conf = np.array([1, 1, 1, 1, 1, 0, 0], float)
+    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": conf})
+    f = _rate_features(g, np.arange(7), 30)
+    assert f["yaw_rate_mean_dps"] == pytest.approx(10.0)
+    assert f["yaw_rate_block_max_dps"] == pytest.approx(10.0)
+    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": np.full(7, 0.5)})
+    assert _rate_features(g, np.arange(7), 30)["yaw_rate_mean_dps"] == pytest.approx(230 / 7)
