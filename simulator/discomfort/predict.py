@@ -78,7 +78,7 @@ def study_model(manifest: Path, base: Path, table, videos) -> Path | None:
     for vid, method in videos:
         if method != "sphere":
             raise InputError(
-                f'{where}: video {vid!r} is preprocessed in {method} mode; the model\'s features '
+                f"{where}: video {vid!r} is preprocessed in {method} mode; the model's features "
                 'need method = "sphere"'
             )
     return p
