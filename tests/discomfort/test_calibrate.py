@@ -173,3 +173,38 @@ def test_models_failing_the_schema_are_refused(calibrated, tmp_path):
         load_model(p)
     shutil.copy(calibrated, tmp_path / "ok.json")
     assert load_model(tmp_path / "ok.json").names
+
+
+def test_metrics_are_scipys_figures():
+    """LCC and SROCC (plain numpy, for the bootstrap's speed) equal scipy.stats' Pearson and
+    Spearman, ties included; a constant's correlations are 0."""
+    from scipy import stats
+
+    from simulator.discomfort.fit import metrics
+
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        a = np.round(rng.normal(size=rng.integers(3, 30)), 1)
+        b = np.round(a + rng.normal(size=len(a)), 1)
+        lcc, srocc, rmse = metrics(a, b)
+        assert lcc == pytest.approx(stats.pearsonr(a, b)[0], abs=1e-12)
+        assert srocc == pytest.approx(stats.spearmanr(a, b)[0], abs=1e-12)
+        assert rmse == pytest.approx(np.sqrt(np.mean((a - b) ** 2)))
+    assert metrics(np.ones(4), np.arange(4.0))[:2] == (0.0, 0.0)
+
+
+def test_cross_validation_holds_whole_groups_out():
+    """Grouped: GroupKFold over the groups (each prediction from a fit without its group);
+    a feature that only identifies the group cannot predict a held-out group."""
+    from simulator.discomfort.fit import cross_validate
+
+    rng = np.random.default_rng(1)
+    groups = np.repeat(np.arange(6), 4)
+    y = groups * 10.0 + rng.normal(0, 0.1, len(groups))
+    X = np.column_stack([rng.normal(size=len(y)), (groups == 0).astype(float)])
+    cv = cross_validate(X, y, groups.astype(str))
+    assert cv.summary["grouped"] and cv.summary["folds"] == 5
+    assert cv.summary["srocc"] < 0.6  # nothing learnt transfers to unseen groups
+    loo = cross_validate(np.column_stack([y + rng.normal(0, 1, len(y))]), y, None)
+    assert not loo.summary["grouped"] and loo.summary["folds"] == len(y)
+    assert loo.summary["srocc"] > 0.9
