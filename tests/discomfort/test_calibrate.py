@@ -208,3 +208,43 @@ def test_cross_validation_holds_whole_groups_out():
     loo = cross_validate(np.column_stack([y + rng.normal(0, 1, len(y))]), y, None)
     assert not loo.summary["grouped"] and loo.summary["folds"] == len(y)
     assert loo.summary["srocc"] > 0.9
+
+
+def _trace(path, pitch, seconds=1.0):
+    path.write_text(f"time_s,yaw_deg,pitch_deg,roll_deg\n0,0,{pitch},0\n{seconds},0,{pitch},0\n")
+    return path.name
+
+
+@pytest.mark.slow  # 24 viewings' features (the grids come from the session's cache)
+def test_ratings_per_viewing_use_each_trace(rated_clips, calibrated, tmp_path):
+    """A trace column: each row's features are its viewing's (looking up or ahead at the same
+    clip give different EPOF), the model says per_viewing, and its training-set hash
+    differs from the per-video one's."""
+    d = rated_clips.folder
+    up, ahead = _trace(d / "up.csv", 90.0), _trace(d / "ahead.csv", 0.0)
+    lines = ["video,rating,group,trace,participant"]
+    for ln in rated_clips.ratings.read_text().splitlines()[1:]:
+        v, rating, g = ln.split(",")
+        lines += [f"{v},{float(rating) * 0.5},{g},{up},p1", f"{v},{rating},{g},{ahead},p2"]
+    csv_path = d / "viewings.csv"
+    csv_path.write_text("\n".join(lines) + "\n")
+    out = tmp_path / "m.json"
+    assert (
+        main(["calibrate", str(csv_path), "-o", str(out), "--grids", str(rated_clips.grids)]) == 0
+    )
+    m = load_model(out)
+    assert m.data["ratings"]["per_viewing"] is True and m.data["ratings"]["n"] == 24
+    rows = (tmp_path / "m.features.csv").read_text().splitlines()
+    head = rows[0].split(",")
+    e = [float(r.split(",")[head.index("epof_mean_dps")]) for r in rows[1:3]]
+    assert e[0] < 0.8 * e[1]  # the same clip, looked at along the yaw axis vs at the horizon
+    assert rows[1].split(",")[head.index("trace")] == "up.csv"
+    assert m.data["training_set_hash"] != load_model(calibrated).data["training_set_hash"]
+
+
+def test_a_trace_that_is_missing_or_unreadable_is_refused_naming_the_row(tmp_path, capsys):
+    text = _rows(8).replace("video,rating,group", "video,rating,group,trace")
+    text = "\n".join(ln + ("," if i else "") for i, ln in enumerate(text.splitlines())) + "\n"
+    bad = text.replace("v3.mp4,3,g0,", "v3.mp4,3,g0,nope.csv")
+    err = _bad(tmp_path, capsys, bad, names="row 5")
+    assert "nope.csv" in err and "not found" in err
