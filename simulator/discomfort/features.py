@@ -14,7 +14,11 @@ viewing, the viewer's head path. Nothing else: no poses, no depth.
 - The camera's rates (``yaw_rate``, ``pitch_rate``, ``roll_rate``: ``vimsim ego``'s
   columns, deg/s, about the camera's axes) are the camera's whatever the viewer does.
   Their means are weighted by the ego fit's confidence per frame (0..1): a frame whose
-  fit is poor (much of the picture moving on its own, no texture) counts less.
+  fit is poor (much of the picture moving on its own, no texture) counts less. So are
+  the camera's angular acceleration and the view's rotation against the content: the
+  camera's angular velocity plus the head's (:func:`head_omega_dps`, both in the world =
+  equirect frame), 0 for a head that turns with the content, the camera's own for a
+  video (no head).
 - Blocks are 1 s long (``round(fps)`` frames, at least 1; the last partial block
   counted); a block feature is the largest block mean.
 - The opacity is the absolute rule of the named bands: 0 at 5, 1 at 30 deg/s
@@ -38,6 +42,7 @@ from simulator.media.gridfile import GridFile, require_field
 from simulator.media.lazyfield import LazyField
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.grf import OpacityRule
+from simulator.sphere.geometry import head_rotation
 
 __all__ = [
     "FEATURES",
@@ -45,6 +50,7 @@ __all__ = [
     "Feature",
     "feature_names",
     "features_from_grid",
+    "head_omega_dps",
     "sphere_series",
 ]
 
@@ -78,6 +84,17 @@ FEATURES: tuple[Feature, ...] = (
     Feature("pitch_rate_block_max_dps", "deg/s", "largest 1 s block mean of |pitch rate|"),
     Feature("roll_rate_block_max_dps", "deg/s", "largest 1 s block mean of |roll rate|"),
     Feature("rotation_mean_dps", "deg/s", "camera's mean angular speed, confidence-weighted"),
+    Feature(
+        "rotation_change_mean_dps2",
+        "deg/s^2",
+        "camera's mean angular acceleration |d omega / dt|, confidence-weighted",
+    ),
+    Feature(
+        "view_rate_mean_dps",
+        "deg/s",
+        "the view's rotation against the content |omega_camera + omega_head| (the "
+        "camera's angular speed for a video), confidence-weighted",
+    ),
     Feature("ego_confidence_mean", "1", "mean confidence of the camera-rotation fit (0..1)"),
 )
 
@@ -128,7 +145,16 @@ def _block_max(x: NDArray, n: int, w: NDArray | None = None) -> float:
     )
 
 
-def _rate_features(grid: GridFile, rows: NDArray[np.int64], block: int) -> dict[str, float]:
+def head_omega_dps(time_s, yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
+    """``(T, 3)`` the head's angular velocity (deg/s, world = equirect frame, as
+    ``ego_omega_dps``) from its pose at each frame; row 0 repeats row 1."""
+    R = head_rotation(np.asarray(yaw_deg), np.asarray(pitch_deg), np.asarray(roll_deg))
+    dt = np.diff(np.asarray(time_s, np.float64))
+    w = np.degrees((R[1:] * R[:-1].inv()).as_rotvec()) / np.maximum(dt, 1e-9)[:, None]
+    return np.vstack([w[:1], w]) if len(w) else np.zeros((len(R), 3))
+
+
+def _rate_features(grid: GridFile, rows: NDArray[np.int64], block: int, head=None) -> dict:
     om = np.asarray(grid.extras["ego_omega_dps"], np.float64)[rows]
     conf = np.clip(np.asarray(grid.extras["ego_confidence"], np.float64)[rows], 0.0, 1.0)
     rates = np.abs(np.column_stack([om[:, 1], -om[:, 0], -om[:, 2]]))  # yaw, pitch, roll
@@ -138,6 +164,12 @@ def _rate_features(grid: GridFile, rows: NDArray[np.int64], block: int) -> dict[
         out[f"{axis}_rate_mean_dps"] = float(np.average(rates[:, k], weights=w))
         out[f"{axis}_rate_block_max_dps"] = _block_max(rates[:, k], block, w)
     out["rotation_mean_dps"] = float(np.average(np.linalg.norm(om, axis=1), weights=w))
+    acc = np.linalg.norm(np.diff(om, axis=0), axis=1) * float(grid.fps)
+    out["rotation_change_mean_dps2"] = (
+        float(np.average(acc, weights=np.minimum(w[1:], w[:-1]) + 1e-12)) if len(acc) else 0.0
+    )
+    view = om if head is None else om + np.asarray(head, np.float64)[rows]
+    out["view_rate_mean_dps"] = float(np.average(np.linalg.norm(view, axis=1), weights=w))
     out["ego_confidence_mean"] = float(conf.mean())
     return out
 
@@ -157,6 +189,7 @@ def features_from_grid(grid: GridFile, headpath=None) -> dict[str, float]:
     if grid.n_frames < 2:
         raise InputError(f"{src}: grid has {grid.n_frames} frame(s); features need at least 2")
     rule = OpacityRule(low_dps=ABSOLUTE_LOW_DPS, high_dps=ABSOLUTE_HIGH_DPS)
+    head = None
     if headpath is None:
         epof, rot = sphere_series(grid)
         lo, hi = ABSOLUTE_LOW_DPS, ABSOLUTE_HIGH_DPS
@@ -164,6 +197,7 @@ def features_from_grid(grid: GridFile, headpath=None) -> dict[str, float]:
     else:
         res = compute_epof(grid, headpath, method="sphere", rule=rule)
         epof, rot, opacity = res.epof_dps, res.epof_rot_dps, res.opacity
+        head = head_omega_dps(res.time_s, res.yaw_deg, res.pitch_deg, res.roll_deg)
     rows = np.arange(1, grid.n_frames)
     epof, rot, opacity = epof[rows], rot[rows], opacity[rows]
     block = max(1, round(grid.fps))
@@ -176,7 +210,7 @@ def features_from_grid(grid: GridFile, headpath=None) -> dict[str, float]:
         "epof_trans_mean_dps": float((epof - rot).mean()),
         "time_above_high_share": float((epof > ABSOLUTE_HIGH_DPS).mean()),
         "opacity_mean": float(opacity.mean()),
-        **_rate_features(grid, rows, block),
+        **_rate_features(grid, rows, block, head),
     }
     bad = [k for k, v in feats.items() if not np.isfinite(v)]
     if bad:

@@ -10,6 +10,7 @@ import pytest
 
 from simulator.cli import main
 from simulator.core.errors import InputError
+from simulator.discomfort.features import FEATURES
 from simulator.discomfort.model import load_model, validate_model
 
 
@@ -53,7 +54,10 @@ def test_outputs_beside_the_model(calibrated):
         "model.json", "model.weights.csv", "model.calibration.png", "model.features.csv",
     }  # fmt: skip
     rows = (d / "model.weights.csv").read_text().splitlines()
-    assert rows[0] == "feature,unit,weight_per_sd,coef_per_unit,mean,sd" and len(rows) == 17
+    assert (
+        rows[0] == "feature,unit,weight_per_sd,coef_per_unit,mean,sd"
+        and len(rows) == len(FEATURES) + 1
+    )
     assert rows[1].split(",")[0].startswith("roll_rate")  # the largest weight first
     assert (d / "model.calibration.png").read_bytes()[:4] == b"\x89PNG"
     data = json.loads(calibrated.read_text())

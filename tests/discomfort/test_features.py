@@ -30,7 +30,7 @@ def test_table_is_named_versioned_and_documented():
     names = feature_names()
     assert len(names) == len(set(names)) and FEATURES_VERSION
     for f in FEATURES:
-        assert f.unit in ("deg/s", "s", "1") and f.description
+        assert f.unit in ("deg/s", "deg/s^2", "s", "1") and f.description
         assert f.name.endswith("_dps") == (f.unit == "deg/s")
 
 
@@ -109,9 +109,24 @@ def test_a_poorly_fitted_frame_weighs_less_in_the_rates():
     om = np.zeros((7, 3))
     om[:, 1] = [10, 10, 10, 10, 10, 90, 90]  # yaw rate = omega_y
     conf = np.array([1, 1, 1, 1, 1, 0, 0], float)
-    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": conf})
+    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": conf}, fps=30.0)
     f = _rate_features(g, np.arange(7), 30)
     assert f["yaw_rate_mean_dps"] == pytest.approx(10.0)
     assert f["yaw_rate_block_max_dps"] == pytest.approx(10.0)
-    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": np.full(7, 0.5)})
+    g = SimpleNamespace(extras={"ego_omega_dps": om, "ego_confidence": np.full(7, 0.5)}, fps=30.0)
     assert _rate_features(g, np.arange(7), 30)["yaw_rate_mean_dps"] == pytest.approx(230 / 7)
+
+
+def test_a_head_following_the_content_sees_no_view_rotation(tmp_path):
+    """A camera yawing right at 40 deg/s moves the content left; a head turning left at 40
+    deg/s follows it: the view's rotation against the content is ~0 while the camera's is
+    40; a still head sees the camera's. A constant rotation has ~no angular acceleration."""
+    g = _grid(tmp_path, "yaw", 40.0, 0.0, 0.0)
+    t = np.array([0.0, 1.0])
+    follow = HeadPath.from_angles_deg(t, [0.0, -40.0], np.zeros(2), np.zeros(2))
+    still = HeadPath.from_angles_deg(t, np.zeros(2), np.zeros(2), np.zeros(2))
+    f, s = features_from_grid(g, follow), features_from_grid(g, still)
+    assert f["view_rate_mean_dps"] < 0.05 * 40 and f["rotation_mean_dps"] > 38
+    assert s["view_rate_mean_dps"] == pytest.approx(s["rotation_mean_dps"])
+    assert features_from_grid(g)["view_rate_mean_dps"] == pytest.approx(s["rotation_mean_dps"])
+    assert s["rotation_change_mean_dps2"] < 0.1 * 40 * 30  # jitter only, far below 1 rad/s^2
