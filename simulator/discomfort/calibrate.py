@@ -202,7 +202,7 @@ def _plot(path: Path, cv, title: str) -> None:
     ax.set_title(
         f"{title}\nLCC {s['lcc']:.2f} [{s['lcc_ci'][0]:.2f}, {s['lcc_ci'][1]:.2f}]  "
         f"SROCC {s['srocc']:.2f} [{s['srocc_ci'][0]:.2f}, {s['srocc_ci'][1]:.2f}]  "
-        f"RMSE {s['rmse']:.3g}  ({s['scheme']})",
+        f"RMSE {s['rmse']:.3g}\n{s['scheme']}",
         fontsize=8,
     )
     fig.tight_layout()
