@@ -9,8 +9,10 @@ row (:mod:`simulator.discomfort.features`); the ridge pipeline and its cross-val
 
 - ``MODEL.json`` (:mod:`simulator.discomfort.model`),
 - ``<MODEL>.weights.csv``: one row per feature: ``feature,unit,weight_per_sd,
-  coef_per_unit,mean,sd`` (largest ``|weight_per_sd|`` first; ``weight_per_sd`` = the
-  rating change for one standard deviation of the feature),
+  coef_per_unit,mean,sd,heldout_srocc_without`` (largest ``|weight_per_sd|`` first;
+  ``weight_per_sd`` = the rating change for one standard deviation of the feature;
+  ``heldout_srocc_without`` = the held-out SROCC of the model refitted without it, same
+  folds: what the feature adds),
 - ``<MODEL>.calibration.png``: held-out predicted against rated, with the figures,
 - ``<MODEL>.features.csv``: the features of every row with its rating (the table the
   model was fitted on).
@@ -47,7 +49,7 @@ from simulator.discomfort.features import (
     feature_names,
     features_from_grid,
 )
-from simulator.discomfort.fit import cross_validate, fit_pipeline, model_terms
+from simulator.discomfort.fit import cross_validate, fit_pipeline, model_terms, srocc_without
 from simulator.discomfort.model import MODEL_FORMAT, MODEL_FORMAT_VERSION, save_model
 from simulator.discomfort.ratings import Ratings, read_ratings
 from simulator.epof.parts import has_parts
@@ -160,13 +162,14 @@ def _features(ratings: Ratings, cache: Path, progress) -> tuple[np.ndarray, dict
     return np.asarray(rows, np.float64), hashes
 
 
-def _weights_csv(terms: dict) -> str:
+def _weights_csv(terms: dict, without: dict) -> str:
     buf = io.StringIO()
-    buf.write("feature,unit,weight_per_sd,coef_per_unit,mean,sd\n")
+    buf.write("feature,unit,weight_per_sd,coef_per_unit,mean,sd,heldout_srocc_without\n")
     for f in sorted(terms["features"], key=lambda f: -abs(f["coef"])):
         buf.write(
             f"{csv_cell(f['name'])},{csv_cell(f['unit'])},{f['coef']:.6g},"
-            f"{f['coef'] / f['scale']:.6g},{f['mean']:.6g},{f['scale']:.6g}\n"
+            f"{f['coef'] / f['scale']:.6g},{f['mean']:.6g},{f['scale']:.6g},"
+            f"{without[f['name']]:.4f}\n"
         )
     return buf.getvalue()
 
@@ -233,6 +236,7 @@ def calibrate(
     groups = np.array([r.group for r in ratings.rows]) if ratings.grouped else None
     cv = cross_validate(X, y, groups, seed=seed)
     terms = model_terms(fit_pipeline(X, y), feature_names())
+    without = srocc_without(X, y, groups, feature_names())
     data = {
         "format": MODEL_FORMAT, "format_version": MODEL_FORMAT_VERSION,
         "features_version": FEATURES_VERSION, **terms,
@@ -250,7 +254,7 @@ def calibrate(
     }  # fmt: skip
     save_model(model_path, data)  # first: it lists the side files a later run may replace
     with atomic_output(sides["weights.csv"]) as tmp:
-        tmp.write_text(_weights_csv(terms), encoding="utf-8")
+        tmp.write_text(_weights_csv(terms, without), encoding="utf-8")
     with atomic_output(sides["features.csv"]) as tmp:
         tmp.write_text(_features_csv(ratings, X, cv.predicted), encoding="utf-8")
     _plot(sides["calibration.png"], cv, f"{ratings.path.name}: {len(y)} ratings")

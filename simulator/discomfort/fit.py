@@ -27,7 +27,15 @@ from sklearn.preprocessing import StandardScaler
 
 from simulator.discomfort.features import FEATURES
 
-__all__ = ["ALPHAS", "CrossValidation", "cross_validate", "fit_pipeline", "metrics", "model_terms"]
+__all__ = [
+    "ALPHAS",
+    "CrossValidation",
+    "cross_validate",
+    "fit_pipeline",
+    "metrics",
+    "model_terms",
+    "srocc_without",
+]
 
 #: Ridge penalties RidgeCV chooses from (standardised features).
 ALPHAS: tuple[float, ...] = tuple(float(a) for a in np.logspace(-3, 4, 29))
@@ -90,18 +98,34 @@ def _bootstrap(pred, rated, groups, seed: int) -> dict[str, list[float]]:
     }
 
 
+def _splitter(y: NDArray, groups: NDArray | None):
+    if groups is not None:
+        folds = min(5, len(np.unique(groups)))
+        return folds, GroupKFold(n_splits=folds), f"GroupKFold({folds}): whole groups held out"
+    return len(y), LeaveOneOut(), "leave-one-out (no groups given)"
+
+
+def srocc_without(X: NDArray, y: NDArray, groups: NDArray | None, names: list[str]) -> dict:
+    """What each feature adds: ``{name: held-out SROCC of the model refitted without it}``
+    (same folds as :func:`cross_validate`; no bootstrap)."""
+    X, y = np.asarray(X, np.float64), np.asarray(y, np.float64)
+    _, cv, _ = _splitter(y, groups)
+    out = {}
+    for j, name in enumerate(names):
+        pipe = make_pipeline(StandardScaler(), RidgeCV(alphas=ALPHAS))
+        pred = cross_val_predict(pipe, np.delete(X, j, axis=1), y, groups=groups, cv=cv)
+        out[name] = metrics(pred, y)[1]
+    return out
+
+
 def cross_validate(
     X: NDArray, y: NDArray, groups: NDArray | None, *, seed: int = 0
 ) -> CrossValidation:
     """Held-out predictions and their figures (module docstring); ``groups`` (N,) labels
     or None (leave-one-out)."""
     X, y = np.asarray(X, np.float64), np.asarray(y, np.float64)
-    if groups is not None:
-        groups = np.asarray(groups)
-        folds = min(5, len(np.unique(groups)))
-        cv, scheme = GroupKFold(n_splits=folds), f"GroupKFold({folds}): whole groups held out"
-    else:
-        folds, cv, scheme = len(y), LeaveOneOut(), "leave-one-out (no groups given)"
+    groups = None if groups is None else np.asarray(groups)
+    folds, cv, scheme = _splitter(y, groups)
     pipe = make_pipeline(StandardScaler(), RidgeCV(alphas=ALPHAS))
     pred = cross_val_predict(pipe, X, y, groups=groups, cv=cv)
     lcc, srocc, rmse = metrics(pred, y)

@@ -54,11 +54,11 @@ def test_outputs_beside_the_model(calibrated):
         "model.json", "model.weights.csv", "model.calibration.png", "model.features.csv",
     }  # fmt: skip
     rows = (d / "model.weights.csv").read_text().splitlines()
-    assert (
-        rows[0] == "feature,unit,weight_per_sd,coef_per_unit,mean,sd"
-        and len(rows) == len(FEATURES) + 1
-    )
+    assert rows[0] == "feature,unit,weight_per_sd,coef_per_unit,mean,sd,heldout_srocc_without"
+    assert len(rows) == len(FEATURES) + 1
     assert rows[1].split(",")[0].startswith("roll_rate")  # the largest weight first
+    without = {r.split(",")[0]: float(r.split(",")[-1]) for r in rows[1:]}
+    assert all(-1 <= v <= 1 for v in without.values())
     assert (d / "model.calibration.png").read_bytes()[:4] == b"\x89PNG"
     data = json.loads(calibrated.read_text())
     for key in ("training_set_hash", "vimsim_version", "ratings", "alpha", "intercept"):
