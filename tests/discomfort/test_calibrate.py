@@ -252,3 +252,10 @@ def test_a_trace_that_is_missing_or_unreadable_is_refused_naming_the_row(tmp_pat
     bad = text.replace("v3.mp4,3,g0,", "v3.mp4,3,g0,nope.csv")
     err = _bad(tmp_path, capsys, bad, names="row 5")
     assert "nope.csv" in err and "not found" in err
+
+
+def test_an_output_that_is_not_a_model_is_never_replaced(tmp_path, capsys):
+    (tmp_path / "m.json").write_text('{"mine": true}\n')
+    err = _bad(tmp_path, capsys, _rows(8), names="m.json")
+    assert "is not a vimsim model" in err
+    assert (tmp_path / "m.json").read_text() == '{"mine": true}\n'
