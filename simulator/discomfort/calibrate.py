@@ -24,6 +24,7 @@ refused before any work.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import io
 import json
@@ -104,8 +105,20 @@ def _check_outputs(model_path: Path, inputs: list[Path]) -> dict[str, Path]:
 
 
 def grid_for(video: Path, cache: Path, *, progress: Progress | None = None) -> Path:
-    """The sphere-mode grid of ``video`` in the folder ``cache`` (both made when missing)."""
+    """The sphere-mode grid of ``video`` in the folder ``cache`` (both made when missing; a
+    folder made here and left empty by a failure is removed)."""
+    made = not Path(cache).exists()
     check_output_dir(cache)
+    try:
+        return _grid_in(video, Path(cache), progress)
+    except BaseException:
+        if made:
+            with contextlib.suppress(OSError):
+                Path(cache).rmdir()  # only when empty
+        raise
+
+
+def _grid_in(video: Path, cache: Path, progress) -> Path:
     want = content_hash(video)
     g = cache / f"{want.removeprefix('sha256:')[:20]}.npz"
     if g.exists():
@@ -141,8 +154,14 @@ def _features(ratings: Ratings, cache: Path, progress) -> tuple[np.ndarray, dict
             except InputError as e:
                 raise InputError(f"{ratings.path}: row {r.line}: {e}") from None
     grids, hashes, per_video = {}, {}, {}
+    first = {}
+    for r in ratings.rows:
+        first.setdefault(r.video, r.line)
     for k, v in enumerate(ratings.videos):
-        grids[v] = grid_for(v, cache)
+        try:
+            grids[v] = grid_for(v, cache)
+        except InputError as e:  # not a video, a still, a foreign cache file: name the row
+            raise InputError(f"{ratings.path}: row {first[v]}: {e}") from None
         hashes[v] = content_hash(v)
         if progress is not None:
             progress(k + 1, len(ratings.videos))

@@ -259,3 +259,23 @@ def test_an_output_that_is_not_a_model_is_never_replaced(tmp_path, capsys):
     err = _bad(tmp_path, capsys, _rows(8), names="m.json")
     assert "is not a vimsim model" in err
     assert (tmp_path / "m.json").read_text() == '{"mine": true}\n'
+
+
+def test_a_video_that_cannot_be_decoded_is_refused_naming_its_row(tmp_path, capsys):
+    """The videos pass the CSV checks (they exist) but v0 is no video: refused when its grid
+    is made, naming the ratings file and the row; no model, no side file."""
+    err = _bad(tmp_path, capsys, _rows(8), names="row 2")
+    assert "r.csv" in err and "v0.mp4" in err
+    assert not (tmp_path / "m.json").exists() and not (tmp_path / "m.weights.csv").exists()
+
+
+def test_a_foreign_file_in_the_grid_cache_is_refused_and_kept(tmp_path, capsys):
+    from simulator.media.gridfile import content_hash
+
+    (tmp_path / "v0.mp4").write_bytes(b"not decoded before the checks")
+    cache = tmp_path / "m.grids"
+    cache.mkdir()
+    name = content_hash(tmp_path / "v0.mp4").removeprefix("sha256:")[:20] + ".npz"
+    (cache / name).write_bytes(b"someone's file")
+    err = _bad(tmp_path, capsys, _rows(8), names="not the sphere grid of")
+    assert (cache / name).read_bytes() == b"someone's file" and "row 2" in err
