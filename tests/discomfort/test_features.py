@@ -91,12 +91,14 @@ def test_viewing_features_use_the_head_path(tmp_path):
 
 
 def test_a_grid_without_the_camera_rotation_is_refused(tmp_path):
-    from simulator.preprocess import preprocess_video
+    """A grid without the per-frame camera rotation (paper mode, or made before vimsim
+    estimated it) or without a field: refused naming the grid and the fix."""
+    from dataclasses import replace
 
-    v = rotate_clip(tmp_path / "p.mp4", 20.0, 0.0, 0.0, frames=3)
-    g = load_grid(preprocess_video(v, tmp_path / "p.npz", grid=grid_preset("paper-198")))
-    with pytest.raises(InputError, match="p.npz.*sphere"):
-        features_from_grid(g)
+    g = _grid(tmp_path, "p", 20.0, 0.0, 0.0, frames=3)
+    for bare in (replace(g, extras={}), replace(g, field_dps=None)):
+        with pytest.raises(InputError, match="p.npz.*--method sphere"):
+            features_from_grid(bare)
 
 
 def test_a_poorly_fitted_frame_weighs_less_in_the_rates():
