@@ -18,7 +18,7 @@
    and the same walk turning right at 30 deg/s: yaw error in %.
 
     .venv/bin/python bench/calibrate.py [--clips 24] [--groups 6] [--noise 0.1]
-        [--timing-clips 100] [--skip ego,timing,accuracy]
+        [--timing-clips 100] [--skip ego,timing,accuracy] [--ego-flow dis|farneback]
 """
 
 from __future__ import annotations
@@ -130,11 +130,11 @@ def timing(args, tmp: Path) -> None:
     print(f"   ratio calibrate / features: {t_cal / t_feat:.2f}")
 
 
-def ego(tmp: Path) -> None:
+def ego(tmp: Path, flow: str = "dis") -> None:
     from simulator.synth.camera_path import CameraTrajectory
     from simulator.synth.trajectory import synthesize_trajectory
 
-    print("\n3. ego per axis (rotate 512x256, 10 frames, default flow): mean rate error %")
+    print(f"\n3. ego per axis (rotate 512x256, 10 frames, flow {flow}): mean rate error %")
     speeds = (5.0, 10.0, 20.0, 30.0, 60.0, 120.0)
     print("   axis   " + "".join(f"{s:>9g}" for s in speeds) + "   (deg/s)")
     for k, axis in enumerate(("yaw", "pitch", "roll")):
@@ -143,7 +143,9 @@ def ego(tmp: Path) -> None:
             rates = np.zeros(3)
             rates[k] = s
             v = rotate_clip(tmp / f"{axis}.mp4", rates, size=(512, 256), frames=10)
-            g = load_grid(preprocess_sphere(v, tmp / f"{axis}.npz", grid=grid_preset("default")))
+            g = load_grid(
+                preprocess_sphere(v, tmp / f"{axis}.npz", grid=grid_preset("default"), flow=flow)
+            )
             om = g.extras["ego_omega_dps"][1:].astype(float)
             r = np.column_stack([om[:, 1], -om[:, 0], -om[:, 2]]).mean(axis=0)
             errs.append((r[k] - s) / s * 100)
@@ -155,7 +157,9 @@ def ego(tmp: Path) -> None:
     for name, yaw in (("walk 2 m/s", 0.0), ("walk 2 m/s turning 30 deg/s", 30.0)):
         traj = CameraTrajectory.from_poses_deg(t, pos, yaw * t, 0 * t, 0 * t, source=name)
         v = synthesize_trajectory(traj, tmp / "walk.mp4", size=(512, 256))[0]
-        g = load_grid(preprocess_sphere(v, tmp / "walk.npz", grid=grid_preset("default")))
+        g = load_grid(
+            preprocess_sphere(v, tmp / "walk.npz", grid=grid_preset("default"), flow=flow)
+        )
         om = g.extras["ego_omega_dps"][1:].astype(float)
         if yaw == 0:
             print(f"   {name}: rotation read (translation leak) max {np.linalg.norm(om, axis=1).max():.2f}"
@@ -172,6 +176,7 @@ def main() -> int:
     ap.add_argument("--noise", type=float, default=0.1)
     ap.add_argument("--timing-clips", type=int, default=100)
     ap.add_argument("--skip", default="", help="comma list of: accuracy, timing, ego")
+    ap.add_argument("--ego-flow", default="dis", help="flow of the ego section (default dis)")
     args = ap.parse_args()
     skip = set(filter(None, args.skip.split(",")))
     with tempfile.TemporaryDirectory(prefix="vimsim-bench-calibrate-") as tmp:
@@ -180,7 +185,7 @@ def main() -> int:
         if "timing" not in skip:
             timing(args, Path(tmp))
         if "ego" not in skip:
-            ego(Path(tmp))
+            ego(Path(tmp), args.ego_flow)
     return 0
 
 
