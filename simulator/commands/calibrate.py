@@ -33,7 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "translational parts, the camera's yaw/pitch/roll rates from 'vimsim ego', opacity, "
         "duration) to RATINGS.csv (columns video,rating[,group][,trace][,participant]; paths "
         "relative to the CSV), and judge it by cross-validation holding whole groups out "
-        "(GroupKFold; leave-one-out without groups): LCC, SROCC, RMSE with bootstrap 95 %% "
+        "(GroupKFold; leave-one-out without groups): LCC, SROCC, RMSE with bootstrap 95 % "
         "intervals. See docs/calibrate.md.",
     )
     p.add_argument("ratings", metavar="RATINGS.csv", help="one rated video or viewing a row")
