@@ -59,7 +59,7 @@ MAX_WEB_SIDE = 4096
 #: 2048 wide (sharper than the screen); a wider or non-H.264 source is scaled to fit.
 BROWSER_WIDTH = 2048
 #: x264 preset of a re-encoded browser copy: the fastest that keeps the replay sharp at the
-#: report's view size (bench/report_speed.py prints the view PSNR of each preset).
+#: report's view size (bench/report_4k.py prints the view PSNR of each preset).
 BROWSER_PRESET = "superfast"
 BROWSER_CRF = 20
 
