@@ -52,11 +52,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="use only the K largest overlaps (the paper's figure shows 4); default all",
     )
     p.add_argument(
-        "--hold-last",
-        action="store_true",
-        help="hold the first/last pose where the head path does not cover the video",
-    )
-    p.add_argument(
         "--flow-weights",
         default=None,
         metavar="rot=A,trans=B",
@@ -96,8 +91,10 @@ def _check_output_file(path: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
+    from pathlib import Path
+
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.commands.headpath import load_headpath_args
+    from simulator.commands.headpath import load_headpath_args, print_warnings
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
     from simulator.media.gridfile import load_grid
 
@@ -111,7 +108,11 @@ def run(args: argparse.Namespace) -> int:
     with warnings_to_stderr("vimsim epof"):
         rule = rule_from_args(args)
         grid = load_grid(args.grid)
-    hp = load_headpath_args(args, args.headpath, "vimsim epof")
+    vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+    n_video = int(vid.get("n_frames") or grid.n_frames)  # the whole video, not the grid's part
+    notes: list[str] = []  # span warnings: printed once the EPOF is written
+    hp = load_headpath_args(args, args.headpath, "vimsim epof", n_video / grid.fps,
+                            Path(str(vid.get("path") or args.grid)).name, notes)  # fmt: skip
     art = None
     if args.artefacts:
         from simulator.preprocess.artefacts import artefacts_for_grid
@@ -137,6 +138,7 @@ def run(args: argparse.Namespace) -> int:
     write_epof_csv(args.output, res)  # the CSV first: a plot is never left without it
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
+    print_warnings("vimsim epof", notes)
     lo, hi = res.thresholds_dps
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "

@@ -20,6 +20,8 @@ __all__ = [
     "HEADSET_NAMES",
     "INTERPS",
     "LAYOUTS",
+    "MAX_CLIP_FPS",
+    "MAX_CLIP_FRAMES",
     "MITIGATIONS",
     "MITIGATION_HELP",
     "OPACITY_RULES",
@@ -51,6 +53,11 @@ PROJECTIONS: tuple[str, ...] = ("equirect", "eac", "c3x2", "c6x1", "dfisheye", "
 #: (``--seconds`` / ``--fps``).
 STILL_SECONDS = 10.0
 STILL_FPS = 30.0
+
+#: Upper bounds of a clip vimsim makes (``synth``, ``demo``, a still's ``--seconds`` x
+#: ``--fps``): a typo such as ``--fps 1e9`` or ``--seconds 1e9`` fails at once, not after hours.
+MAX_CLIP_FPS = 240.0
+MAX_CLIP_FRAMES = 100_000
 
 #: Eyes of a stereo source or render.
 Eye = Literal["left", "right"]

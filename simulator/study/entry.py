@@ -13,7 +13,7 @@ from pathlib import Path
 from simulator.core.errors import InputError
 from simulator.sphere.headsets import resolve_fov
 
-__all__ = ["Entry", "user_numbers"]
+__all__ = ["Entry", "stem_fields", "user_numbers"]
 
 
 class Entry:
@@ -104,3 +104,10 @@ def user_numbers(e: Entry, key: str, value) -> list[int]:
     if not out:
         e.fail(f"{key} = {value!r}: names no user; {_USER_HELP}")
     return out
+
+
+def stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
+    """The ``{stem}`` and ``{user}`` of a viewing's id template: the trace file's stem and
+    the user's number, zero-padded to the width of the file's user count."""
+    width = len(str(n_users)) if n_users > 1 else 1
+    return {"stem": trace.stem, "user": "" if user is None else f"{user:0{width}d}"}
