@@ -26,6 +26,7 @@ __all__ = ["build_parser", "main"]
 COMMANDS: dict[str, str] = {
     "viewport": "viewport",
     "preprocess": "preprocess",
+    "grid": "grid",
     "ego": "ego",
     "headpath": "headpath",
     "epof": "epof",
