@@ -294,3 +294,44 @@ def test_bootstrap_is_seeded(tmp_path: Path) -> None:
     ci = [(_main_tests(x)["ssq_total"]["effect_ci_low"], _main_tests(x)["ssq_n"]["effect_ci_high"])
           for x in st]  # fmt: skip
     assert ci[0] == ci[1]
+
+
+def _study_analysis(tmp_path: Path, conds: list[str]) -> dict:
+    """``vimsim study``'s analysis step on hand-made EPOF CSVs (one viewing per participant)."""
+    from types import SimpleNamespace
+
+    from simulator.study.outputs import _analysis
+
+    out = tmp_path / "o"
+    (out / "epof").mkdir(parents=True)
+    q = tmp_path / "q.csv"
+    rows, table = [], []
+    for i, c in enumerate(conds):
+        pid, vid = f"u{i}", f"clip-u{i}"
+        (out / "epof" / f"{vid}.csv").write_text(
+            "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity\n"
+            f"0,0,0,0,0,{100 + 10 * i},0\n1,0.1,0,0,0,{120 + 10 * i},0\n"
+        )
+        rows.append([pid, c, 9.54 * (i % 4), 7.58, 13.92 * (i % 3), 5 + i])
+        table.append({"status": "ok", "participant": pid, "condition": c, "viewing": vid,
+                      "video": "clip"})  # fmt: skip
+    pd.DataFrame(rows, columns=["participant", "condition", "ssq_n", "ssq_o", "ssq_d", "mssq"]
+                 ).to_csv(q, index=False)  # fmt: skip
+    manifest = SimpleNamespace(questionnaires={"path": str(q), "flow_stat": "mean",
+                                               "exclude_below": None, "conditions": None})  # fmt: skip
+    return _analysis(manifest, out, table)
+
+
+def test_study_and_report_show_the_design_statistics(tmp_path: Path) -> None:
+    from simulator.report.pages import Site
+
+    info = _study_analysis(tmp_path / "a", ["GR", "NR"] * 4)
+    assert info["error"] is None and "tests.csv" in info["files"] and "model.csv" in info["files"]
+    folder = tmp_path / "a" / "o" / "analysis"
+    html = Site({"outputs": {"analysis": info}}, [], {}).analysis_page(folder)
+    assert "Tests of the design" in html and "<td>Mann-Whitney U</td>" in html
+    assert "Mixed model" in html and "In plain words" in html
+    # one GR participant: the paper's analysis alone, with the reason in its notes
+    info = _study_analysis(tmp_path / "b", ["GR", "NR", "NR", "NR"])
+    assert info["error"] is None and "tests.csv" not in info["files"]
+    assert any("no design statistics" in n and "'GR' has 1 participant" in n for n in info["notes"])
