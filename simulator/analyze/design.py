@@ -123,16 +123,17 @@ def _check_forced(study: Study, df: pd.DataFrame, forced: str, found: str) -> No
 def _pairs(df: pd.DataFrame, conds: tuple[str, str], path: object) -> tuple[pd.DataFrame, list]:
     """The table without participants who miss a condition; InputError below MIN_PAIRS."""
     have = df.groupby("participant", sort=False)["condition"].agg(lambda s: set(s.astype(str)))
-    full = have[have.map(lambda s: set(conds) <= s)].index
+    complete = have.map(lambda s: set(conds) <= s)
+    full = set(have.index[complete])
     dropped = [f"participant {pid!r}: no row in condition "
                f"{[c for c in conds if c not in have[pid]][0]!r}"
-               for pid in have.index if pid not in set(full)]  # fmt: skip
+               for pid in have.index[~complete]]  # fmt: skip
     if len(full) < MIN_PAIRS:
         raise InputError(f"{path}: {len(full)} participant(s) have rows in both {conds[0]!r} and "
                          f"{conds[1]!r} ({len(dropped)} miss one); the paired test needs >= "
                          f"{MIN_PAIRS} complete pairs: add participants or use --design between "
                          "if each participant saw one condition")  # fmt: skip
-    return df[df["participant"].isin(set(full))].reset_index(drop=True), dropped
+    return df[df["participant"].isin(full)].reset_index(drop=True), dropped
 
 
 def design_table(
