@@ -32,10 +32,10 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 OUT = REPO / "bench" / "_out" / "analyze_coverage"
 
-from simulator.analyze.data import read_study  # noqa: E402
-from simulator.analyze.design import design_table  # noqa: E402
-from simulator.analyze.simulate import SIM_HEADER, simulated_rows, write_simulated  # noqa: E402
-from simulator.analyze.stats import (  # noqa: E402
+from simulator.analyze.data import read_study
+from simulator.analyze.design import design_table
+from simulator.analyze.simulate import SIM_HEADER, simulated_rows, write_simulated
+from simulator.analyze.stats import (
     StatsOptions,
     _paired_row,
     _rb_paired,
@@ -59,8 +59,9 @@ def coverage(runs: int) -> tuple[float, float, int]:
     r_true = _population_r()
     hit_model = hit_r = not_conv = 0
     for seed in range(runs):
-        path = write_simulated(OUT / "run.csv", simulated_rows(24, videos=3, effect=EFFECT,
-                                                               seed=seed))  # fmt: skip
+        path = write_simulated(
+            OUT / "run.csv", simulated_rows(24, videos=3, effect=EFFECT, seed=seed)
+        )
         study = read_study(path)
         d = design_table(study, study.participants, ("A", "B"))
         rows, info = fit_model(d.table, "none", 0.05, crossed_video=True)
@@ -80,8 +81,9 @@ def _wall(cmd: list[str], repeats: int = 3) -> float:
     times = []
     for _ in range(repeats):
         t0 = time.perf_counter()
-        subprocess.run(cmd, check=True, env=env, stdout=subprocess.DEVNULL,
-                       stderr=subprocess.DEVNULL)  # fmt: skip
+        subprocess.run(
+            cmd, check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+        )
         times.append(time.perf_counter() - t0)
     return statistics.median(times)
 
@@ -92,8 +94,9 @@ def timing() -> tuple[float, float, float]:
     py = sys.executable
     t_pass = _wall([py, "-c", "pass"])
     t_help = _wall([py, "-m", "simulator", "--help"])
-    t_an = _wall([py, "-m", "simulator", "analyze", str(data), "-o", str(OUT / "report"),
-                  "--power", "0.8"])  # fmt: skip
+    t_an = _wall(
+        [py, "-m", "simulator", "analyze", str(data), "-o", str(OUT / "report"), "--power", "0.8"]
+    )
     return t_an, t_help, t_pass
 
 
@@ -105,20 +108,30 @@ def main() -> None:
     np.seterr(all="ignore")
     t0 = time.perf_counter()
     cov_m, cov_r, nc = coverage(args.runs)
-    print(f"coverage of the 95 % interval, {args.runs} seeded runs (24 participants x 2 "
-          f"conditions x 3 videos, true effect {EFFECT} SSQ points):")  # fmt: skip
-    print(f"  model condition term (MixedLM, crossed participant + video): {cov_m:.1%} "
-          f"(goal >= 90 %, ratio to goal {cov_m / 0.9:.3f}); not converged: {nc}")  # fmt: skip
+    print(
+        f"coverage of the 95 % interval, {args.runs} seeded runs (24 participants x 2 "
+        f"conditions x 3 videos, true effect {EFFECT} SSQ points):"
+    )
+    print(
+        f"  model condition term (MixedLM, crossed participant + video): {cov_m:.1%} "
+        f"(goal >= 90 %, ratio to goal {cov_m / 0.9:.3f}); not converged: {nc}"
+    )
     print(f"  bootstrap interval of the rank-biserial r vs. the population r: {cov_r:.1%}")
     print(f"  ({time.perf_counter() - t0:.0f} s for the coverage runs)")
     t_an, t_help, t_pass = timing()
-    print("analysis of 48 participants x 2 conditions x 3 videos (288 rows), with start-up, "
-          "median of 3:")  # fmt: skip
-    print(f"  vimsim analyze --power 0.8: {t_an:.2f} s (goal <= 3 s, ratio to goal "
-          f"{t_an / 3.0:.2f})")  # fmt: skip
-    print(f"  reference vimsim --help: {t_help:.2f} s; ratio analyze / --help = {t_an / t_help:.2f}")
-    print(f"  reference python -c pass: {t_pass:.3f} s; ratio analyze / python = "
-          f"{t_an / t_pass:.1f}")  # fmt: skip
+    print(
+        "analysis of 48 participants x 2 conditions x 3 videos (288 rows), with start-up, "
+        "median of 3:"
+    )
+    print(
+        f"  vimsim analyze --power 0.8: {t_an:.2f} s (goal <= 3 s, ratio to goal {t_an / 3.0:.2f})"
+    )
+    print(
+        f"  reference vimsim --help: {t_help:.2f} s; ratio analyze / --help = {t_an / t_help:.2f}"
+    )
+    print(
+        f"  reference python -c pass: {t_pass:.3f} s; ratio analyze / python = {t_an / t_pass:.1f}"
+    )
 
 
 if __name__ == "__main__":

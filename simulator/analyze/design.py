@@ -73,8 +73,15 @@ def _table(included: Sequence[Participant], conds: tuple[str, str]) -> tuple[pd.
     change = bool(included) and all(q.pre is not None for q in included)
     rows = []
     for q in included:
-        rec = {"participant": q.id, "condition": q.condition, "video": q.video,
-               "session": q.session, "flow": q.flow, "mssq": q.mssq.total, "row": q.row}  # fmt: skip
+        rec = {
+            "participant": q.id,
+            "condition": q.condition,
+            "video": q.video,
+            "session": q.session,
+            "flow": q.flow,
+            "mssq": q.mssq.total,
+            "row": q.row,
+        }
         for col, attr in MEASURES:
             v = getattr(q.ssq, attr)
             rec[col] = v - getattr(q.pre, attr) if change and q.pre is not None else v
@@ -104,20 +111,28 @@ def _check_forced(study: Study, df: pd.DataFrame, forced: str, found: str) -> No
     per_id = df.groupby("participant", sort=False)["row"].apply(list)
     rep = per_id[per_id.map(len) > 1]
     if forced == "mixed" and not {"video", "session"} & set(study.columns):
-        raise InputError(f"{path}: --design mixed needs column 'video' or 'session' (which "
-                         f"video or session each row is); found {list(study.columns)}")  # fmt: skip
+        raise InputError(
+            f"{path}: --design mixed needs column 'video' or 'session' (which "
+            f"video or session each row is); found {list(study.columns)}"
+        )
     if forced == "between" and len(rep):
         pid, rows = rep.index[0], rep.iloc[0]
-        raise InputError(f"{path}: --design between but participant {pid!r} has {len(rows)} "
-                         f"rows (rows {', '.join(map(str, rows))}); a between design has one "
-                         f"row per participant: use --design {found}")  # fmt: skip
+        raise InputError(
+            f"{path}: --design between but participant {pid!r} has {len(rows)} "
+            f"rows (rows {', '.join(map(str, rows))}); a between design has one "
+            f"row per participant: use --design {found}"
+        )
     if forced in ("within", "mixed") and not len(rep):
-        raise InputError(f"{path}: --design {forced} but every participant id has one row; "
-                         "a repeated design has each participant in several rows (same id): "
-                         "use --design between")  # fmt: skip
+        raise InputError(
+            f"{path}: --design {forced} but every participant id has one row; "
+            "a repeated design has each participant in several rows (same id): "
+            "use --design between"
+        )
     if forced == "within" and found == "mixed":
-        raise InputError(f"{path}: --design within but participants have several rows per "
-                         "condition (videos or sessions): use --design mixed")  # fmt: skip
+        raise InputError(
+            f"{path}: --design within but participants have several rows per "
+            "condition (videos or sessions): use --design mixed"
+        )
 
 
 def _pairs(df: pd.DataFrame, conds: tuple[str, str], path: object) -> tuple[pd.DataFrame, list]:
@@ -125,14 +140,17 @@ def _pairs(df: pd.DataFrame, conds: tuple[str, str], path: object) -> tuple[pd.D
     have = df.groupby("participant", sort=False)["condition"].agg(lambda s: set(s.astype(str)))
     complete = have.map(lambda s: set(conds) <= s)
     full = set(have.index[complete])
-    dropped = [f"participant {pid!r}: no row in condition "
-               f"{[c for c in conds if c not in have[pid]][0]!r}"
-               for pid in have.index[~complete]]  # fmt: skip
+    dropped = [
+        f"participant {pid!r}: no row in condition {next(c for c in conds if c not in have[pid])!r}"
+        for pid in have.index[~complete]
+    ]
     if len(full) < MIN_PAIRS:
-        raise InputError(f"{path}: {len(full)} participant(s) have rows in both {conds[0]!r} and "
-                         f"{conds[1]!r} ({len(dropped)} miss one); the paired test needs >= "
-                         f"{MIN_PAIRS} complete pairs: add participants or use --design between "
-                         "if each participant saw one condition")  # fmt: skip
+        raise InputError(
+            f"{path}: {len(full)} participant(s) have rows in both {conds[0]!r} and "
+            f"{conds[1]!r} ({len(dropped)} miss one); the paired test needs >= "
+            f"{MIN_PAIRS} complete pairs: add participants or use --design between "
+            "if each participant saw one condition"
+        )
     return df[df["participant"].isin(full)].reset_index(drop=True), dropped
 
 
@@ -168,8 +186,10 @@ def design_table(
             ids = df.loc[df["condition"] == c, "participant"].unique()
             if len(ids) < 2:
                 who = f" ({ids[0]!r})" if len(ids) else ""
-                raise InputError(f"{study.path}: condition {c!r} has {len(ids)} participant(s)"
-                                 f"{who} after exclusion; comparing conditions needs >= 2 each "
-                                 "(3 for the tests): add participants or pick conditions with "
-                                 "--conditions")  # fmt: skip
+                raise InputError(
+                    f"{study.path}: condition {c!r} has {len(ids)} participant(s)"
+                    f"{who} after exclusion; comparing conditions needs >= 2 each "
+                    "(3 for the tests): add participants or pick conditions with "
+                    "--conditions"
+                )
     return Design(name, design == "auto", paired, df, change, tuple(dropped), why)

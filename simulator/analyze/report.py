@@ -399,9 +399,9 @@ def _report_lines(an: Analysis, table_md: str) -> list[str]:
     if an.statistics is not None:
         d = an.statistics.design
         lines += ["", "## The design's statistics", "",
-                  f"Design {d.name} ({d.why}): the tests with effect sizes (`tests.csv`), the "
-                  "mixed model (`model.csv`) and, with `--power`, `power.csv`; explained in "
-                  "plain words in `analysis.md`."]  # fmt: skip
+                  (f"Design {d.name} ({d.why}): the tests with effect sizes (`tests.csv`), the "
+                   "mixed model (`model.csv`) and, with `--power`, `power.csv`; explained in "
+                   "plain words in `analysis.md`.")]  # fmt: skip
     lines += ["", "## Excluded", ""]
     lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
     lines += ["", "## Rows with problems (not used)", ""]

@@ -52,8 +52,10 @@ def simulated_rows(
     seed : int
     """
     if design not in ("within", "between") or participants < 2 or videos < 1:
-        raise InputError(f"simulated study: design within|between, >= 2 participants and "
-                         f">= 1 video; got {design!r}, {participants}, {videos}")  # fmt: skip
+        raise InputError(
+            f"simulated study: design within|between, >= 2 participants and "
+            f">= 1 video; got {design!r}, {participants}, {videos}"
+        )
     rng = np.random.default_rng(seed)
     vid_flow = np.linspace(200.0, 1400.0, videos) if videos > 1 else np.array([800.0])
     w = rng.normal(0.0, sd_video, videos)
@@ -65,11 +67,29 @@ def simulated_rows(
         for c in conds:
             for v in range(videos):
                 flow = float(np.round(vid_flow[v] * rng.uniform(0.9, 1.1), 1))
-                tot = (base + effect * (c == "B") + flow_slope * flow + mssq_slope * ms + u
-                       + w[v] + rng.normal(0.0, sd_residual))  # fmt: skip
+                tot = (
+                    base
+                    + effect * (c == "B")
+                    + flow_slope * flow
+                    + mssq_slope * ms
+                    + u
+                    + w[v]
+                    + rng.normal(0.0, sd_residual)
+                )
                 tot = float(np.clip(tot, 0.0, 200.0))
-                rows.append([f"P{i + 1:03d}", c, f"V{v + 1}", round(0.8 * tot, 6),
-                             round(0.6 * tot, 6), round(1.2 * tot, 6), round(tot, 6), ms, flow])  # fmt: skip
+                rows.append(
+                    [
+                        f"P{i + 1:03d}",
+                        c,
+                        f"V{v + 1}",
+                        round(0.8 * tot, 6),
+                        round(0.6 * tot, 6),
+                        round(1.2 * tot, 6),
+                        round(tot, 6),
+                        ms,
+                        flow,
+                    ]
+                )
     return rows
 
 

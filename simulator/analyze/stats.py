@@ -4,8 +4,9 @@ Tests (``tests.csv``) compare participants: the mean of each participant's rows 
 condition. Paired designs use the Wilcoxon signed-rank test of B - A with the matched-pairs
 rank-biserial correlation (Kerby 2014); between designs use the two-sided Mann-Whitney U with
 the rank-biserial correlation (Wendt 1972). Both effects are signed so that positive means
-higher scores in B (the second condition) than in A (the reference), and get a seeded
-percentile bootstrap interval (participants resampled, within each group for between). Holm's
+higher scores in B (the second condition) than in A (the reference), and get a seeded BCa
+bootstrap interval (``scipy.stats.bootstrap``; participants resampled, within each group
+for between). Holm's
 correction runs across the four SSQ measures (total, N, O, D). Shapiro-Wilk of the
 differences (paired) or of each group (between) is kept beside them.
 
@@ -38,19 +39,36 @@ __all__ = [
     "MODEL_COLUMNS",
     "POWER_COLUMNS",
     "TEST_COLUMNS",
-    "StatsOptions",
     "Statistics",
+    "StatsOptions",
     "fit_model",
     "power_rows",
-    "study_statistics",
     "rank_tests",
+    "study_statistics",
 ]
 
-TEST_COLUMNS = ("measure", "test", "statistic", "p", "p_holm", "effect", "effect_name",
-                "effect_ci_low", "effect_ci_high", "n")  # fmt: skip
+TEST_COLUMNS = (
+    "measure",
+    "test",
+    "statistic",
+    "p",
+    "p_holm",
+    "effect",
+    "effect_name",
+    "effect_ci_low",
+    "effect_ci_high",
+    "n",
+)
 MODEL_COLUMNS = ("term", "estimate", "std_error", "ci_low", "ci_high", "p")
-POWER_COLUMNS = ("design", "test", "effect", "alpha", "power", "participants_needed",
-                 "observed_power")  # fmt: skip
+POWER_COLUMNS = (
+    "design",
+    "test",
+    "effect",
+    "alpha",
+    "power",
+    "participants_needed",
+    "observed_power",
+)
 
 _D = {o.name: o.default for o in STATS_OPTIONS}
 
@@ -113,10 +131,10 @@ class Statistics:
 
 
 def participant_means(df: pd.DataFrame, col: str) -> pd.DataFrame:
-    """Participant x condition means of ``col`` (rows: participants in first-seen order)."""
-    wide = df.pivot_table(index="participant", columns="condition", values=col,
-                          aggfunc="mean", observed=False, sort=False)  # fmt: skip
-    return wide
+    """Participant x condition means of ``col``: one row per participant (in id order), one
+    column per condition (reference first; NaN where a participant has no row)."""
+    m = df.groupby(["participant", "condition"], observed=True)[col].mean().unstack("condition")
+    return m.reindex(columns=df["condition"].cat.categories)
 
 
 def _rb_paired(d: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -141,35 +159,70 @@ def _rb_between(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.fl
     return 1.0 - 2.0 * u_a / (na * nb)
 
 
-def _interval(boot: NDArray[np.float64], alpha: float) -> tuple[float, float]:
-    lo, hi = np.quantile(boot, [alpha / 2.0, 1.0 - alpha / 2.0])
+def _last_axis(f):
+    """A statistic of 2-D rows made a ``scipy.stats.bootstrap`` statistic (``axis=``)."""
+
+    def stat(*samples, axis=-1):
+        xs = [np.moveaxis(np.asarray(x, dtype=np.float64), axis, -1) for x in samples]
+        lead = np.broadcast_shapes(*(x.shape[:-1] for x in xs))
+        xs = [np.broadcast_to(x, lead + x.shape[-1:]) for x in xs]
+        rows = f(*(x.reshape(-1, x.shape[-1]) for x in xs))
+        return rows.reshape(lead)
+
+    return stat
+
+
+def _interval(samples: tuple, f, opts: StatsOptions, rng) -> tuple[float, float]:
+    """BCa bootstrap interval of ``f`` (scipy.stats.bootstrap, participants resampled,
+    each sample on its own); the percentile interval of the same resamples where BCa is
+    undefined (every resample equal, e.g. r = 1 throughout)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # a degenerate distribution: handled below
+        res = stats.bootstrap(samples, _last_axis(f), vectorized=True, n_resamples=opts.n_boot,
+                              confidence_level=1.0 - opts.alpha, method="BCa", rng=rng)  # fmt: skip
+    lo, hi = res.confidence_interval
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        a = opts.alpha
+        lo, hi = np.quantile(res.bootstrap_distribution, [a / 2.0, 1.0 - a / 2.0])
     return float(lo), float(hi)
 
 
 def _paired_row(col: str, d: NDArray[np.float64], opts: StatsOptions, rng) -> dict:
-    row = {"measure": col, "test": "Wilcoxon signed-rank", "statistic": math.nan,
-           "p": math.nan, "p_holm": math.nan, "effect": math.nan,
-           "effect_name": "matched-pairs rank-biserial r (B - A)", "effect_ci_low": math.nan,
-           "effect_ci_high": math.nan, "n": int(d.size)}  # fmt: skip
+    row = {
+        "measure": col,
+        "test": "Wilcoxon signed-rank",
+        "statistic": math.nan,
+        "p": math.nan,
+        "p_holm": math.nan,
+        "effect": math.nan,
+        "effect_name": "matched-pairs rank-biserial r (B - A)",
+        "effect_ci_low": math.nan,
+        "effect_ci_high": math.nan,
+        "n": int(d.size),
+    }
     if np.any(d != 0):
         res = stats.wilcoxon(d)
         row["statistic"], row["p"] = float(res.statistic), float(res.pvalue)
     row["effect"] = float(_rb_paired(d[None, :])[0])
-    idx = rng.integers(0, d.size, size=(opts.n_boot, d.size))
-    row["effect_ci_low"], row["effect_ci_high"] = _interval(_rb_paired(d[idx]), opts.alpha)
+    row["effect_ci_low"], row["effect_ci_high"] = _interval((d,), _rb_paired, opts, rng)
     return row
 
 
 def _between_row(col: str, a, b, opts: StatsOptions, rng) -> dict:
     res = stats.mannwhitneyu(a, b, alternative="two-sided")
-    boot = _rb_between(a[rng.integers(0, a.size, (opts.n_boot, a.size))],
-                       b[rng.integers(0, b.size, (opts.n_boot, b.size))])  # fmt: skip
-    lo, hi = _interval(boot, opts.alpha)
-    return {"measure": col, "test": "Mann-Whitney U", "statistic": float(res.statistic),
-            "p": float(res.pvalue), "p_holm": math.nan,
-            "effect": float(_rb_between(a[None, :], b[None, :])[0]),
-            "effect_name": "rank-biserial r (B vs. A)", "effect_ci_low": lo,
-            "effect_ci_high": hi, "n": int(a.size + b.size)}  # fmt: skip
+    lo, hi = _interval((a, b), _rb_between, opts, rng)
+    return {
+        "measure": col,
+        "test": "Mann-Whitney U",
+        "statistic": float(res.statistic),
+        "p": float(res.pvalue),
+        "p_holm": math.nan,
+        "effect": float(_rb_between(a[None, :], b[None, :])[0]),
+        "effect_name": "rank-biserial r (B vs. A)",
+        "effect_ci_low": lo,
+        "effect_ci_high": hi,
+        "n": int(a.size + b.size),
+    }
 
 
 def _shapiro_row(col: str, label: str, v: NDArray[np.float64]) -> dict:
@@ -232,12 +285,15 @@ def fit_model(table: pd.DataFrame, transform: str, alpha: float, crossed_video: 
                 res = smf.ols(formula, table).fit()
                 info["converged"] = True
             elif crossed_video:
-                info["method"] = ("MixedLM REML: (1 | participant) + (1 | video), crossed "
-                                  "(variance components, one group)")  # fmt: skip
+                info["method"] = (
+                    "MixedLM REML: (1 | participant) + (1 | video), crossed "
+                    "(variance components, one group)"
+                )
                 vc = {"participant": "0 + C(participant)", "video": "0 + C(video)"}
                 t = table.assign(_all=1)
-                res = smf.mixedlm(formula, t, groups="_all", re_formula="0",
-                                  vc_formula=vc).fit(reml=True)  # fmt: skip
+                res = smf.mixedlm(formula, t, groups="_all", re_formula="0", vc_formula=vc).fit(
+                    reml=True
+                )
             else:
                 info["method"] = "MixedLM REML: (1 | participant)"
                 res = smf.mixedlm(formula, table, groups="participant").fit(reml=True)
@@ -258,16 +314,23 @@ def _model_rows(res, alpha: float, repeated: bool, crossed: bool) -> list[dict]:
     bse = res.bse_fe if repeated else res.bse
     ci = res.conf_int(alpha=alpha)
     pv = res.pvalues
-    rows = [{"term": t, "estimate": float(fe[t]), "std_error": float(bse[t]),
-             "ci_low": float(ci.loc[t, 0]), "ci_high": float(ci.loc[t, 1]), "p": float(pv[t])}
-            for t in fe.index]  # fmt: skip
+    rows = [
+        {
+            "term": t,
+            "estimate": float(fe[t]),
+            "std_error": float(bse[t]),
+            "ci_low": float(ci.loc[t, 0]),
+            "ci_high": float(ci.loc[t, 1]),
+            "p": float(pv[t]),
+        }
+        for t in fe.index
+    ]
     blank = {"std_error": math.nan, "ci_low": math.nan, "ci_high": math.nan, "p": math.nan}
     if repeated and crossed:
         for name, v in zip(res.model.exog_vc.names, res.vcomp):
             rows.append({"term": f"{name} Var", "estimate": float(v), **blank})
     elif repeated:
-        rows.append({"term": "participant Var", "estimate": float(res.cov_re.iloc[0, 0]),
-                     **blank})  # fmt: skip
+        rows.append({"term": "participant Var", "estimate": float(res.cov_re.iloc[0, 0]), **blank})
     rows.append({"term": "Residual Var", "estimate": float(res.scale), **blank})
     return rows
 
@@ -288,16 +351,31 @@ def power_rows(design: Design, opts: StatsOptions) -> tuple[list[dict], list[str
         test, solver, n_now, ratio = "paired t (d_z)", TTestPower(), d.size, None
     else:
         a, b = (wide[c].dropna().to_numpy(dtype=np.float64) for c in (a_lab, b_lab))
-        sp = math.sqrt(((a.size - 1) * a.var(ddof=1) + (b.size - 1) * b.var(ddof=1))
-                       / (a.size + b.size - 2))  # fmt: skip
+        sp = math.sqrt(
+            ((a.size - 1) * a.var(ddof=1) + (b.size - 1) * b.var(ddof=1)) / (a.size + b.size - 2)
+        )
         observed = (b.mean() - a.mean()) / sp if sp > 0 else math.nan
-        test, solver, n_now, ratio = "two-sample t (Cohen's d)", TTestIndPower(), a.size, b.size / a.size
+        test, solver, n_now, ratio = (
+            "two-sample t (Cohen's d)",
+            TTestIndPower(),
+            a.size,
+            b.size / a.size,
+        )
     eff = opts.effect if opts.effect is not None else observed
-    row = {"design": design.name, "test": test, "effect": float(eff), "alpha": opts.alpha,
-           "power": opts.power, "participants_needed": math.nan, "observed_power": math.nan}  # fmt: skip
+    row = {
+        "design": design.name,
+        "test": test,
+        "effect": float(eff),
+        "alpha": opts.alpha,
+        "power": opts.power,
+        "participants_needed": math.nan,
+        "observed_power": math.nan,
+    }
     if not math.isfinite(eff) or eff == 0:
-        notes.append("power: the observed effect is 0 or undefined (no variation); give "
-                     "--effect D for the effect the next study should detect")  # fmt: skip
+        notes.append(
+            "power: the observed effect is 0 or undefined (no variation); give "
+            "--effect D for the effect the next study should detect"
+        )
         return [row], notes
     kw = {} if ratio is None else {"ratio": 1.0}
     with warnings.catch_warnings():
@@ -306,7 +384,7 @@ def power_rows(design: Design, opts: StatsOptions) -> tuple[list[dict], list[str
         kw_now = {} if ratio is None else {"ratio": ratio}
         row["observed_power"] = float(solver.power(abs(eff), n_now, opts.alpha, **kw_now))
     n = float(np.squeeze(n))
-    row["participants_needed"] = int(math.ceil(n)) if math.isfinite(n) else math.nan
+    row["participants_needed"] = math.ceil(n) if math.isfinite(n) else math.nan
     return [row], notes
 
 
@@ -321,17 +399,29 @@ def _flow_notes(design: Design) -> list[str]:
         return []
     ratio = "inf" if m.min() <= 0 else f"{m.max() / m.min():.1f}"
     per = ", ".join(f"{v} {x:.4g}" for v, x in m.items())
-    return [f"WARNING: pooling mixes videos of very different flow (mean flow {per}: "
-            f"{ratio}x); read the per-video tables and the model's flow term"]  # fmt: skip
+    return [
+        (
+            f"WARNING: pooling mixes videos of very different flow (mean flow {per}: "
+            f"{ratio}x); read the per-video tables and the model's flow term"
+        )
+    ]
 
 
 def study_statistics(design: Design, opts: StatsOptions) -> Statistics:
     """The tests, the model, power (when ``opts.power``) and per-video tables of ``design``."""
     if opts.transform == "log1p" and (design.table["ssq_total"] <= -1).any():
-        raise InputError("--transform log1p: change scores (pre_ columns) of -1 or below have "
-                         "no log(1 + x); use --transform none")  # fmt: skip
-    notes = [f"{len(design.dropped)} participant(s) dropped from the paired test "
-             f"(a condition missing): " + "; ".join(design.dropped)] if design.dropped else []  # fmt: skip
+        raise InputError(
+            "--transform log1p: change scores (pre_ columns) of -1 or below have "
+            "no log(1 + x); use --transform none"
+        )
+    notes = (
+        [
+            f"{len(design.dropped)} participant(s) dropped from the paired test "
+            f"(a condition missing): " + "; ".join(design.dropped)
+        ]
+        if design.dropped
+        else []
+    )
     tests = rank_tests(design, opts)
     crossed = len(design.videos) > 1
     model, info = fit_model(design.table, opts.transform, opts.alpha, crossed)
@@ -353,17 +443,22 @@ def study_statistics(design: Design, opts: StatsOptions) -> Statistics:
             m, vinfo = fit_model(sub, opts.transform, opts.alpha, False)
             notes += _model_notes(vinfo, f"model of video {v!r}")
             by_video[v] = (tuple(t), tuple(m))
-    return Statistics(design, opts, tuple(tests), tuple(model), tuple(power), by_video, info,
-                      tuple(notes))  # fmt: skip
+    return Statistics(
+        design, opts, tuple(tests), tuple(model), tuple(power), by_video, info, tuple(notes)
+    )
 
 
 def _model_notes(info: dict, what: str) -> list[str]:
     out = []
     if info["error"]:
-        out.append(f"{what}: {info['error']} (model.csv left without rows); check that flow "
-                   "and mssq vary, or try --transform log1p")  # fmt: skip
+        out.append(
+            f"{what}: {info['error']} (model.csv left without rows); check that flow "
+            "and mssq vary, or try --transform log1p"
+        )
     elif not info["converged"]:
-        out.append(f"WARNING: {what} did not converge: its estimates are not reliable; try "
-                   "--transform log1p or more participants")  # fmt: skip
+        out.append(
+            f"WARNING: {what} did not converge: its estimates are not reliable; try "
+            "--transform log1p or more participants"
+        )
     out += [f"{what}: statsmodels warns: {w}" for w in info["warnings"]]
     return out

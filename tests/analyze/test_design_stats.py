@@ -44,7 +44,7 @@ def _t_pm(t_plus: float, t_minus: float) -> float:
 def test_within_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
     rows = simulated_rows(14, effect=6.0, seed=5)
     data = write_simulated(tmp_path / "d.csv", rows)
-    opts = StatsOptions(power=0.8)
+    opts = StatsOptions(power=0.8, n_boot=200)
     an = analyze_study(read_study(data), stats=opts)
     st = an.statistics
     assert (st.design.name, st.design.paired, st.design.detected) == ("within", True, True)
@@ -59,6 +59,16 @@ def test_within_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
     r = stats.rankdata(np.abs(d))
     assert t["effect"] == pytest.approx(_t_pm(r[d > 0].sum(), r[d < 0].sum()), abs=TOL)
     assert t["effect_ci_low"] <= t["effect"] <= t["effect_ci_high"]
+
+    # the interval: scipy's BCa bootstrap, same seed (0), same resamples (2000 -> 200 here)
+    def rb(x, axis=-1):
+        x = np.moveaxis(x, axis, -1)
+        rk = stats.rankdata(np.abs(x), axis=-1)  # no zero differences in these data
+        return ((rk * (x > 0)).sum(-1) - (rk * (x < 0)).sum(-1)) / rk.sum(-1)
+
+    ci = stats.bootstrap((d,), rb, vectorized=True, n_resamples=200, method="BCa",
+                         rng=np.random.default_rng(0)).confidence_interval  # fmt: skip
+    assert (t["effect_ci_low"], t["effect_ci_high"]) == pytest.approx(tuple(ci), abs=TOL)
     # Holm across the four measures, as multipletests does it
     ps = [_main_tests(st)[m]["p"] for m in ("ssq_total", "ssq_n", "ssq_o", "ssq_d")]
     holm = multipletests(ps, method="holm")[1]
@@ -66,7 +76,9 @@ def test_within_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
         pytest.approx(list(holm), abs=TOL)
     )
     # the model: (1 | participant), REML, statsmodels directly
-    res = smf.mixedlm("ssq_total ~ condition + flow + mssq", df, groups="participant").fit(reml=True)
+    res = smf.mixedlm("ssq_total ~ condition + flow + mssq", df, groups="participant").fit(
+        reml=True
+    )
     got = {r["term"]: r for r in st.model}
     for term in res.fe_params.index:
         assert got[term]["estimate"] == pytest.approx(res.fe_params[term], abs=TOL)
@@ -87,7 +99,9 @@ def test_within_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
 def test_between_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
     rows = simulated_rows(16, effect=8.0, design="between", seed=7)
     data = write_simulated(tmp_path / "d.csv", rows)
-    st = analyze_study(read_study(data), stats=StatsOptions(power=0.9, alpha=0.01)).statistics
+    st = analyze_study(
+        read_study(data), stats=StatsOptions(power=0.9, alpha=0.01, n_boot=200)
+    ).statistics
     assert (st.design.name, st.design.paired) == ("between", False)
     df = _frame(rows)
     a = df.loc[df.condition == "A", "ssq_n"].to_numpy()
@@ -100,6 +114,17 @@ def test_between_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
     # P(B > A) - P(B < A) by counting pairs, the rank-biserial's definition
     gt = (b[:, None] > a[None, :]).mean() - (b[:, None] < a[None, :]).mean()
     assert t["effect"] == pytest.approx(gt, abs=TOL)
+    ta = df.loc[df.condition == "A", "ssq_total"].to_numpy()
+    tb = df.loc[df.condition == "B", "ssq_total"].to_numpy()
+
+    def rb(x, y, axis=-1):  # P(B > A) - P(B < A) over all pairs
+        x, y = np.moveaxis(x, axis, -1), np.moveaxis(y, axis, -1)
+        return np.sign(y[..., :, None] - x[..., None, :]).mean(axis=(-2, -1))
+
+    ci = stats.bootstrap((ta, tb), rb, vectorized=True, n_resamples=200, method="BCa",
+                         confidence_level=0.99, rng=np.random.default_rng(0)).confidence_interval  # fmt: skip
+    tt = _main_tests(st)["ssq_total"]
+    assert (tt["effect_ci_low"], tt["effect_ci_high"]) == pytest.approx(tuple(ci), abs=TOL)
     sw = {r["test"]: r for r in st.tests if r["measure"] == "ssq_n" and not r["effect_name"]}
     assert sw["Shapiro-Wilk (A)"]["p"] == pytest.approx(stats.shapiro(a).pvalue, abs=TOL)
     res = smf.ols("ssq_total ~ condition + flow + mssq", df).fit()
@@ -108,8 +133,6 @@ def test_between_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
         assert got[term]["estimate"] == pytest.approx(res.params[term], abs=TOL)
         assert got[term]["p"] == pytest.approx(res.pvalues[term], abs=TOL)
         assert got[term]["ci_high"] == pytest.approx(res.conf_int(0.01).loc[term, 1], abs=TOL)
-    ta = df.loc[df.condition == "A", "ssq_total"].to_numpy()
-    tb = df.loc[df.condition == "B", "ssq_total"].to_numpy()
     sp = math.sqrt((7 * ta.var(ddof=1) + 7 * tb.var(ddof=1)) / 14)
     dd = (tb.mean() - ta.mean()) / sp
     need = TTestIndPower().solve_power(effect_size=abs(dd), alpha=0.01, power=0.9, ratio=1.0)
@@ -121,7 +144,8 @@ def test_mixed_three_videos_cli(tmp_path: Path, capsys: pytest.CaptureFixture[st
     rows = simulated_rows(10, videos=3, effect=5.0, seed=11)
     data = write_simulated(tmp_path / "d.csv", rows)
     out = tmp_path / "r"
-    assert main(["analyze", str(data), "-o", str(out), "--power", "0.8", "--effect", "0.5"]) == 0
+    argv = ["analyze", str(data), "-o", str(out), "--power", "0.8", "--effect", "0.5"]
+    assert main([*argv, "--n-boot", "200"]) == 0
     err = capsys.readouterr().err
     assert "pooling mixes videos of very different flow" in err
     df = _frame(rows)
@@ -129,27 +153,57 @@ def test_mixed_three_videos_cli(tmp_path: Path, capsys: pytest.CaptureFixture[st
     w = df.groupby(["participant", "condition"], observed=True)["ssq_o"].mean().unstack()
     ref = stats.wilcoxon((w["B"] - w["A"]).to_numpy())
     tests = {(r["measure"], r["test"]): r for r in _read(out / "tests.csv")}
-    assert list(_read(out / "tests.csv")[0]) == ["measure", "test", "statistic", "p", "p_holm",
-                                                 "effect", "effect_name", "effect_ci_low",
-                                                 "effect_ci_high", "n"]  # fmt: skip
-    assert float(tests[("ssq_o", "Wilcoxon signed-rank")]["p"]) == pytest.approx(ref.pvalue, abs=TOL)
+    assert list(_read(out / "tests.csv")[0]) == [
+        "measure",
+        "test",
+        "statistic",
+        "p",
+        "p_holm",
+        "effect",
+        "effect_name",
+        "effect_ci_low",
+        "effect_ci_high",
+        "n",
+    ]
+    assert float(tests[("ssq_o", "Wilcoxon signed-rank")]["p"]) == pytest.approx(
+        ref.pvalue, abs=TOL
+    )
     # crossed (1 | participant) + (1 | video), as statsmodels' documentation fits them
     vc = {"participant": "0 + C(participant)", "video": "0 + C(video)"}
-    res = smf.mixedlm("ssq_total ~ condition + flow + mssq", df.assign(g=1), groups="g",
-                      re_formula="0", vc_formula=vc).fit(reml=True)  # fmt: skip
+    res = smf.mixedlm(
+        "ssq_total ~ condition + flow + mssq",
+        df.assign(g=1),
+        groups="g",
+        re_formula="0",
+        vc_formula=vc,
+    ).fit(reml=True)
     model = {r["term"]: r for r in _read(out / "model.csv")}
-    assert list(_read(out / "model.csv")[0]) == ["term", "estimate", "std_error", "ci_low",
-                                                 "ci_high", "p"]  # fmt: skip
+    assert list(_read(out / "model.csv")[0]) == [
+        "term",
+        "estimate",
+        "std_error",
+        "ci_low",
+        "ci_high",
+        "p",
+    ]
     for term in res.fe_params.index:
         assert float(model[term]["estimate"]) == pytest.approx(res.fe_params[term], abs=TOL)
         assert float(model[term]["p"]) == pytest.approx(res.pvalues[term], abs=TOL)
     assert float(model["video Var"]["estimate"]) == pytest.approx(res.vcomp[1], abs=TOL)
     power = _read(out / "power.csv")
-    assert list(power[0]) == ["design", "test", "effect", "alpha", "power",
-                              "participants_needed", "observed_power"]  # fmt: skip
+    assert list(power[0]) == [
+        "design",
+        "test",
+        "effect",
+        "alpha",
+        "power",
+        "participants_needed",
+        "observed_power",
+    ]
     assert power[0]["design"] == "mixed" and float(power[0]["effect"]) == 0.5
     assert int(power[0]["participants_needed"]) == math.ceil(
-        TTestPower().solve_power(effect_size=0.5, alpha=0.05, power=0.8))  # fmt: skip
+        TTestPower().solve_power(effect_size=0.5, alpha=0.05, power=0.8)
+    )
     by_video = _read(out / "tests_by_video.csv")
     assert {r["video"] for r in by_video} == {"V1", "V2", "V3"}
     sub = df[df.video == "V2"].pivot(index="participant", columns="condition", values="ssq_total")
@@ -161,8 +215,18 @@ def test_mixed_three_videos_cli(tmp_path: Path, capsys: pytest.CaptureFixture[st
 
 def test_change_scores_from_pre_columns(tmp_path: Path) -> None:
     rng = np.random.default_rng(2)
-    header = ["id", "condition", "ssq_n", "ssq_o", "ssq_d", "pre_ssq_n", "pre_ssq_o",
-              "pre_ssq_d", "mssq", "flow"]  # fmt: skip
+    header = [
+        "id",
+        "condition",
+        "ssq_n",
+        "ssq_o",
+        "ssq_d",
+        "pre_ssq_n",
+        "pre_ssq_o",
+        "pre_ssq_d",
+        "mssq",
+        "flow",
+    ]
     rows = []
     for i in range(8):
         for c in ("A", "B"):
@@ -171,7 +235,7 @@ def test_change_scores_from_pre_columns(tmp_path: Path) -> None:
             rows.append([f"p{i}", c, *post, *pre, 10 + i, 500 + 10 * i + (c == "B")])
     data = tmp_path / "d.csv"
     pd.DataFrame(rows, columns=header).to_csv(data, index=False)
-    st = analyze_study(read_study(data), stats=StatsOptions()).statistics
+    st = analyze_study(read_study(data), stats=StatsOptions(n_boot=200)).statistics
     assert st.design.change
     df = pd.DataFrame(rows, columns=header)
     ch = (df["ssq_d"] - df["pre_ssq_d"]).to_numpy()
@@ -185,9 +249,12 @@ def test_change_scores_from_pre_columns(tmp_path: Path) -> None:
 def test_log1p_transform(tmp_path: Path) -> None:
     rows = simulated_rows(8, seed=3)
     data = write_simulated(tmp_path / "d.csv", rows)
-    st = analyze_study(read_study(data), stats=StatsOptions(transform="log1p")).statistics
-    res = smf.mixedlm("np.log1p(ssq_total) ~ condition + flow + mssq", _frame(rows),
-                      groups="participant").fit(reml=True)  # fmt: skip
+    st = analyze_study(
+        read_study(data), stats=StatsOptions(transform="log1p", n_boot=200)
+    ).statistics
+    res = smf.mixedlm(
+        "np.log1p(ssq_total) ~ condition + flow + mssq", _frame(rows), groups="participant"
+    ).fit(reml=True)
     got = {r["term"]: r["estimate"] for r in st.model}
     assert got["condition[T.B]"] == pytest.approx(res.fe_params["condition[T.B]"], abs=TOL)
     assert st.model_info["formula"].startswith("np.log1p(ssq_total)")
@@ -209,7 +276,7 @@ def _cli(tmp_path: Path, rows, *extra: str, header=SIM_HEADER) -> tuple[int, str
     data = tmp_path / "d.csv"
     pd.DataFrame(rows, columns=header).to_csv(data, index=False)
     out = tmp_path / "r"
-    rc = main(["analyze", str(data), "-o", str(out), *extra])
+    rc = main(["analyze", str(data), "-o", str(out), "--n-boot", "200", *extra])
     return rc, data, out
 
 
@@ -222,7 +289,7 @@ def test_within_missing_condition_dropped_then_refused(tmp_path, capsys) -> None
     assert "1 participant(s) dropped from the paired test" in err and "'P002'" in err
     assert _read(out / "tests.csv")[0]["n"] == "7"
     rows = [r for r in rows if not (r[0] in ("P003", "P004") and r[1] == "A")]
-    rc, data, out2 = _cli(tmp_path, rows)
+    rc, data, _ = _cli(tmp_path, rows)
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.count("\n") == 0
     assert str(data) in err and "5 participant(s) have rows in both 'A' and 'B'" in err
@@ -290,9 +357,14 @@ def test_bad_options_exit_2(tmp_path, capsys, args, expect) -> None:
 
 def test_bootstrap_is_seeded(tmp_path: Path) -> None:
     data = write_simulated(tmp_path / "d.csv", simulated_rows(10, seed=8))
-    st = [analyze_study(read_study(data), stats=StatsOptions(seed=s)).statistics for s in (1, 1, 2)]
-    ci = [(_main_tests(x)["ssq_total"]["effect_ci_low"], _main_tests(x)["ssq_n"]["effect_ci_high"])
-          for x in st]  # fmt: skip
+    st = [
+        analyze_study(read_study(data), stats=StatsOptions(seed=s, n_boot=200)).statistics
+        for s in (1, 1, 2)
+    ]
+    ci = [
+        (_main_tests(x)["ssq_total"]["effect_ci_low"], _main_tests(x)["ssq_n"]["effect_ci_high"])
+        for x in st
+    ]
     assert ci[0] == ci[1]
 
 
@@ -313,12 +385,20 @@ def _study_analysis(tmp_path: Path, conds: list[str]) -> dict:
             f"0,0,0,0,0,{100 + 10 * i},0\n1,0.1,0,0,0,{120 + 10 * i},0\n"
         )
         rows.append([pid, c, 9.54 * (i % 4), 7.58, 13.92 * (i % 3), 5 + i])
-        table.append({"status": "ok", "participant": pid, "condition": c, "viewing": vid,
-                      "video": "clip"})  # fmt: skip
-    pd.DataFrame(rows, columns=["participant", "condition", "ssq_n", "ssq_o", "ssq_d", "mssq"]
-                 ).to_csv(q, index=False)  # fmt: skip
-    manifest = SimpleNamespace(questionnaires={"path": str(q), "flow_stat": "mean",
-                                               "exclude_below": None, "conditions": None})  # fmt: skip
+        table.append(
+            {"status": "ok", "participant": pid, "condition": c, "viewing": vid, "video": "clip"}
+        )
+    pd.DataFrame(
+        rows, columns=["participant", "condition", "ssq_n", "ssq_o", "ssq_d", "mssq"]
+    ).to_csv(q, index=False)
+    manifest = SimpleNamespace(
+        questionnaires={
+            "path": str(q),
+            "flow_stat": "mean",
+            "exclude_below": None,
+            "conditions": None,
+        }
+    )
     return _analysis(manifest, out, table)
 
 
@@ -335,3 +415,13 @@ def test_study_and_report_show_the_design_statistics(tmp_path: Path) -> None:
     info = _study_analysis(tmp_path / "b", ["GR", "NR", "NR", "NR"])
     assert info["error"] is None and "tests.csv" not in info["files"]
     assert any("no design statistics" in n and "'GR' has 1 participant" in n for n in info["notes"])
+
+
+def test_interval_where_every_resample_is_equal(tmp_path: Path) -> None:
+    """Every participant higher in B: r = 1 in every resample, BCa undefined, the
+    percentile interval [1, 1] reported (not NaN, no warning)."""
+    rows = simulated_rows(8, effect=80.0, seed=1, sd_residual=0.5)
+    st = analyze_study(read_study(write_simulated(tmp_path / "d.csv", rows)),
+                       stats=StatsOptions(n_boot=200)).statistics  # fmt: skip
+    t = _main_tests(st)["ssq_total"]
+    assert (t["effect"], t["effect_ci_low"], t["effect_ci_high"]) == (1.0, 1.0, 1.0)
