@@ -320,10 +320,12 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             flow = _cell(
                 float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
             )
-        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
+        video = [] if "video" in header else [vs[0]["video"] if len({x["video"] for x in vs}) == 1 else ""]
+        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv, *video])
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["id", "condition", *extra, "flow", "epof_csv"])
+    # the video column lets the analysis give per-video tables and warn on pooled flows
+    w.writerow(["id", "condition", *extra, "flow", "epof_csv", *([] if "video" in header else ["video"])])
     w.writerows(rows)
     data = folder / "DATA.csv"
     with atomic_output(data) as tmp:

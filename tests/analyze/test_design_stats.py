@@ -368,7 +368,7 @@ def test_bootstrap_is_seeded(tmp_path: Path) -> None:
     assert ci[0] == ci[1]
 
 
-def _study_analysis(tmp_path: Path, conds: list[str]) -> dict:
+def _study_analysis(tmp_path: Path, conds: list[str], fast: int = 0) -> dict:
     """``vimsim study``'s analysis step on hand-made EPOF CSVs (one viewing per participant)."""
     from types import SimpleNamespace
 
@@ -380,13 +380,14 @@ def _study_analysis(tmp_path: Path, conds: list[str]) -> dict:
     rows, table = [], []
     for i, c in enumerate(conds):
         pid, vid = f"u{i}", f"clip-u{i}"
+        video, k = ("fast", 13) if i < fast else ("clip", 1)
         (out / "epof" / f"{vid}.csv").write_text(
             "frame,time_s,yaw_deg,pitch_deg,roll_deg,epof_dps,opacity\n"
-            f"0,0,0,0,0,{100 + 10 * i},0\n1,0.1,0,0,0,{120 + 10 * i},0\n"
+            f"0,0,0,0,0,{k * (100 + 10 * i)},0\n1,0.1,0,0,0,{k * (120 + 10 * i)},0\n"
         )
         rows.append([pid, c, 9.54 * (i % 4), 7.58, 13.92 * (i % 3), 5 + i])
         table.append(
-            {"status": "ok", "participant": pid, "condition": c, "viewing": vid, "video": "clip"}
+            {"status": "ok", "participant": pid, "condition": c, "viewing": vid, "video": video}
         )
     pd.DataFrame(
         rows, columns=["participant", "condition", "ssq_n", "ssq_o", "ssq_d", "mssq"]
@@ -415,6 +416,10 @@ def test_study_and_report_show_the_design_statistics(tmp_path: Path) -> None:
     info = _study_analysis(tmp_path / "b", ["GR", "NR", "NR", "NR"])
     assert info["error"] is None and "tests.csv" not in info["files"]
     assert any("no design statistics" in n and "'GR' has 1 participant" in n for n in info["notes"])
+    # two videos of 13x different flow: per-video tables and the warning on pooling them
+    info = _study_analysis(tmp_path / "c", ["GR", "NR"] * 6, fast=6)
+    assert "tests_by_video.csv" in info["files"]
+    assert any("pooling mixes videos of very different flow" in n for n in info["notes"])
 
 
 def test_interval_where_every_resample_is_equal(tmp_path: Path) -> None:
