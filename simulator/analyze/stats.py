@@ -30,6 +30,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 from scipy import stats
+from threadpoolctl import threadpool_limits
 
 from simulator.analyze.design import MEASURES, Design
 from simulator.core.errors import InputError
@@ -179,7 +180,7 @@ def _interval(samples: tuple, f, opts: StatsOptions, rng) -> tuple[float, float]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # a degenerate distribution: handled below
         res = stats.bootstrap(samples, _last_axis(f), vectorized=True, n_resamples=opts.n_boot,
-                              confidence_level=1.0 - opts.alpha, method="BCa", rng=rng)  # fmt: skip
+                              confidence_level=1.0 - opts.alpha, method="BCa", random_state=rng)  # fmt: skip
     lo, hi = res.confidence_interval
     if not (math.isfinite(lo) and math.isfinite(hi)):
         a = opts.alpha
@@ -277,7 +278,9 @@ def fit_model(table: pd.DataFrame, transform: str, alpha: float, crossed_video: 
     formula = _formula(transform)
     info: dict = {"formula": formula, "warnings": [], "error": None, "converged": None}
     repeated = bool(table["participant"].duplicated().any())
-    with warnings.catch_warnings(record=True) as caught:
+    # the model's matrices are small (rows x participants): BLAS threads only cost here, up to
+    # 6x on a loaded 2-core machine (bench/analyze_coverage.py)
+    with warnings.catch_warnings(record=True) as caught, threadpool_limits(1, user_api="blas"):
         warnings.simplefilter("always")
         try:
             if not repeated:

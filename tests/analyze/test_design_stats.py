@@ -67,7 +67,7 @@ def test_within_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
         return ((rk * (x > 0)).sum(-1) - (rk * (x < 0)).sum(-1)) / rk.sum(-1)
 
     ci = stats.bootstrap((d,), rb, vectorized=True, n_resamples=200, method="BCa",
-                         rng=np.random.default_rng(0)).confidence_interval  # fmt: skip
+                         random_state=np.random.default_rng(0)).confidence_interval  # fmt: skip
     assert (t["effect_ci_low"], t["effect_ci_high"]) == pytest.approx(tuple(ci), abs=TOL)
     # Holm across the four measures, as multipletests does it
     ps = [_main_tests(st)[m]["p"] for m in ("ssq_total", "ssq_n", "ssq_o", "ssq_d")]
@@ -122,7 +122,7 @@ def test_between_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
         return np.sign(y[..., :, None] - x[..., None, :]).mean(axis=(-2, -1))
 
     ci = stats.bootstrap((ta, tb), rb, vectorized=True, n_resamples=200, method="BCa",
-                         confidence_level=0.99, rng=np.random.default_rng(0)).confidence_interval  # fmt: skip
+                         confidence_level=0.99, random_state=np.random.default_rng(0)).confidence_interval  # fmt: skip
     tt = _main_tests(st)["ssq_total"]
     assert (tt["effect_ci_low"], tt["effect_ci_high"]) == pytest.approx(tuple(ci), abs=TOL)
     sw = {r["test"]: r for r in st.tests if r["measure"] == "ssq_n" and not r["effect_name"]}
@@ -140,6 +140,7 @@ def test_between_matches_scipy_and_statsmodels(tmp_path: Path) -> None:
     assert st.power[0]["participants_needed"] == math.ceil(need)
 
 
+@pytest.mark.slow  # several full reports (box plots) and crossed models
 def test_mixed_three_videos_cli(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     rows = simulated_rows(10, videos=3, effect=5.0, seed=11)
     data = write_simulated(tmp_path / "d.csv", rows)
@@ -403,6 +404,7 @@ def _study_analysis(tmp_path: Path, conds: list[str], fast: int = 0) -> dict:
     return _analysis(manifest, out, table)
 
 
+@pytest.mark.slow  # several full reports (box plots) and crossed models
 def test_study_and_report_show_the_design_statistics(tmp_path: Path) -> None:
     from simulator.report.pages import Site
 
