@@ -9,8 +9,10 @@ Figures:
   the population r (estimated once from a simulated study of 20000 participants);
 * time: ``vimsim analyze DATA.csv -o OUT --power 0.8`` on 48 participants x 2 conditions x
   3 videos (288 rows), wall clock with the interpreter's start-up, median of 3 runs (goal
-  <= 3 s), as a ratio to ``vimsim --help`` (the CLI's start-up) and ``python -c pass``
-  measured in the same run (the machine's load shows in all three).
+  <= 3 s), as a ratio to ``vimsim --help`` (the CLI's start-up), to importing the libraries
+  the analysis needs (pandas, scipy.stats, statsmodels, matplotlib: the floor any such
+  analysis pays) and to ``python -c pass``, all measured in the same run.
+  Add ``--runs 0`` for the timing alone.
 
 Run: .venv/bin/python bench/analyze_coverage.py [--runs 200]
 """
@@ -88,16 +90,22 @@ def _wall(cmd: list[str], repeats: int = 3) -> float:
     return statistics.median(times)
 
 
-def timing() -> tuple[float, float, float]:
-    """Median wall seconds of the analysis, of ``vimsim --help`` and of ``python -c pass``."""
+def timing() -> tuple[float, float, float, float]:
+    """Median wall seconds of the analysis, of ``vimsim --help``, of importing the
+    libraries the analysis needs, and of ``python -c pass``."""
     data = write_simulated(OUT / "48x2x3.csv", simulated_rows(48, videos=3, effect=EFFECT, seed=1))
     py = sys.executable
+    libs = (
+        "import pandas, scipy.stats, statsmodels.formula.api, matplotlib; "
+        "matplotlib.use('Agg'); import matplotlib.pyplot"
+    )
     t_pass = _wall([py, "-c", "pass"])
     t_help = _wall([py, "-m", "simulator", "--help"])
+    t_libs = _wall([py, "-c", libs])
     t_an = _wall(
         [py, "-m", "simulator", "analyze", str(data), "-o", str(OUT / "report"), "--power", "0.8"]
     )
-    return t_an, t_help, t_pass
+    return t_an, t_help, t_libs, t_pass
 
 
 def main() -> None:
@@ -107,6 +115,9 @@ def main() -> None:
     OUT.mkdir(parents=True, exist_ok=True)
     np.seterr(all="ignore")
     t0 = time.perf_counter()
+    if args.runs <= 0:
+        _timing_report()
+        return
     cov_m, cov_r, nc = coverage(args.runs)
     print(
         f"coverage of the 95 % interval, {args.runs} seeded runs (24 participants x 2 "
@@ -118,7 +129,11 @@ def main() -> None:
     )
     print(f"  bootstrap interval of the rank-biserial r vs. the population r: {cov_r:.1%}")
     print(f"  ({time.perf_counter() - t0:.0f} s for the coverage runs)")
-    t_an, t_help, t_pass = timing()
+    _timing_report()
+
+
+def _timing_report() -> None:
+    t_an, t_help, t_libs, t_pass = timing()
     print(
         "analysis of 48 participants x 2 conditions x 3 videos (288 rows), with start-up, "
         "median of 3:"
@@ -130,8 +145,13 @@ def main() -> None:
         f"  reference vimsim --help: {t_help:.2f} s; ratio analyze / --help = {t_an / t_help:.2f}"
     )
     print(
+        f"  reference import of pandas, scipy.stats, statsmodels, matplotlib: {t_libs:.2f} s; "
+        f"ratio analyze / imports = {t_an / t_libs:.2f}"
+    )
+    print(
         f"  reference python -c pass: {t_pass:.3f} s; ratio analyze / python = {t_an / t_pass:.1f}"
     )
+    print(f"  load average during the run: {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
 
 
 if __name__ == "__main__":
