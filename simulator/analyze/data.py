@@ -318,9 +318,11 @@ def _row_flow(
 
 
 def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
-    """Read and score DATA.csv (one row per participant; see docs/analyze.md).
+    """Read and score DATA.csv (one row per participant, or per participant and session in a
+    repeated design: the same id in several rows; see docs/analyze.md).
 
-    Lines starting with ``#`` are comments. Column names are case-insensitive. Per row,
+    Lines starting with ``#`` are comments. Optional ``video`` and ``session`` cells and the
+    pre-exposure SSQ (``pre_`` columns) are carried on each :class:`Participant`. Column names are case-insensitive. Per row,
     SSQ item ratings take precedence over subscores, MSSQ answers over ``mssq``, and
     ``flow`` over ``epof_csv`` (a path relative to DATA.csv's folder); a blank cell falls
     back to the alternative where the file has it.

@@ -432,3 +432,36 @@ def test_interval_where_every_resample_is_equal(tmp_path: Path) -> None:
                        stats=StatsOptions(n_boot=200)).statistics  # fmt: skip
     t = _main_tests(st)["ssq_total"]
     assert (t["effect"], t["effect_ci_low"], t["effect_ci_high"]) == (1.0, 1.0, 1.0)
+
+
+def test_sessions_make_a_mixed_design_and_the_options_come_from_one_table(tmp_path) -> None:
+    from simulator.analyze.design import design_table
+    from simulator.cli import build_parser
+    from simulator.core.statsopts import DESIGNS, STATS_OPTIONS
+
+    rows = simulated_rows(8, videos=2, seed=9)
+    for r in rows:  # the two "videos" become two sessions of one video
+        r[2] = "V1"
+    header = ["id", "condition", "session", *SIM_HEADER[3:]]
+    rows = [[r[0], r[1], f"S{k % 2 + 1}", *r[3:]] for k, r in enumerate(rows)]
+    pd.DataFrame(rows, columns=header).to_csv(tmp_path / "d.csv", index=False)
+    study = read_study(tmp_path / "d.csv")
+    d = design_table(study, study.participants, ("A", "B"))
+    assert (d.name, d.paired, d.videos) == ("mixed", True, ())
+    assert len(d.table) == 32 and d.table["participant"].nunique() == 8
+    # the parser's options are the table's: names, choices and defaults
+    sub = next(a for a in build_parser()._actions if a.dest == "command" or a.choices)
+    p = sub.choices["analyze"]
+    acts = {a.dest: a for a in p._actions}
+    for opt in STATS_OPTIONS:
+        assert acts[opt.name].default == opt.default and opt.flag in acts[opt.name].option_strings
+    assert tuple(acts["design"].choices) == DESIGNS
+
+
+def test_model_not_converged_is_a_warning_line() -> None:
+    from simulator.analyze.stats import _model_notes
+
+    info = {"error": None, "converged": False, "warnings": ["Gradient optimization failed"]}
+    notes = _model_notes(info, "model")
+    assert notes[0].startswith("WARNING: model did not converge")
+    assert notes[1] == "model: statsmodels warns: Gradient optimization failed"
