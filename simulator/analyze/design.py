@@ -54,6 +54,8 @@ class Design:
         Participants left out of the paired test (a condition missing), one line each.
     why : str
         One sentence: why this design.
+    source : str
+        The data's path (messages name it).
     """
 
     name: str
@@ -63,6 +65,7 @@ class Design:
     change: bool = False
     dropped: tuple[str, ...] = ()
     why: str = ""
+    source: str = ""  # DATA.csv's path, for messages
 
     @property
     def videos(self) -> tuple[str, ...]:
@@ -192,4 +195,4 @@ def design_table(
                     "(3 for the tests): add participants or pick conditions with "
                     "--conditions"
                 )
-    return Design(name, design == "auto", paired, df, change, tuple(dropped), why)
+    return Design(name, design == "auto", paired, df, change, tuple(dropped), why, str(study.path))

@@ -412,10 +412,11 @@ def _flow_notes(design: Design) -> list[str]:
 
 def study_statistics(design: Design, opts: StatsOptions) -> Statistics:
     """The tests, the model, power (when ``opts.power``) and per-video tables of ``design``."""
-    if opts.transform == "log1p" and (design.table["ssq_total"] <= -1).any():
+    low = design.table.loc[design.table["ssq_total"] <= -1, "participant"]
+    if opts.transform == "log1p" and len(low):
         raise InputError(
-            "--transform log1p: change scores (pre_ columns) of -1 or below have "
-            "no log(1 + x); use --transform none"
+            f"{design.source}: --transform log1p: participant {low.iloc[0]!r} has an SSQ total "
+            "change (post - pre) of -1 or below, which has no log(1 + x); use --transform none"
         )
     notes = (
         [

@@ -242,6 +242,10 @@ def test_change_scores_from_pre_columns(tmp_path: Path) -> None:
     ch = (df["ssq_d"] - df["pre_ssq_d"]).to_numpy()
     d = ch[1::2] - ch[::2]
     assert _main_tests(st)["ssq_d"]["p"] == pytest.approx(stats.wilcoxon(d).pvalue, abs=TOL)
+    rows[0][5:8] = [150.0, 150.0, 250.0]  # p0 felt worse before than after: a change < -1
+    pd.DataFrame(rows, columns=header).to_csv(data, index=False)
+    with pytest.raises(InputError, match=r"d.csv: --transform log1p: participant 'p0' has an SSQ"):
+        analyze_study(read_study(data), stats=StatsOptions(transform="log1p", n_boot=200))
     with pytest.raises(InputError, match="pre-exposure SSQ subscore columns missing: pre_ssq_o"):
         pd.DataFrame(rows, columns=header).drop(columns="pre_ssq_o").to_csv(data, index=False)
         read_study(data)
