@@ -142,16 +142,32 @@ def _why_test(st: Statistics, a: str, b: str) -> list[str]:
 
 
 def _in_words(st: Statistics, a: str, b: str) -> list[str]:
+    """One sentence on the test's effect, one on the model's condition term."""
     out = []
     t = next((r for r in st.tests if r["measure"] == "ssq_total" and r["effect_name"]), None)
     if t is not None and math.isfinite(t["effect"]):
-        way = "higher" if t["effect"] > 0 else "lower" if t["effect"] < 0 else "no different"
-        out.append(
-            f"In words: the SSQ total was {way} under {b} than under {a} (r = "
-            f"{_n(t['effect'])}, interval {_n(t['effect_ci_low'])} to "
-            f"{_n(t['effect_ci_high'])}; p {p_text(t['p'])}, Holm {p_text(t['p_holm'])}). "
-            "An interval that contains 0 does not rule out no effect."
+        lo, hi = t["effect_ci_low"], t["effect_ci_high"]
+        stats_ = (
+            f"r = {_n(t['effect'])}, interval {_n(lo)} to {_n(hi)}; p {p_text(t['p'])}, "
+            f"Holm {p_text(t['p_holm'])}"
         )
+        if lo <= 0.0 <= hi:
+            out.append(
+                f"In words: the data show no clear difference in the SSQ total between "
+                f"{b} and {a} ({stats_}): the interval includes 0, so an effect either "
+                "way, or none, fits them."
+            )
+        else:
+            way = "higher" if t["effect"] > 0 else "lower"
+            what = (
+                f"the rank-weighted share of participants higher under {b} minus that lower"
+                if st.design.paired
+                else f"P({b} > {a}) - P({b} < {a}) for a participant of each group"
+            )
+            out.append(
+                f"In words: the SSQ total was {way} under {b} than under {a} ({stats_}); r is "
+                f"{what}."
+            )
     c = next((r for r in st.model if r["term"].startswith("condition[")), None)
     if c is not None:
         unit = "log(1 + SSQ) units" if st.options.transform == "log1p" else "SSQ points"
