@@ -6,13 +6,13 @@ Also the report's shared writers: :func:`write_csv` (atomic, spreadsheet-safe te
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
 
 from simulator.analyze.stats import MODEL_COLUMNS, POWER_COLUMNS, TEST_COLUMNS, Statistics
-from simulator.core.fileio import atomic_output, csv_cell
+from simulator.core.fileio import atomic_output
+from simulator.core.fileio import write_csv as core_write_csv
 
 __all__ = ["STATS_FILES", "analysis_markdown", "fmt", "p_text", "write_csv", "write_statistics"]
 
@@ -38,12 +38,9 @@ def fmt(v: object, digits: int = 10) -> str:
 
 
 def write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
-    """Write a CSV atomically; text cells cannot start a spreadsheet formula."""
-    with atomic_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(header)
-        for r in rows:
-            w.writerow([csv_cell(v) if isinstance(v, str) else fmt(v) for v in r])
+    """The report's tables through :func:`simulator.core.fileio.write_csv` (atomic; text
+    cells cannot start a spreadsheet formula), numbers by :func:`fmt`."""
+    core_write_csv(path, header, rows, fmt=fmt)
 
 
 def p_text(p: float) -> str:
