@@ -259,6 +259,19 @@ def _row_ssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[SSQScore
     return ssq, ssq_src
 
 
+def _row_pre(cell: Callable[[str], str], has: dict[str, bool], errs: list[str]) -> SSQScores | None:
+    """A row's pre-exposure SSQ (``pre_`` columns; None where the file has none); a problem
+    is appended to ``errs``."""
+    if not (has["pre_items"] or has["pre_subscores"]):
+        return None
+    try:
+        pre_has = {"items": has["pre_items"], "subscores": has["pre_subscores"]}
+        return _row_ssq(lambda c: cell(_PRE + c), pre_has)[0]
+    except InputError as e:
+        errs.append(f"pre-exposure {e}")
+        return None
+
+
 def _row_mssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[MSSQScore, str]:
     """A row's MSSQ-short score and its source (``answers`` or ``score``); InputError names
     the problem."""
@@ -378,13 +391,7 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
             ms, ms_src = _row_mssq(cell, has)
         except InputError as e:
             errs.append(str(e))
-        pre = None
-        if has["pre_items"] or has["pre_subscores"]:
-            pre_has = {"items": has["pre_items"], "subscores": has["pre_subscores"]}
-            try:
-                pre, _ = _row_ssq(lambda c, cell=cell: cell(_PRE + c), pre_has)
-            except InputError as e:
-                errs.append(f"pre-exposure {e}")
+        pre = _row_pre(cell, has, errs)
         flow = flow_src = None
         try:
             flow, flow_src = _row_flow(cell, "epof_csv" in idx, p.parent, flow_stat, flow_cache)
