@@ -197,8 +197,13 @@ def _power_md(st: Statistics) -> list[str]:
                 f"{r['power']:g} power at alpha {r['alpha']:g}, the next study needs "
                 f"{r['participants_needed']} {who}. The solver is the t test's; the rank test "
                 "needs about 5 % more under normality (asymptotic relative efficiency 3/pi; "
-                "Lehmann 1975). The observed power (this study's n at this effect) follows "
-                "from p and adds no evidence (Hoenig & Heisey 2001)."
+                "Lehmann 1975). "
+                + (
+                    "The observed power is this study's power for the given effect."
+                    if st.options.effect is not None
+                    else "The observed power (this study's n at its own effect) follows "
+                    "from p and adds no evidence (Hoenig & Heisey 2001)."
+                )
             ),
         ]
     return out

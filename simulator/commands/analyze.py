@@ -123,8 +123,10 @@ def run(args: argparse.Namespace) -> int:
     st = an.statistics
     for r in st.tests if st is not None else ():
         if r["effect_name"]:
-            print(f"{r['measure']}: {st.design.name} design, {r['test']} p = {p_text(r['p'])}"
-                  f" (Holm {p_text(r['p_holm'])}), {r['effect_name']} = {r['effect']:.3f} "
+            p = p_text(r["p"])
+            print(f"{r['measure']}: {st.design.name} design, {r['test']} p "
+                  f"{p if p[0] == '<' else '= ' + p} (Holm {p_text(r['p_holm'])}), "
+                  f"{r['effect_name']} = {r['effect']:.3f} "
                   f"[{r['effect_ci_low']:.3f}, {r['effect_ci_high']:.3f}], n = {r['n']}")  # fmt: skip
     for r in st.power if st is not None else ():
         print(f"power: {r['participants_needed']} participants needed"
