@@ -21,7 +21,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.study.entry import Entry, user_numbers
+from simulator.study.entry import Entry, short_spec, user_numbers, user_spans
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import FORMATS, n_users
 from simulator.viewing.spec import ViewSpec
@@ -203,11 +203,7 @@ def _users_of(e: Entry, trace: Path, fmt: str, user) -> tuple[list[int | None], 
         return [None], n
     if user == "all":
         return (list(range(1, n + 1)) if n > 1 or tfmt == "360vidstr" else [None]), n
-    users = user_numbers(e, "user", user)
-    bad = [u for u in users if u > n]
-    if bad:
-        e.fail(f"{trace}: no user {bad[0]} (user = {user!r}); the file holds {n}")
-    return list(users), n
+    return list(user_numbers(e, "user", user, n_users=n, where=f"{trace}: ")), n
 
 
 def _render_users(e: Entry, render, users: list[int | None]) -> set:
@@ -217,10 +213,13 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
         return set(users) if render else set()
     if users == [None]:
         e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
-    chosen = user_numbers(e, "render", render)
-    missing = [u for u in chosen if u not in users]
+    top = max(users)  # checked against the entry's users before the spec is expanded
+    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
+    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
+    taken = set(users)
+    missing = beyond or [u for u in chosen if u not in taken]
     if missing:
-        e.fail(f"render = {render!r}: user {missing[0]} is not among this entry's users")
+        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
     return set(chosen)
 
 
@@ -286,7 +285,7 @@ def _viewings(
         fmt = e.get("format", (str,), "auto", choices=("auto", *FORMATS))
         user = e.get("user", (int, str, list))
         if user is not None and user != "all":
-            user_numbers(e, "user", user)  # a bad spec is named before any file is read
+            user_spans(e, "user", user)  # a bad spec is named before any file is read
         condition = e.get("condition", (str,), "")
         render_spec = e.get("render", (bool, int, str, list), False)
         plot = e.get("plot", (bool,), False)
