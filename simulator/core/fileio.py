@@ -15,6 +15,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from simulator.core.errors import InputError
+from simulator.core.lifeline import exit_if_orphaned
 
 __all__ = [
     "OutputFolder",
@@ -163,6 +164,7 @@ class PendingOutput:
     """
 
     def __init__(self, path: str | os.PathLike):
+        exit_if_orphaned()  # a worker whose command is gone writes nothing
         self.target = check_output_file(path)
         parent = self.target.parent if str(self.target.parent) else Path(".")
         remove_stale_temporaries(self.target)
@@ -172,6 +174,7 @@ class PendingOutput:
         """Rename the finished temporary file into place (refused if the target became an
         input meanwhile); returns the target."""
         check_not_input(self.target)  # an input registered while writing
+        exit_if_orphaned(cleanup=self.discard)
         os.replace(self.tmp, self.target)
         return self.target
 

@@ -33,6 +33,7 @@ from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from simulator.core.errors import InputError
+from simulator.core.lifeline import exit_if_orphaned, watch_parent
 
 __all__ = ["LocalExecutor", "RayExecutor", "make_executor", "parse_executor"]
 
@@ -111,7 +112,9 @@ def safe_import_path(path: list[str], cwd: str | None = None) -> list[str]:
     return keep
 
 
-def _worker_init() -> None:
+def _worker_init(command_pid: int | None = None) -> None:
+    # Die with the command (even a kill -9 of it): no orphan keeps writing into OUTDIR.
+    watch_parent(command_pid)
     # The pool hands each worker the driver's sys.path (with the working folder first
     # when the driver was started as ``python -m`` / ``-c``): drop it before any task.
     sys.path[:] = safe_import_path(sys.path)
@@ -142,6 +145,7 @@ def _start_fork_server() -> None:
 
 
 def _run_task(fn, args):
+    exit_if_orphaned()  # a task still queued when the command died is never started
     _IN_TASK[0] = True
     try:
         return fn(*args)
@@ -187,7 +191,8 @@ class LocalExecutor:
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=self._ctx, initializer=_worker_init
+            max_workers=self.workers, mp_context=self._ctx, initializer=_worker_init,
+            initargs=(os.getpid(),),
         )
 
     def submit(self, fn, *args, num_cpus: int = 1, alone: bool = False) -> cf.Future:
