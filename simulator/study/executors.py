@@ -29,6 +29,7 @@ import signal
 import socket
 import sys
 import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
@@ -153,6 +154,27 @@ def _run_task(fn, args):
         _IN_TASK[0] = False
 
 
+#: Seconds a cancelled pool's workers get to end on SIGTERM before SIGKILL.
+STOP_GRACE_S = 1.0
+
+
+def _stop_workers(pool: cf.ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
+    """End a pool now: its queue cancelled, its workers terminated (killed if still there
+    after ``grace_s``), never joined without a bound."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    end = time.monotonic() + grace_s
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError, AssertionError, AttributeError):
+            p.join(max(0.0, end - time.monotonic()))
+            if p.is_alive():
+                p.kill()
+                p.join(0.5)
+
+
 class LocalExecutor:
     """A pool of ``workers`` processes, fed at most ``workers`` tasks at a time.
 
@@ -265,10 +287,16 @@ class LocalExecutor:
         return {"executor": "local", "workers": self.workers}
 
     def close(self, cancel: bool = False, wait: bool = True) -> None:
+        """Shut the pool down; ``cancel``: drop queued tasks and end the running ones now
+        (their workers terminated, killed after ``STOP_GRACE_S``; a task writes each output
+        to a temporary name, so none is left half-written), as after a signal: joining
+        workers that finish their chunks could take hours."""
         if cancel:
             for h, *_ in self._queue:
                 h.cancel()
             self._queue.clear()
+            _stop_workers(self._pool)
+            return
         self._pool.shutdown(wait=wait, cancel_futures=cancel)
 
     def join(self) -> None:
