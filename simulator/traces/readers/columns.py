@@ -24,10 +24,10 @@ pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 import warnings
+from array import array
 from datetime import UTC, datetime
 
 import numpy as np
@@ -36,6 +36,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import HeadPath
 from simulator.traces.readers.common import _check_increasing, _dedupe_times, _hint, _value
+from simulator.traces.readers.jsonlog import json_entries, starts_as_json
 
 __all__ = ["COLUMN_KEYS", "ClockTimeWarning", "load_columns", "parse_column_map"]
 
@@ -100,49 +101,65 @@ def _flatten(obj, prefix: str, out: dict) -> dict:
     return out
 
 
-def _json_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
-    """Columns and rows (label, {column: value}) of a JSON log (see the module doc)."""
-    try:
-        obj = json.loads(text)
-    except RecursionError:
-        raise InputError(f"{p}: JSON nested too deeply") from None
-    except json.JSONDecodeError as e:
-        raise InputError(f"{p}: not valid JSON (line {e.lineno}: {e.msg})") from None
-    if isinstance(obj, dict):
-        entries = [(f"entry {i + 1}", {"key": k}, v) for i, (k, v) in enumerate(obj.items())]
-    elif isinstance(obj, list):
-        entries = [(f"entry {i + 1}", {}, v) for i, v in enumerate(obj)]
-    else:
-        raise InputError(f"{p}: expected a JSON object keyed by time, or a list of objects")
-    rows, cols = [], {}
-    for label, row, v in entries:
+class _Table:
+    """A log's columns (every name seen, in order) and the mapped numbers of its kept rows
+    (``data``, (N, len(keys)); row labels ``kind`` + ``numbers``), filled row by row: no
+    row is kept as a dict. ``problem``: the first row's error, raised once the map's
+    columns are known to exist (an unknown column is the more useful message)."""
+
+    def __init__(self, p, cmap: dict, keys: list[str], time_format: str | None, skip_rows: int):
+        self.p, self.cmap, self.keys, self.time_format = p, cmap, keys, time_format
+        self.skip, self.seen = skip_rows, 0
+        self.cols: dict[str, None] = {}
+        self.values = array("d")
+        self.numbers = array("q")
+        self.kind = "line"
+        self.problem: InputError | None = None
+
+    def add(self, number: int, row: dict) -> None:
+        self.seen += 1
+        if self.seen <= self.skip or self.problem is not None:
+            return
+        try:
+            self.values.extend(_row_numbers(self.p, self.cmap, self.keys, f"{self.kind} {number}",
+                                            row, self.time_format))  # fmt: skip
+        except InputError as e:
+            self.problem = e
+            return
+        self.numbers.append(number)
+
+    @property
+    def data(self):
+        return np.frombuffer(self.values, dtype=np.float64).reshape(-1, len(self.keys))
+
+
+def _json_table(t: _Table) -> None:
+    """The rows of a JSON log (see the module doc), entry by entry (:mod:`jsonlog`)."""
+    t.kind = "entry"
+    for i, (key, v) in enumerate(json_entries(t.p)):
+        row = {} if key is None else {"key": key}
         if isinstance(v, (dict, list)):
             _flatten(v, "", row)
         else:
             row["value"] = v
-        cols.update(dict.fromkeys(row))
-        rows.append((label, row))
-    return list(cols), rows
+        t.cols.update(dict.fromkeys(row))
+        t.add(i + 1, row)
 
 
-def _text_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
-    """Columns and rows (label, {column: value}) of a delimited log; the delimiter is the
-    header's (comma, semicolon, tab, else whitespace); ``#`` lines are comments."""
+def _text_table(t: _Table) -> None:
+    """The rows of a delimited log; the delimiter is the header's (comma, semicolon, tab,
+    else whitespace); ``#`` lines are comments."""
+    with open(t.p, encoding="utf-8-sig", errors="replace") as fh:
+        text = fh.read()
     lines = [(k + 1, ln) for k, ln in enumerate(text.splitlines()) if ln.strip()]
     lines = [(k, ln) for k, ln in lines if not ln.lstrip().startswith("#")]
     if not lines:
-        raise InputError(f"{p}: head path file is empty")
+        raise InputError(f"{t.p}: head path file is empty")
     delim = next((d for d in (",", ";", "\t") if d in lines[0][1]), None)
     cols = _split(lines[0][1], delim)
-    return cols, [(f"line {k}", dict(zip(cols, _split(ln, delim)))) for k, ln in lines[1:]]
-
-
-def _read_table(p) -> tuple[list[str], list[tuple[str, dict]]]:
-    with open(p, encoding="utf-8-sig", errors="replace") as fh:
-        text = fh.read()
-    if text.lstrip().startswith(("{", "[")):
-        return _json_table(p, text)
-    return _text_table(p, text)
+    t.cols.update(dict.fromkeys(cols))
+    for k, ln in lines[1:]:
+        t.add(k, dict(zip(cols, _split(ln, delim))))
 
 
 def _clock_seconds(p, label: str, value, fmt: str) -> float:
@@ -156,29 +173,29 @@ def _clock_seconds(p, label: str, value, fmt: str) -> float:
     return (d if d.tzinfo else d.replace(tzinfo=UTC)).timestamp()
 
 
-def _numbers(p, cmap: dict, keys: list[str], rows, time_format: str | None):
-    """The mapped values of every row as floats, (N, len(keys)); errors name row and column."""
-    data = np.empty((len(rows), len(keys)))
-    for r, (label, row) in enumerate(rows):
-        for j, key in enumerate(keys):
-            col = cmap[key][0]
-            if col not in row:
-                raise InputError(f"{p}: {label} has no column {col!r}")
-            v = row[col]
-            if key == "time" and time_format:
-                data[r, j] = _clock_seconds(p, label, v, time_format)
-                continue
-            try:
-                if isinstance(v, bool):
-                    raise TypeError(col)
-                data[r, j] = float(v)
-            except (TypeError, ValueError):
-                raise InputError(
-                    f"{p}: {label}, column {col!r} ({key}): non-numeric value {_value(str(v))}"
-                ) from None
-            if not math.isfinite(data[r, j]):
-                raise InputError(f"{p}: {label}, column {col!r}: value is not finite")
-    return data
+def _row_numbers(p, cmap: dict, keys: list[str], label: str, row: dict, time_format):
+    """The mapped values of one row as floats; errors name the row and the column."""
+    out = []
+    for key in keys:
+        col = cmap[key][0]
+        if col not in row:
+            raise InputError(f"{p}: {label} has no column {col!r}")
+        v = row[col]
+        if key == "time" and time_format:
+            out.append(_clock_seconds(p, label, v, time_format))
+            continue
+        try:
+            if isinstance(v, bool):
+                raise TypeError(col)
+            x = float(v)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{p}: {label}, column {col!r} ({key}): non-numeric value {_value(str(v))}"
+            ) from None
+        if not math.isfinite(x):
+            raise InputError(f"{p}: {label}, column {col!r}: value is not finite")
+        out.append(x)
+    return out
 
 
 def load_columns(
@@ -204,29 +221,31 @@ def load_columns(
         raise InputError(f"--time-scale must be a finite non-zero factor; got {time_scale}")
     if skip_rows < 0:
         raise InputError(f"--skip-rows must be >= 0; got {skip_rows}")
-    cols, rows = _read_table(p)
-    unknown = [c for c, _ in cmap.values() if c not in cols]
+    keys = [k for k in COLUMN_KEYS if k in cmap]
+    table = _Table(p, cmap, keys, time_format, skip_rows)
+    (_json_table if starts_as_json(p) else _text_table)(table)
+    cols = list(table.cols)
+    unknown = [c for c, _ in cmap.values() if c not in table.cols]
     if unknown:
         raise InputError(
             f"{p}: no column {', '.join(map(repr, unknown))} among its {len(cols)} columns"
             f"{_hint(unknown[0], cols)}"
         )
-    rows = rows[skip_rows:]
-    if not rows:
+    if table.problem is not None:
+        raise table.problem
+    if table.seen <= skip_rows:
         raise InputError(f"{p}: head path file has no data rows" + (
             f" after --skip-rows {skip_rows}" if skip_rows else ""))  # fmt: skip
-    keys = [k for k in COLUMN_KEYS if k in cmap]
-    data = _numbers(p, cmap, keys, rows, time_format)
-    labels = [label for label, _ in rows]
+    data, labels = table.data, np.frombuffer(table.numbers, dtype=np.int64)
     if drop_zero_rows:
         nonzero = np.any(data[:, 1:] != 0.0, axis=1)
-        data, labels = data[nonzero], [x for x, k in zip(labels, nonzero) if k]
+        data, labels = data[nonzero], labels[nonzero]
         if not len(data):
             raise InputError(f"{p}: every row's angles are 0 (--drop-zero-rows left nothing)")
     t = data[:, 0] * (1.0 if time_format else float(time_scale))
     keep = _dedupe_times(t)
     t, data = t[keep], data[keep]
-    labels = [x for x, k in zip(labels, keep) if k]
+    labels = labels[keep]
     if time_from_first or time_format:
         t = t - t[0]
     elif abs(float(t[0])) > CLOCK_TIME_S:
@@ -236,7 +255,7 @@ def load_columns(
             ClockTimeWarning,
             stacklevel=2,
         )
-    _check_increasing(p, t, [x.split(" ", 1)[1] for x in labels], labels[0].split(" ")[0])
+    _check_increasing(p, t, labels, table.kind)
     ang = {}
     for key in ("yaw", "pitch", "roll"):
         if key not in cmap:
