@@ -219,7 +219,7 @@ def test_huge_user_ranges_refused_without_expanding(base, spec, first, tmp_path)
     env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
     r = subprocess.run([sys.executable, "-m", "simulator", "study", str(m), "-o",
                         str(tmp_path / "never"), "--dry-run"], capture_output=True, text=True,
-                       timeout=120, env=env)  # fmt: skip
+                       timeout=120, env=env, check=False)  # fmt: skip
     assert r.returncode == 2
     assert r.stderr.count("\n") == 1
     assert "[[viewings]] #1" in r.stderr and first in r.stderr and "users 1-5" in r.stderr

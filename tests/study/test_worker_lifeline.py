@@ -145,11 +145,11 @@ def test_watch_parent_outside_and_inside_a_worker(tmp_path):
     target = tmp_path / "out.txt"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     r = subprocess.run([sys.executable, "-c", code, str(dead.pid), str(target)],
-                       input="\n", capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
+                       input="\n", capture_output=True, text=True, env=env, timeout=60, check=False)  # fmt: skip
     assert r.returncode == lifeline.ORPHAN_STATUS
     assert "wrote" not in r.stdout
     assert list(tmp_path.iterdir()) == []
     ok = subprocess.run([sys.executable, "-c", code, str(os.getpid()), str(target)],
-                        input="\n", capture_output=True, text=True, env=env, timeout=60)  # fmt: skip
+                        input="\n", capture_output=True, text=True, env=env, timeout=60, check=False)  # fmt: skip
     assert ok.returncode == 0 and "wrote" in ok.stdout
     assert target.read_text() == "x"
