@@ -38,7 +38,7 @@ def run(m: Path, workers: int) -> tuple[float, dict]:
     t0 = time.perf_counter()
     subprocess.run([sys.executable, "-m", "simulator", "study", str(m), "-o", str(out),
                     "--workers", str(workers), "--cache-dir", str(OUT / "cache"), "--no-progress"],
-                   check=True, env=env, stdout=subprocess.DEVNULL)  # fmt: skip
+                   check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)  # fmt: skip
     wall = time.perf_counter() - t0
     return wall, json.loads((out / "study.json").read_text())
 
