@@ -14,9 +14,11 @@ data rows, ``drop_zero_rows`` the rows whose mapped angles are all exactly 0 (Un
 first sample before the headset reports). Times that look like clock timestamps (over
 1e8 s) without ``time_from_first`` give a :class:`ClockTimeWarning`.
 
-A JSON log is an object keyed by timestamps (``{"20210510Z-200400_686Z": {"rot": {"x":
-..}}, ..}``, the SIT-VR shape) or a list of objects; ``time=key`` names the object's key,
-nested fields go by dotted names (``yaw=rot.y``).
+A JSON log is an object keyed by timestamps or a list of objects, below any single wrapper
+key, which is descended: the real SIT-VR Unity log is ``{"1-SubheadPosition":
+{"20210510Z-200400_686Z": {"Ex": .., "Ey": .., "Ez": .., "Rx": .., ..}, ..}}``, read with
+``time=key,yaw=Ey,pitch=-Ex,roll=-Ez``; ``time=key`` names the object's key, nested fields
+go by dotted names (``yaw=rot.y``).
 
 A Unity-style log (left-handed, x right, y up, z forward; Euler degrees in [0, 360);
 pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
@@ -24,6 +26,8 @@ pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
 
 from __future__ import annotations
 
+import difflib
+import json
 import math
 import os
 import warnings
@@ -35,10 +39,10 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import HeadPath
-from simulator.traces.readers.common import _check_increasing, _dedupe_times, _hint, _value
+from simulator.traces.readers.common import _check_increasing, _dedupe_times, _value
 from simulator.traces.readers.jsonlog import json_entries, starts_as_json
 
-__all__ = ["COLUMN_KEYS", "ClockTimeWarning", "load_columns", "parse_column_map"]
+__all__ = ["COLUMN_KEYS", "ClockTimeWarning", "columns_example", "load_columns", "parse_column_map"]
 
 #: Times beyond this many seconds (about 3 years) look like clock timestamps.
 CLOCK_TIME_S = 1e8
@@ -101,65 +105,123 @@ def _flatten(obj, prefix: str, out: dict) -> dict:
     return out
 
 
-class _Table:
-    """A log's columns (every name seen, in order) and the mapped numbers of its kept rows
-    (``data``, (N, len(keys)); row labels ``kind`` + ``numbers``), filled row by row: no
-    row is kept as a dict. ``problem``: the first row's error, raised once the map's
-    columns are known to exist (an unknown column is the more useful message)."""
-
-    def __init__(self, p, cmap: dict, keys: list[str], time_format: str | None, skip_rows: int):
-        self.p, self.cmap, self.keys, self.time_format = p, cmap, keys, time_format
-        self.skip, self.seen = skip_rows, 0
-        self.cols: dict[str, None] = {}
-        self.values = array("d")
-        self.numbers = array("q")
-        self.kind = "line"
-        self.problem: InputError | None = None
-
-    def add(self, number: int, row: dict) -> None:
-        self.seen += 1
-        if self.seen <= self.skip or self.problem is not None:
-            return
-        try:
-            self.values.extend(_row_numbers(self.p, self.cmap, self.keys, f"{self.kind} {number}",
-                                            row, self.time_format))  # fmt: skip
-        except InputError as e:
-            self.problem = e
-            return
-        self.numbers.append(number)
-
-    @property
-    def data(self):
-        return np.frombuffer(self.values, dtype=np.float64).reshape(-1, len(self.keys))
+def _is_samples(v) -> bool:
+    """Whether ``v`` is a container of samples: a non-empty object or list whose members
+    are all objects (one sample's members are values)."""
+    members = list(v.values()) if isinstance(v, dict) else v if isinstance(v, list) else []
+    return bool(members) and all(isinstance(x, dict) for x in members)
 
 
-def _json_table(t: _Table) -> None:
-    """The rows of a JSON log (see the module doc), entry by entry (:mod:`jsonlog`)."""
-    t.kind = "entry"
-    for i, (key, v) in enumerate(json_entries(t.p)):
-        row = {} if key is None else {"key": key}
+def _descend(obj) -> tuple[object, list[str]]:
+    """Below every single wrapper key (``{"1-SubheadPosition": {time: sample, ..}}``, the
+    real SIT-VR log): the samples, and the keys descended."""
+    path: list[str] = []
+    while isinstance(obj, dict) and len(obj) == 1:
+        (k, v), = obj.items()
+        if not _is_samples(v):
+            break
+        obj, path = v, [*path, str(k)]
+    return obj, path
+
+
+def _json_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
+    """Columns and rows (label, {column: value}) of a JSON log (see the module doc)."""
+    try:
+        obj = json.loads(text)
+    except RecursionError:
+        raise InputError(f"{p}: JSON nested too deeply") from None
+    except json.JSONDecodeError as e:
+        raise InputError(f"{p}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    obj, _ = _descend(obj)
+    if isinstance(obj, dict):
+        entries = [(f"entry {i + 1}", {"key": k}, v) for i, (k, v) in enumerate(obj.items())]
+    elif isinstance(obj, list):
+        entries = [(f"entry {i + 1}", {}, v) for i, v in enumerate(obj)]
+    else:
+        raise InputError(f"{p}: expected a JSON object keyed by time, or a list of objects")
+    rows, cols = [], {}
+    for label, row, v in entries:
         if isinstance(v, (dict, list)):
             _flatten(v, "", row)
         else:
             row["value"] = v
-        t.cols.update(dict.fromkeys(row))
-        t.add(i + 1, row)
+        cols.update(dict.fromkeys(row))
+        rows.append((label, row))
+    return list(cols), rows
 
 
-def _text_table(t: _Table) -> None:
-    """The rows of a delimited log; the delimiter is the header's (comma, semicolon, tab,
-    else whitespace); ``#`` lines are comments."""
-    with open(t.p, encoding="utf-8-sig", errors="replace") as fh:
-        text = fh.read()
+def _text_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
+    """Columns and rows (label, {column: value}) of a delimited log; the delimiter is the
+    header's (comma, semicolon, tab, else whitespace); ``#`` lines are comments."""
     lines = [(k + 1, ln) for k, ln in enumerate(text.splitlines()) if ln.strip()]
     lines = [(k, ln) for k, ln in lines if not ln.lstrip().startswith("#")]
     if not lines:
-        raise InputError(f"{t.p}: head path file is empty")
+        raise InputError(f"{p}: head path file is empty")
     delim = next((d for d in (",", ";", "\t") if d in lines[0][1]), None)
     cols = _split(lines[0][1], delim)
-    t.cols.update(dict.fromkeys(cols))
-    for k, ln in lines[1:]:
-        t.add(k, dict(zip(cols, _split(ln, delim))))
+    return cols, [(f"line {k}", dict(zip(cols, _split(ln, delim)))) for k, ln in lines[1:]]
+
+
+def _read_table(p) -> tuple[list[str], list[tuple[str, dict]]]:
+    with open(p, encoding="utf-8-sig", errors="replace") as fh:
+        text = fh.read()
+    if text.lstrip().startswith(("{", "[")):
+        return _json_table(p, text)
+    return _text_table(p, text)
+
+
+def _unknown_message(p, unknown: list[str], rows) -> str:
+    """One line: the unknown columns and the closest field names of one sample (difflib,
+    at most 5, each cut to 30 characters); none close, only how many fields it has (a
+    header is never listed: docs/reliability.md)."""
+    label, sample = rows[0] if rows else ("", {})
+    names = [str(c) for c in sample]
+    close = difflib.get_close_matches(unknown[0], names, n=5, cutoff=0.5)
+    miss = f"{p}: no column {', '.join(map(repr, unknown))}"
+    if not close:
+        return f"{miss}; none of the {len(names)} fields of one sample ({label}) is close"
+    return f"{miss}; closest fields of one sample ({label}): {', '.join(_value(n) for n in close)}"
+
+
+#: Field names that look like each quantity: exact (lower case), then name endings.
+_GUESS = {
+    "time": (("key", "time", "t", "timestamp", "time_s", "sec", "seconds", "ms", "stamp"),
+             ("time", "stamp", "_t", "_ms", "_s")),
+    "yaw": (("yaw", "ey", "ry", "heading"), ("rot.y", "yaw", ".ey")),
+    "pitch": (("pitch", "ex", "rx"), ("rot.x", "pitch", ".ex")),
+    "roll": (("roll", "ez", "rz"), ("rot.z", "roll", ".ez")),
+}  # fmt: skip
+
+
+def columns_example(path: str | os.PathLike) -> str:
+    """A ``--columns`` map of the file's own fields that look like each quantity (``COL``
+    for a quantity none looks like; ``--time-format FMT`` after it when the time field is
+    not a number), for messages: only names that match a known pattern are quoted (a
+    header is never listed: docs/reliability.md); ``""`` if the file is no table of at
+    least three fields or none looks like an angle. Signs and units need the user's check."""
+    try:
+        cols, rows = _read_table(path)
+    except (InputError, OSError, ValueError):
+        return ""
+    free = [str(c) for c in (rows[0][1] if rows else cols)]
+    if len(free) < 3:
+        return ""
+    out = {}
+    for key, (exact, ends) in _GUESS.items():
+        hit = next((n for n in free if n.lower() in exact), None)
+        hit = hit or next((n for n in free if n.lower().endswith(ends)), None)
+        if hit is not None:
+            out[key] = hit[:30]
+            free.remove(hit)
+    if not out.keys() & {"yaw", "pitch"}:
+        return ""
+    text = ",".join(f"{k}={out.get(k, 'COL')}" for k in COLUMN_KEYS if k in out or k != "roll")
+    t0 = rows[0][1].get(out["time"]) if rows and "time" in out else 0.0
+    try:
+        float(t0)
+    except (TypeError, ValueError):  # a clock time such as 20210510Z-200400_686Z
+        return text + " --time-format FMT"
+    return text
 
 
 def _clock_seconds(p, label: str, value, fmt: str) -> float:
@@ -198,6 +260,78 @@ def _row_numbers(p, cmap: dict, keys: list[str], label: str, row: dict, time_for
     return out
 
 
+class _Table:
+    """A log's columns (every name seen, in order), its first row (for messages) and the
+    mapped numbers of its kept rows (``data``, (N, len(keys)); row labels ``kind`` +
+    ``numbers``), filled row by row: no row is kept as a dict. ``problem``: the first
+    row's error, raised once the map's columns are known to exist."""
+
+    def __init__(self, p, cmap: dict, keys: list[str], time_format: str | None, skip_rows: int):
+        self.p, self.cmap, self.keys, self.time_format = p, cmap, keys, time_format
+        self.skip, self.seen, self.kind = skip_rows, 0, "line"
+        self.cols: dict[str, None] = {}
+        self.first: list[tuple[str, dict]] = []
+        self.values, self.numbers = array("d"), array("q")
+        self.problem: InputError | None = None
+
+    def add(self, number: int, row: dict) -> None:
+        self.seen += 1
+        self.cols.update(dict.fromkeys(row))
+        if not self.first:
+            self.first.append((f"{self.kind} {number}", row))
+        if self.seen <= self.skip or self.problem is not None:
+            return
+        try:
+            self.values.extend(_row_numbers(self.p, self.cmap, self.keys, f"{self.kind} {number}",
+                                            row, self.time_format))  # fmt: skip
+        except InputError as e:
+            self.problem = e
+            return
+        self.numbers.append(number)
+
+    @property
+    def data(self):
+        return np.frombuffer(self.values, dtype=np.float64).reshape(-1, len(self.keys))
+
+
+def _sample_row(key, v) -> dict:
+    row = {} if key is None else {"key": key}
+    if isinstance(v, (dict, list)):
+        return _flatten(v, "", row)
+    row["value"] = v
+    return row
+
+
+def _stream_json(t: _Table) -> None:
+    """The rows of a JSON log, entry by entry (:mod:`jsonlog`: the document is never held
+    whole). A top-level object of one key holding samples is a wrapper (:func:`_descend`):
+    its samples are the rows (that one value decoded whole)."""
+    t.kind = "entry"
+    held = None  # the first entry, until a second shows the top level is no wrapper
+    for i, (key, v) in enumerate(json_entries(t.p)):
+        if i == 0 and key is not None and _is_samples(v):
+            held = (key, v)
+            continue
+        if held is not None:
+            t.add(1, _sample_row(*held))
+            held = None
+        t.add(i + 1, _sample_row(key, v))
+    if held is not None:
+        obj, _ = _descend({held[0]: held[1]})
+        items = obj.items() if isinstance(obj, dict) else ((None, x) for x in obj)
+        for i, (key, v) in enumerate(items):
+            t.add(i + 1, _sample_row(key, v))
+
+
+def _stream_text(t: _Table) -> None:
+    """The rows of a delimited log (as :func:`_text_table` reads them)."""
+    with open(t.p, encoding="utf-8-sig", errors="replace") as fh:
+        cols, rows = _text_table(t.p, fh.read())
+    t.cols.update(dict.fromkeys(cols))
+    for label, row in rows:
+        t.add(int(label.split(" ", 1)[1]), row)
+
+
 def load_columns(
     path: str | os.PathLike,
     columns: str | dict,
@@ -223,14 +357,10 @@ def load_columns(
         raise InputError(f"--skip-rows must be >= 0; got {skip_rows}")
     keys = [k for k in COLUMN_KEYS if k in cmap]
     table = _Table(p, cmap, keys, time_format, skip_rows)
-    (_json_table if starts_as_json(p) else _text_table)(table)
-    cols = list(table.cols)
+    (_stream_json if starts_as_json(p) else _stream_text)(table)  # arrays, not row dicts
     unknown = [c for c, _ in cmap.values() if c not in table.cols]
     if unknown:
-        raise InputError(
-            f"{p}: no column {', '.join(map(repr, unknown))} among its {len(cols)} columns"
-            f"{_hint(unknown[0], cols)}"
-        )
+        raise InputError(_unknown_message(p, unknown, table.first))
     if table.problem is not None:
         raise table.problem
     if table.seen <= skip_rows:
