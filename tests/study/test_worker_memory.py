@@ -59,12 +59,12 @@ def test_weight_cache_stays_bounded(grid, tmp_path, monkeypatch):
 
     assert tasks.WEIGHT_CACHE_BYTES <= 32 << 20
     monkeypatch.setattr(tasks, "WEIGHT_CACHE_BYTES", 64 << 10)
-    exact.shared_query.cache_clear()
+    exact._query.cache_clear()
     tasks._GRIDS.clear()
     _epof(grid, tmp_path, n=4)
     g = tasks._grid(str(grid))
     q = exact.shared_query(4.0, Frustum.symmetric(*viewport_fov(g, None, None)))
     assert q._cache_bytes == 64 << 10
     assert 0 < q._bytes <= 64 << 10
-    exact.shared_query.cache_clear()
+    exact._query.cache_clear()
     tasks._GRIDS.clear()
