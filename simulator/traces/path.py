@@ -225,9 +225,11 @@ class HeadPath:
         """Angle between consecutive poses over their time step, deg/s, shape (N-1,)."""
         if self.n < 2:
             return np.zeros(0)
-        r = self.rotations
-        delta = r[:-1].inv() * r[1:]
-        return np.degrees(delta.magnitude()) / np.diff(self.times_s)
+        r, out = self.rotations, np.empty(self.n - 1)
+        for i in range(0, self.n - 1, 1 << 16):  # in chunks: no three copies of a long path
+            j = min(i + (1 << 16), self.n - 1)
+            out[i:j] = (r[i:j].inv() * r[i + 1 : j + 1]).magnitude()
+        return np.degrees(out) / np.diff(self.times_s)
 
 
 def save_headpath_csv(path: str | os.PathLike, hp: HeadPath) -> None:
