@@ -29,6 +29,7 @@ import scipy
 from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
+from simulator.analyze.stats import StatsOptions
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, write_csv
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
@@ -315,16 +316,23 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             flow = _cell(
                 float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
             )
-        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
+        video = [] if "video" in header else [vs[0]["video"] if len({x["video"] for x in vs}) == 1 else ""]
+        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv, *video])
     data = folder / "DATA.csv"
-    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv"], rows, fmt=_cell)
+    # the video column lets the analysis give per-video tables and warn on pooled flows
+    vcol = [] if "video" in header else ["video"]
+    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv", *vcol], rows, fmt=_cell)
     info = {"dir": str(folder), "data": str(data),
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:
         study = read_study(data, flow_stat=q["flow_stat"])
-        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"],
-                           k_of_formula=q.get("k_of", "invariant"),
-                           notes=confound_notes(table))  # fmt: skip
+        kw = {"exclude_below": q["exclude_below"], "conditions": q["conditions"],
+              "k_of_formula": q.get("k_of", "invariant")}  # fmt: skip
+        try:  # the design's statistics (tests.csv, model.csv, analysis.md) where the data allow
+            an = analyze_study(study, notes=confound_notes(table), stats=StatsOptions(), **kw)
+        except InputError as e:  # too few for them: the paper's analysis alone, and why
+            an = analyze_study(study, notes=[*confound_notes(table), f"no design statistics: {e}"],
+                               **kw)  # fmt: skip
         info["files"] = [p.name for p in write_report(an, folder)]
         info["problems"] = list(study.problems)
         info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]
