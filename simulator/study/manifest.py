@@ -23,7 +23,7 @@ from simulator.core.traceopts import TraceOptions
 from simulator.discomfort.predict import study_model
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.study.entry import Entry, stem_fields, user_numbers
+from simulator.study.entry import Entry, short_spec, stem_fields, user_numbers, user_spans
 from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import n_users
@@ -202,11 +202,7 @@ def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | N
         return [None], n
     if user == "all":
         return (list(range(1, n + 1)) if n > 1 or tfmt == "360vidstr" else [None]), n
-    users = user_numbers(e, "user", user)
-    bad = [u for u in users if u > n]
-    if bad:
-        e.fail(f"{trace}: no user {bad[0]} (user = {user!r}); the file holds {n}")
-    return list(users), n
+    return list(user_numbers(e, "user", user, n_users=n, where=f"{trace}: ")), n
 
 
 def _render_users(e: Entry, render, users: list[int | None]) -> set:
@@ -216,10 +212,13 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
         return set(users) if render else set()
     if users == [None]:
         e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
-    chosen = user_numbers(e, "render", render)
-    missing = [u for u in chosen if u not in users]
+    top = max(users)  # checked against the entry's users before the spec is expanded
+    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
+    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
+    taken = set(users)
+    missing = beyond or [u for u in chosen if u not in taken]
     if missing:
-        e.fail(f"render = {render!r}: user {missing[0]} is not among this entry's users")
+        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
     return set(chosen)
 
 

@@ -13,6 +13,7 @@ render).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 import warnings
@@ -50,8 +51,18 @@ _TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
 _ARTEFACTS: dict[tuple, Artefacts] = {}
 
-#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
-WEIGHT_CACHE_BYTES = 192 << 20
+#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video). Bounded
+#: small: a longer video visits more orientation bins, so a large cache filled with length
+#: (192 MiB made a worker 2x larger for 10x the frames) and hardly saved time.
+WEIGHT_CACHE_BYTES = 16 << 20
+#: A grid's sphere fields (float32, with the translational part) held whole by a worker
+#: up to this size; beyond it they are read lazily per viewing.
+FIELD_IN_MEMORY_BYTES = 16 << 20
+
+
+def _field_bytes(g: GridFile) -> int:
+    """Bytes of the grid's fields as float32 arrays."""
+    return sum(4 * math.prod(f.shape) for f in (g.field_dps, g.field_trans_dps) if f is not None)
 
 
 def _source(video: dict) -> Source:
@@ -85,15 +96,16 @@ def _grid(path: str) -> GridFile:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            g = load_grid(path, scan=False)  # the values checked once in memory, below
-        if g.field_dps is not None:
-            # Read once per worker as float32, not once per viewing: a worker holds one
-            # video's field at a time (one grid cached), the price of not decompressing it
-            # again for every viewing of the video (the single commands stay lazy).
-            g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
-        if g.field_trans_dps is not None:  # the same for the field without the rotation
-            g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
-        check_field_values(g)
+            g = load_grid(path, scan=False)  # the values checked once, below
+        if _field_bytes(g) <= FIELD_IN_MEMORY_BYTES:
+            # A short video's fields read once per worker as float32, not once per viewing;
+            # a longer one's stay lazy (read chunk by chunk per viewing, as the single
+            # commands do): a worker's memory does not grow with the video's length.
+            if g.field_dps is not None:
+                g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
+            if g.field_trans_dps is not None:
+                g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
+        check_field_values(g)  # in memory, or chunk by chunk
         _GRIDS[key] = g
     return _GRIDS[key]
 
