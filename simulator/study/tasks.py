@@ -26,8 +26,10 @@ from simulator.core.fileio import atomic_output, json_text
 from simulator.core.traceopts import TraceOptions, translate
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
+from simulator.epof.parts import keep_parts_in
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, check_field_values, load_grid
+from simulator.media.lazyfield import LazyField, spool, spool_name
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
 from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
@@ -90,7 +92,26 @@ def _file_key(path: str) -> tuple:
     return (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
 
 
-def _grid(path: str) -> GridFile:
+def _spooled(g: GridFile, folder: Path) -> GridFile:
+    """A long video's fields as raw float32 spools in ``folder`` (the study's cache:
+    decompressed once per grid file, not at each viewing; still read chunk by chunk) and
+    their rotational part kept beside them (:func:`simulator.epof.parts.keep_parts_in`);
+    the grid as it is when the folder cannot be written."""
+    try:
+        new = {}
+        for name in ("field_dps", "field_trans_dps"):
+            f = getattr(g, name)
+            n = spool_name(f, name) if isinstance(f, LazyField) else None
+            if n is not None:
+                new[name] = spool(f, folder / n)
+        keep_parts_in(folder)
+        return dataclasses.replace(g, **new)
+    except OSError:
+        keep_parts_in(None)
+        return g
+
+
+def _grid(path: str, spool_dir: str | None = None) -> GridFile:
     key = _file_key(path)
     if key not in _GRIDS:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
@@ -105,6 +126,8 @@ def _grid(path: str) -> GridFile:
                 g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
             if g.field_trans_dps is not None:
                 g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
+        elif spool_dir is not None:
+            g = _spooled(g, Path(spool_dir))
         check_field_values(g)  # in memory, or chunk by chunk
         _GRIDS[key] = g
     return _GRIDS[key]
@@ -235,16 +258,19 @@ def _rule(opts: dict) -> OpacityRule:
     return rule_from_options(get, lambda k: f"[epof] {k}")
 
 
-def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> list[dict]:
+def epof_task(
+    grid_path: str, items: list[dict], opts: dict, epof_dir: str, spool_dir: str | None = None
+) -> list[dict]:
     """EPOF and opacity of each viewing in ``items`` (``id``, ``trace``, ``format``,
     ``user``) on the grid ``grid_path``; writes ``epof_dir/<id>.csv``. Returns one dict per
     item: ``id``, ``status`` (``"ok"`` or the one-line error), the stats of
     :func:`viewing_stats`, ``warnings`` (lines), ``seconds`` and ``cpu_s`` (this process's
-    CPU time; the first item's includes loading the grid)."""
+    CPU time; the first item's includes loading the grid). ``spool_dir``: where a long
+    video's fields are kept decompressed (:func:`_spooled`; None: read lazily each time)."""
     out = []
     c_setup = time.process_time()
     try:
-        grid = _grid(grid_path)
+        grid = _grid(grid_path, spool_dir)
         rule = _rule(opts)
         # As vimsim epof: a headset's exact per-eye frustum, else the FOVs (the grid's)
         frustum = Frustum.from_headset(opts["headset"]) if opts.get("headset") else None

@@ -26,12 +26,12 @@ def grid(tmp_path_factory):
     return d / "grid.npz"
 
 
-def _epof(grid, out, n=3):
+def _epof(grid, out, n=3, spool_dir=None):
     from simulator.screen.run import _epof_options
 
     items = [{"id": f"v{k}", "trace": "", "format": "synth:look-around", "user": k, "plot": False}
              for k in range(n)]  # fmt: skip
-    recs = tasks.epof_task(str(grid), items, _epof_options({}, True), str(out))
+    recs = tasks.epof_task(str(grid), items, _epof_options({}, True), str(out), spool_dir)
     assert [r["status"] for r in recs] == ["ok"] * n
     return [list(csv.reader(open(out / f"v{k}.csv"))) for k in range(n)]
 
@@ -68,3 +68,27 @@ def test_weight_cache_stays_bounded(grid, tmp_path, monkeypatch):
     assert 0 < q._bytes <= 64 << 10
     exact._query.cache_clear()
     tasks._GRIDS.clear()
+
+
+def test_long_fields_spooled_once_with_the_same_results(grid, tmp_path, monkeypatch):
+    """With the study's spool folder, a long video's fields are decompressed once into raw
+    float32 files (and their rotational part beside them), read chunk by chunk from there:
+    the same EPOF CSVs as with the fields held whole."""
+    from simulator.epof.parts import keep_parts_in
+
+    tasks._GRIDS.clear()
+    (tmp_path / "whole").mkdir()
+    whole = _epof(grid, tmp_path / "whole")
+    tasks._GRIDS.clear()
+    monkeypatch.setattr(tasks, "FIELD_IN_MEMORY_BYTES", 0)
+    (tmp_path / "spooled").mkdir()
+    try:
+        got = _epof(grid, tmp_path / "spooled", spool_dir=str(tmp_path / "fields"))
+        g = tasks._grid(str(grid), str(tmp_path / "fields"))
+        assert isinstance(g.field_dps, LazyField) and g.field_dps.path.parent == tmp_path / "fields"
+    finally:
+        keep_parts_in(None)
+        tasks._GRIDS.clear()
+    assert got == whole
+    names = sorted(p.name.rsplit(".", 2)[1] for p in (tmp_path / "fields").iterdir())
+    assert names == ["field_dps", "field_trans_dps", "rot"]
