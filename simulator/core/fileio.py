@@ -142,8 +142,9 @@ def _registered_input(t: Path) -> Path | None:
         return None
     with contextlib.suppress(OSError):
         st = os.stat(t)
-        if (st.st_dev, st.st_ino) in _INPUT_IDS:
-            return _INPUT_IDS[(st.st_dev, st.st_ino)]
+        r = _INPUT_IDS.get((st.st_dev, st.st_ino))
+        if r is not None and _same_file(t, r):  # not an inode reused after r was removed
+            return r
     try:
         r = t.resolve()
     except OSError:

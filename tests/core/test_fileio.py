@@ -197,3 +197,25 @@ def test_input_check_is_a_lookup_not_a_scan(tmp_path, monkeypatch):
             with pytest.raises(InputError, match="same file as the input"):
                 fileio.check_not_input(bad)
     assert not fileio.known_inputs()  # the scope's inputs are gone after it
+
+
+def test_an_input_removed_and_its_inode_reused_is_not_an_input(tmp_path, monkeypatch):
+    """A temporary file read as an input and then removed: a new output that gets its inode
+    (the file system reuses it) is not that input (a report's export was refused so)."""
+    import os
+
+    from simulator.core import fileio
+
+    gone = tmp_path / "tmp" / "vimsim_epof.bin"
+    out = tmp_path / "out.json"
+    out.write_text("{}")
+    st = os.stat(out)
+    with fileio.input_scope():
+        monkeypatch.setitem(fileio._INPUT_IDS, (st.st_dev, st.st_ino), gone)  # as if reused
+        fileio._INPUTS.add(gone)
+        fileio.check_not_input(out)  # no InputError: gone does not exist
+        real = tmp_path / "in.bin"
+        real.write_bytes(b"x")
+        fileio.register_input(real)
+        with pytest.raises(InputError, match="same file as the input"):
+            fileio.check_not_input(real)
