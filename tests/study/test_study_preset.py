@@ -4,11 +4,14 @@ render's x264 preset as ``[render] x264_preset``."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from simulator.cli import main
+from simulator.epof import read_epof_csv
 from simulator.traces.path import save_headpath_csv, synth
 
 
@@ -23,7 +26,8 @@ def base(tmp_path_factory):
     return d
 
 
-def _manifest(d: Path, epof: str, extra: str = "") -> Path:
+def _manifest(d: Path, epof: str, extra: str = "", render: bool = False,
+              render_keys: str = "") -> Path:  # fmt: skip
     m = d / "study.toml"
     m.write_text(f"""
 [[videos]]
@@ -37,6 +41,17 @@ video = "clip"
 trace = "P*.csv"
 participant = "{{stem}}"
 
+[[viewings]]
+video = "clip"
+trace = "P0.csv"
+id = "render-P0"
+render = {"true" if render else "false"}
+
+[render]
+eye_size = "64x64"
+x264_preset = "ultrafast"
+{render_keys}
+
 [epof]
 {epof}
 {extra}
@@ -44,10 +59,11 @@ participant = "{{stem}}"
     return m
 
 
+@pytest.mark.gl
 @pytest.mark.slow
 def test_study_cao2021_code_equals_vimsim_epof(base, tmp_path):
     out, cache = tmp_path / "o", tmp_path / "c"
-    m = _manifest(base, 'preset = "cao2021-code"')
+    m = _manifest(base, 'preset = "cao2021-code"', render=True)
     assert main(["study", str(m), "-o", str(out), "--cache-dir", str(cache), "--no-progress",
                  "--workers", "1"]) == 0  # fmt: skip
     grid = next((cache / "grids").glob("*.npz"))
@@ -58,6 +74,12 @@ def test_study_cao2021_code_equals_vimsim_epof(base, tmp_path):
         got = out / "epof" / f"clip-{p}.csv"
         assert got.read_bytes() == ref.read_bytes()
         assert ",flow_px\n" in got.read_text()
+    s = json.loads((out / "render" / "render-P0" / "summary.json").read_text())
+    assert s["preset"] == "cao2021-code" and s["grf"]["layout"] == "fibonacci"
+    assert s["x264"]["preset"] == "ultrafast"
+    ren = read_epof_csv(out / "render" / "render-P0" / "epof.csv")
+    np.testing.assert_allclose(ren.opacity, read_epof_csv(out / "epof" / "render-P0.csv").opacity,
+                               atol=1e-12)  # fmt: skip
 
 
 @pytest.mark.parametrize(
@@ -68,11 +90,12 @@ def test_study_cao2021_code_equals_vimsim_epof(base, tmp_path):
          "[epof] preset: cao2021-code fixes [grf] grain_size"),
         ('preset = "paper"\nmethod = "sphere"', "", "paper fixes [epof] method"),
         ('preset = "veryfast"', "", "[epof] preset: expected one of vimsim, paper, cao2021-code"),
-        ("", '[render]\npreset = "veryfast"', "x264_preset"),
+        ("", 'RENDER:preset = "veryfast"', "x264_preset"),
     ],
 )
 def test_bad_preset_in_manifest(base, tmp_path, capsys, epof, extra, want):
-    m = _manifest(base, epof, extra)
+    keys = extra.removeprefix("RENDER:") if extra.startswith("RENDER:") else ""
+    m = _manifest(base, epof, "" if keys else extra, render_keys=keys)
     out = tmp_path / "o"
     assert main(["study", str(m), "-o", str(out), "--cache-dir", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
