@@ -116,3 +116,28 @@ def test_js_runtime_equals_python(exported, tmp_path):
     flow, op = _python(grid, k, yaw, pitch)
     np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
     np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)
+
+
+_BROWSER = """
+const [names, q] = args;
+const mod = await import(new URL("cao2021/vimsim_cao2021.js", location.href).href);
+const files = {};
+for (const n of names) files[n] = await (await fetch("cao2021/" + n)).text();
+const rt = new mod.Cao2021Runtime(files);
+return q.map(([k, y, p]) => [rt.flow(k, y, p), rt.opacity(k, y, p)]);
+"""
+
+
+@pytest.mark.browser
+def test_web_export_rule_in_chromium_equals_python(browser, exported, tmp_path):
+    """The web export's cao2021/ rule in Chromium, served beside example.html."""
+    grid, folder = exported
+    if folder.name != "cao2021" or not (folder.parent / "example.html").is_file():
+        pytest.skip("the web export's folder only")
+    k, yaw, pitch = _queries(n=500, seed=5)
+    names = sorted(n.name for n in folder.glob("*.csv"))
+    q = [[int(a), float(b), float(c)] for a, b, c in zip(k, yaw, pitch)]
+    got = np.asarray(browser.run_served(folder.parent, "example.html", _BROWSER, names, q))
+    flow, op = _python(grid, k, yaw, pitch)
+    np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)
