@@ -142,8 +142,11 @@ def _registered_input(t: Path) -> Path | None:
         return None
     with contextlib.suppress(OSError):
         st = os.stat(t)
-        if (st.st_dev, st.st_ino) in _INPUT_IDS:
-            return _INPUT_IDS[(st.st_dev, st.st_ino)]
+        hit = _INPUT_IDS.get((st.st_dev, st.st_ino))
+        # confirmed on the input itself: an inode is reused once its file is deleted (a
+        # temporary input gone, a new output given its number)
+        if hit is not None and _same_file(t, hit):
+            return hit
     try:
         r = t.resolve()
     except OSError:
