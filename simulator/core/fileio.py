@@ -142,9 +142,11 @@ def _registered_input(t: Path) -> Path | None:
         return None
     with contextlib.suppress(OSError):
         st = os.stat(t)
-        r = _INPUT_IDS.get((st.st_dev, st.st_ino))
-        if r is not None and _same_file(t, r):  # not an inode reused after r was removed
-            return r
+        hit = _INPUT_IDS.get((st.st_dev, st.st_ino))
+        # confirmed on the input itself: an inode is reused once its file is deleted (a
+        # temporary input gone, a new output given its number)
+        if hit is not None and _same_file(t, hit):
+            return hit
     try:
         r = t.resolve()
     except OSError:

@@ -199,23 +199,24 @@ def test_input_check_is_a_lookup_not_a_scan(tmp_path, monkeypatch):
     assert not fileio.known_inputs()  # the scope's inputs are gone after it
 
 
-def test_an_input_removed_and_its_inode_reused_is_not_an_input(tmp_path, monkeypatch):
-    """A temporary file read as an input and then removed: a new output that gets its inode
-    (the file system reuses it) is not that input (a report's export was refused so)."""
+def test_a_deleted_inputs_inode_reused_by_an_output_is_not_that_input(tmp_path):
+    """An input read then deleted (a temporary) frees its inode; a new output given the
+    same number is not that input (it was refused as 'the same file as the input')."""
     import os
 
-    from simulator.core import fileio
+    from simulator.core.fileio import check_not_input, input_scope, register_input
 
-    gone = tmp_path / "tmp" / "vimsim_epof.bin"
-    out = tmp_path / "out.json"
-    out.write_text("{}")
-    st = os.stat(out)
-    with fileio.input_scope():
-        monkeypatch.setitem(fileio._INPUT_IDS, (st.st_dev, st.st_ino), gone)  # as if reused
-        fileio._INPUTS.add(gone)
-        fileio.check_not_input(out)  # no InputError: gone does not exist
-        real = tmp_path / "in.bin"
-        real.write_bytes(b"x")
-        fileio.register_input(real)
-        with pytest.raises(InputError, match="same file as the input"):
-            fileio.check_not_input(real)
+    gone = tmp_path / "tmp_input.bin"
+    gone.write_bytes(b"x")
+    with input_scope():
+        register_input(gone)
+        ino = os.stat(gone).st_ino
+        gone.unlink()
+        for k in range(200):  # new files until one gets the freed inode number
+            new = tmp_path / f"out{k}.json"
+            new.write_text("{}")
+            if os.stat(new).st_ino == ino:
+                break
+        else:
+            raise AssertionError("no new file reused the freed inode; cannot check")
+        check_not_input(new)  # not refused
