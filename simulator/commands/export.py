@@ -67,7 +67,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default): the precision vimsim epof uses (float32 POFs, the field's stored dtype)",
     )
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
-    # The same rule options (and defaults: comfort) as vimsim epof; the 'viewing' source
+    # The same rule options (and defaults: absolute) as vimsim epof; the 'viewing' source
     # needs a whole viewing, which an engine export does not have: not offered.
     add_opacity_arguments(p, sources=("grid",))
     _add_overlay_arguments(p)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.core.choices import OPACITY_RULES, OPACITY_SOURCES
+from simulator.core.choices import OPACITY_RULE_DEFAULT, OPACITY_RULES, OPACITY_SOURCES
 from simulator.core.errors import InputError
 from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import GridFile
@@ -50,8 +50,8 @@ __all__ = [
     "rule_from_options",
 ]
 
-#: Ease-in / ease-out times (seconds for a full 0 -> 1 / 1 -> 0 change) of the comfort
-#: opacity rule, the CLI's default (:func:`comfort_rule`); measured in docs/epof.md
+#: Ease-in / ease-out times (seconds for a full 0 -> 1 / 1 -> 0 change) of the eased rules
+#: (absolute, the CLI's default, and comfort, :func:`comfort_rule`); measured in docs/epof.md
 #: (bench/opacity_flicker.py): grains come in fast and leave slowly.
 COMFORT_EASE_IN_S = 0.4
 COMFORT_EASE_OUT_S = 1.5
@@ -276,12 +276,14 @@ class OpacityRule:
     a full change 0 -> 1 takes at least ``ease_in_s`` seconds, 1 -> 0 at least
     ``ease_out_s`` (a slew-rate limit, as the ease-in / ease-out times of Unity XR
     Interaction Toolkit's tunneling vignette); 0 = no limit. All zero (the default) is
-    the paper's rule, unsmoothed; :func:`comfort_rule` is the CLI's default.
+    the paper's rule, unsmoothed; the CLI's default is absolute (:func:`rule_from_options`).
 
     ``low_dps`` and ``high_dps`` (both or neither) make the rule **absolute**: opacity 0 at
     ``low_dps``, 1 at ``high_dps`` deg/s whatever the video (the named bands of
     :mod:`simulator.mitigation.bands`); the percentiles and ``source`` are then unused.
     The paper's rule is relative: every video gets grains in its own top tenth of flow.
+    ``name``: the rule's name in :data:`~simulator.core.choices.OPACITY_RULES` ("" = by its
+    fields: ``absolute``, ``paper`` or ``comfort``), recorded by :meth:`describe`.
     """
 
     low_pct: float = 10.0
@@ -292,8 +294,11 @@ class OpacityRule:
     ease_out_s: float = 0.0
     low_dps: float | None = None
     high_dps: float | None = None
+    name: str = ""
 
     def __post_init__(self) -> None:
+        if self.name and self.name not in OPACITY_RULES:
+            raise InputError(f"opacity rule: expected one of {', '.join(OPACITY_RULES)}; got {self.name!r}")
         if (self.low_dps is None) != (self.high_dps is None):
             raise InputError("absolute opacity rule needs both --low-dps and --high-dps")
         if self.low_dps is not None:
@@ -326,9 +331,15 @@ class OpacityRule:
         """True for the paper's rule: no smoothing, no easing."""
         return self.smoothing_s == 0 and self.ease_in_s == 0 and self.ease_out_s == 0
 
+    @property
+    def label(self) -> str:
+        """The rule's name: ``name``, else ``absolute`` / ``paper`` / ``comfort`` by its fields."""
+        return self.name or ("absolute" if self.is_absolute else "paper" if self.is_paper else "comfort")
+
     def describe(self) -> dict:
-        """The rule's settings, for summary.json and CSV headers."""
+        """The rule's settings, for summary.json and CSV headers (``name``: :attr:`label`)."""
         return {
+            "name": self.label,
             "low_pct": self.low_pct,
             "high_pct": self.high_pct,
             "source": self.source,
@@ -424,7 +435,7 @@ def ease(op, fps: float, ease_in_s: float, ease_out_s: float) -> NDArray[np.floa
 
 
 def comfort_rule(**overrides) -> OpacityRule:
-    """The CLI's default opacity rule: the paper's percentiles with ease-in
+    """The comfort opacity rule: the paper's percentiles with ease-in
     :data:`COMFORT_EASE_IN_S` and ease-out :data:`COMFORT_EASE_OUT_S` (no smoothing);
     ``overrides`` replace fields. ``OpacityRule()`` is the paper's unsmoothed rule."""
     kw = {"ease_in_s": COMFORT_EASE_IN_S, "ease_out_s": COMFORT_EASE_OUT_S, **overrides}
@@ -447,11 +458,11 @@ RULE_OPTIONS = (
 
 
 def rule_from_options(get, label) -> OpacityRule:
-    """The one opacity-rule builder from options: the eased comfort rule by default
-    (:func:`comfort_rule`'s easing unless ``ease_in``/``ease_out`` are given),
-    ``opacity_rule = "paper"`` the paper's unsmoothed rule, ``"absolute"`` the eased rule
-    between ``low_dps`` and ``high_dps`` deg/s (defaults: the bands' :data:`ABSOLUTE_LOW_DPS`,
-    :data:`ABSOLUTE_HIGH_DPS`; given with another rule they are refused).
+    """The one opacity-rule builder from options: by default (:data:`OPACITY_RULE_DEFAULT`)
+    ``"absolute"``, the eased rule between ``low_dps`` and ``high_dps`` deg/s (defaults: the
+    bands' :data:`ABSOLUTE_LOW_DPS`, :data:`ABSOLUTE_HIGH_DPS`; given with another rule they
+    are refused); ``"comfort"`` the eased percentile rule (easing: :func:`comfort_rule`'s
+    unless ``ease_in``/``ease_out`` are given); ``"paper"`` the paper's unsmoothed rule.
 
     get : ``get(name)`` -> the option's value or None (not given), for the names of
         :data:`RULE_OPTIONS`; label : ``label(name)`` -> the option as the caller spells it
@@ -473,7 +484,7 @@ def rule_from_options(get, label) -> OpacityRule:
         raise InputError(
             f"{label('low_pct')}: {low:g} must be below {label('high_pct')} ({high:g})"
         )
-    source, kind = get("opacity_source") or "grid", get("opacity_rule") or "comfort"
+    source, kind = get("opacity_source") or "grid", get("opacity_rule") or OPACITY_RULE_DEFAULT
     for name, v, choices in (("opacity_source", source, OPACITY_SOURCES),
                              ("opacity_rule", kind, OPACITY_RULES)):  # fmt: skip
         if v not in choices:
@@ -499,14 +510,8 @@ def rule_from_options(get, label) -> OpacityRule:
                 f"{label('opacity_rule')} paper is the unsmoothed rule; drop "
                 f"{', '.join(given)} or use comfort"
             )
-        return OpacityRule(low, high, source)
-    return OpacityRule(
-        low,
-        high,
-        source,
-        smooth or 0.0,
-        COMFORT_EASE_IN_S if ease_in is None else ease_in,
-        COMFORT_EASE_OUT_S if ease_out is None else ease_out,
-        low_dps=lo_dps,
-        high_dps=hi_dps,
-    )
+        return OpacityRule(low, high, source, name=kind)
+    ease_in = COMFORT_EASE_IN_S if ease_in is None else ease_in
+    ease_out = COMFORT_EASE_OUT_S if ease_out is None else ease_out
+    return OpacityRule(low, high, source, smooth or 0.0, ease_in, ease_out,
+                       low_dps=lo_dps, high_dps=hi_dps, name=kind)  # fmt: skip

@@ -28,7 +28,7 @@ from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
 from simulator.media.lazyfield import field_chunks
 from simulator.media.source import Source
-from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
+from simulator.mitigation.bands import BANDS, band_of, draw_bands, rule_text, share_above
 from simulator.screen.page import write_screen_page
 from simulator.sphere.geometry import extract_view
 
@@ -237,10 +237,7 @@ def _events(kinds, t) -> list[dict]:
 
 
 def _rule_name(r) -> str:
-    rule = (r.meta.get("settings") or {}).get("opacity_rule") or {}
-    if rule.get("scale") == "absolute":
-        return f"absolute {rule.get('low_dps'):g}-{rule.get('high_dps'):g} deg/s"
-    return f"relative P{rule.get('low_pct', 10):g}-P{rule.get('high_pct', 90):g}"
+    return rule_text((r.meta.get("settings") or {}).get("opacity_rule"))
 
 
 def _plt():

@@ -16,7 +16,7 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
+from simulator.core.choices import MITIGATIONS, OPACITY_RULE_DEFAULT, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
@@ -337,7 +337,7 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
 
 def _epof(m: Path, t) -> dict:
     e = Entry(m, "[epof]", t or {}, _EPOF_KEYS)
-    rule = e.get("opacity_rule", (str,), "comfort", choices=OPACITY_RULES)
+    rule = e.get("opacity_rule", (str,), OPACITY_RULE_DEFAULT, choices=OPACITY_RULES)
     dps = [e.number(k, None, lo=0.0) for k in ("low_dps", "high_dps")]
     if rule == "absolute":  # the defaults: the named bands' edges (rule_from_options checks)
         dps = [d if v is None else v for v, d in zip(dps, (ABSOLUTE_LOW_DPS, ABSOLUTE_HIGH_DPS))]
@@ -358,7 +358,7 @@ def _epof(m: Path, t) -> dict:
         "high_pct": high,
         "opacity_source": e.get("opacity_source", (str,), "grid", choices=("grid", "viewing")),
         "smooth_s": e.number("smooth", 0.0, lo=0.0),
-        # As vimsim epof: the eased comfort rule by default, the paper's one option away.
+        # As vimsim epof: the absolute rule by default, the paper's one option away.
         "opacity_rule": rule,
         "ease_in_s": e.number("ease_in", None, lo=0.0),
         "ease_out_s": e.number("ease_out", None, lo=0.0),

@@ -18,7 +18,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from simulator.core.choices import EPOF_METHODS, MITIGATIONS
+from simulator.core.choices import EPOF_METHODS, MITIGATIONS, OPACITY_RULE_DEFAULT
 from simulator.core.errors import InputError
 from simulator.core.resources import check_fits
 from simulator.mitigation.grf import GrfConfig, OpacityRule, grain_count, rule_from_options
@@ -57,7 +57,7 @@ VIEW_OPTIONS: dict[str, object] = {
     "low_pct": 10.0,
     "high_pct": 90.0,
     "opacity_source": "grid",
-    "opacity_rule": "comfort",
+    "opacity_rule": OPACITY_RULE_DEFAULT,
     "smooth": None,
     "ease_in": None,
     "ease_out": None,
