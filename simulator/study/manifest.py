@@ -365,7 +365,7 @@ def _epof(m: Path, t) -> dict:
         "low_dps": dps[0],  # the absolute rule's (None with another rule)
         "high_dps": dps[1],
         # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
-        "artefacts": e.get("artefacts", (bool,), False),
+        "artefacts": e.get("artefacts", (bool,), True),  # by default (vimsim study --no-artefacts)
     }
 
 
