@@ -6,15 +6,18 @@ Base: ``vimsim synth --scene rotate --omega 20`` (the panorama turning at 20 deg
 512x256, 30 fps, 6 s, CRF 10). Made with ffmpeg (imageio-ffmpeg's binary):
 
 - ``lower-third``: a grey panel 160x32 px in the lower front (lat -30 to -43 deg) from 2 s
-  to 5 s, with a white bar growing and a box sliding inside it (animated); truth: overlay
-  on frames 60-149.
+  to 5 s: static "text" (a black grid, left half), a white bar growing over 3 s and a
+  yellow box sliding across the right half once a second (animated); truth: overlay on
+  frames 60-149.
 - ``end-card``: the clip cut at 4 s to a navy card with a box sliding across it (animated);
   truth: cut on frame 120, overlay on 121-179.
 - ``camera-fixed``: a "hand" (a textured crop of the panorama, 112x40 px, at the nadir,
   swaying 4 px once a second) for the whole clip, and a "thumb" (a darkened crop,
-  120x110 px, at the left lens seam) from 3 s to 4 s; truth: camera-fixed on every frame
-  the hand sways or the thumb is there (all frames: the hand never stops); the frames
-  must not be called a keyframe or an overlay.
+  120x110 px, at the left lens seam) from 3 s to 4 s; truth: camera-fixed on the thumb's
+  frames 90-119 (recall), the hand reported as a camera-fixed event at the nadir (the
+  ``labelled`` column lists the events and their regions, lon0, lon1, lat0, lat1 deg);
+  camera-fixed on any frame is right (the hand never stops swaying), any other kind a
+  false alarm.
 - ``pumping``: rotate at 3 deg/s, x264 constant QP 42, GOP 15 (keyframe truth: the
   decoder's key frames), to check that the decoder's flags keep the keyframe recall.
 
@@ -48,9 +51,12 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" /
 
 
 def ff(*args: str) -> None:
-    if Path(args[-1]).is_file():  # made by an earlier run into the same folder
+    out = Path(args[-1])
+    if out.is_file():  # made by an earlier run into the same folder
         return
-    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", *args], check=True)
+    tmp = out.with_name("tmp_" + out.name)
+    subprocess.run([ffmpeg_exe(), "-loglevel", "error", "-y", *args[:-1], str(tmp)], check=True)
+    tmp.rename(out)
 
 
 def synth(out: Path, *args: str) -> None:
@@ -71,16 +77,20 @@ def make_clips(d: Path) -> dict[str, tuple[Path, dict[str, set[int]], str]]:
     synth(d / "coaster.mp4", "--scene", "coaster")
     clips = {"rotate 20 deg/s (clean)": (base, {}, "mono"),
              "coaster (clean)": (d / "coaster.mp4", {}, "mono")}  # fmt: skip
-    # Lower third: a panel with an animated bar and a sliding box, 2 s to 5 s.
-    on = "enable='between(t,2,4.999)'"
-    lt = (f"drawbox=x=176:y=172:w=160:h=32:color=gray@1:t=fill:{on},"
-          f"drawbox=x=184:y=178:w='8+120*(t-2)/3':h=6:color=white@1:t=fill:{on},"
-          f"drawbox=x='184+100*mod(t,1)':y=190:w=24:h=8:color=yellow@1:t=fill:{on}")  # fmt: skip
-    ff("-i", str(base), "-vf", lt, *ENC, str(d / "lower_third.mp4"))
+    # Lower third: a panel with a growing bar and a sliding box (overlay's x, w per frame), 2 s to 5 s.
+    ff("-i", str(base), "-f", "lavfi", "-i", "color=c=gray:s=160x32:r=30:d=6",
+       "-f", "lavfi", "-i", "color=c=white:s=120x6:r=30:d=6",
+       "-f", "lavfi", "-i", "color=c=yellow:s=24x8:r=30:d=6", "-filter_complex",
+       "[2:v]crop=w='8+112*min(max(t-2,0)/3,1)':h=6:x=0:y=0[bar];"
+       "[1:v]drawgrid=x=8:y=18:w=6:h=4:t=2:c=black,drawbox=x=80:y=16:w=80:h=16:color=gray:t=fill[pg];"
+       "[pg][bar]overlay=x=8:y=6[p1];[p1][3:v]overlay=x='80+60*mod(t,1)':y=20[panel];"
+       "[0:v][panel]overlay=x=176:y=172:enable='between(t,2,4.999)'[v]",
+       "-map", "[v]", "-t", "6", *ENC, str(d / "lower_third.mp4"))  # fmt: skip
     clips["lower third"] = (d / "lower_third.mp4", {"overlay": set(range(60, 150))}, "mono")
     # End card: cut at 4 s to a navy card with a box sliding across.
     ff("-i", str(base), "-f", "lavfi", "-i", "color=c=navy:s=512x256:r=30:d=2",
-       "-filter_complex", "[1:v]drawbox=x='100+150*t':y=110:w=60:h=36:color=white@1:t=fill[c];"
+       "-f", "lavfi", "-i", "color=c=white:s=60x36:r=30:d=2", "-filter_complex",
+       "[1:v][2:v]overlay=x='100+150*t':y=110[c];"
        "[0:v]trim=end_frame=120,setpts=PTS-STARTPTS[a];[a][c]concat=n=2:v=1[v]",
        "-map", "[v]", *ENC, str(d / "end_card.mp4"))  # fmt: skip
     clips["end card"] = (d / "end_card.mp4", {"cut": {120}, "overlay": set(range(121, 180))}, "mono")
@@ -90,9 +100,9 @@ def make_clips(d: Path) -> dict[str, tuple[Path, dict[str, set[int]], str]]:
        "[p2]crop=120:110:40:60,gblur=sigma=3,eq=brightness=-0.25[th];"
        "[0:v][h]overlay=x='200+4*sin(2*PI*t)':y=216:shortest=1[a];"
        "[a][th]overlay=x=0:y=70:enable='between(t,3,3.999)'[v]",
-       "-map", "[v]", *ENC, str(d / "camera_fixed.mp4"))  # fmt: skip
+       "-map", "[v]", "-t", "6", *ENC, str(d / "camera_fixed.mp4"))  # fmt: skip
     clips["camera-fixed hand + thumb"] = (d / "camera_fixed.mp4",
-                                          {"camera-fixed": set(range(1, 180))}, "mono")  # fmt: skip
+                                          {"camera-fixed": set(range(90, 120))}, "mono")  # fmt: skip
     # Keyframe pumping, calm: the decoder's flags must keep the recall.
     ff("-i", str(calm), "-c:v", "libx264", "-qp", "42", "-g", "15", "-bf", "0",
        "-x264-params", "scenecut=0", "-pix_fmt", "yuv420p", str(d / "pumping.mp4"))  # fmt: skip
@@ -109,7 +119,9 @@ def score(kinds: tuple[str, ...], truth: dict[str, set[int]]) -> tuple[dict, int
     """Recall per truth kind, false alarms, and the kinds found."""
     rec = {k: (sum(kinds[f] == k for f in fr if f < len(kinds)), len(fr)) for k, fr in truth.items()}
     want = {f: k for k, fr in truth.items() for f in fr}
-    fa = sum(1 for f, k in enumerate(kinds) if k and want.get(f) != k)
+    # the hand sways all the time: camera-fixed is right on any frame of that clip
+    ok = "camera-fixed" if "camera-fixed" in truth else None
+    fa = sum(1 for f, k in enumerate(kinds) if k and want.get(f) != k and k != ok)
     found: dict[str, int] = {}
     for k in kinds:
         if k:

@@ -16,10 +16,11 @@ moves, and both move the flow without being motion of the world:
 Both are found from the per-block signals of :mod:`simulator.preprocess.artefacts`
 (128 x 64 gray picture, 32 x 16 blocks of 4 x 4 pixels: change per frame and spatial
 contrast). A block is *fixed* at a frame when it is textured (contrast >=
-:data:`TEXTURE`), still against the scene (change < :data:`STILL_REL` of the picture's
-median change) and the picture moves (median change >= :data:`MOVING` gray levels), for
+:data:`TEXTURE`), still (change < :data:`STILL_REL` of the picture's median change and
+< :data:`STILL_ABS` gray levels) and the picture moves (median change >= :data:`MOVING` gray levels), for
 >= 60 % of the frames of the 1 s around it (``_fixed``). A group of >= :data:`MIN_BLOCKS`
-fixed blocks for >= 0.5 s is one piece of fixed content. It is a graphic when it
+fixed blocks for >= 0.5 s, whose neighbouring blocks change by >= 1.5 gray levels (median:
+the scene moves right around it), is one piece of fixed content. It is a graphic when it
 appears after the first second, away from the top and bottom block rows (zenith and nadir,
 where rigs, sticks and hands are) and fills its bounding box as a panel does (>=
 :data:`PANEL_FILL`); otherwise it is camera-fixed. An end card (a cut or fade to a mostly
@@ -36,23 +37,28 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MIN_BLOCKS", "MOVING", "PANEL_FILL", "STILL_REL", "TEXTURE", "fixed_content", "keyframe_flags"]
+__all__ = ["MIN_BLOCKS", "MOVING", "PANEL_FILL", "STILL_ABS", "STILL_REL", "TEXTURE", "fixed_content",
+           "keyframe_flags"]  # fmt: skip
 
 #: A block with content: spatial standard deviation >= this many gray levels (a flat
 #: block, e.g. clear sky, looks still whether or not it moves).
 TEXTURE = 3.0
-#: Still against the scene: the block's change below this share of the median change.
+#: Still against the scene: the block's change below this share of the median change ...
 STILL_REL = 0.25
+#: ... and below this many gray levels (pixel-still: far content near the direction of
+#: travel changes slowly too, but not this little)
+STILL_ABS = 0.5
 #: The picture moves: median block change >= this many gray levels (as artefacts' _MOVING).
 MOVING = 0.8
 #: Blocks of one piece of fixed content, at least.
 MIN_BLOCKS = 3
 #: A graphic fills at least this share of its bounding box (a panel, a box of text).
 PANEL_FILL = 0.5
+_RING = 1.5  # gray levels: the median change of the blocks around fixed content, at least
 _FIXED_SHARE = 0.6  # share of the 1 s around a frame in which a block is fixed
 _MIN_S = 0.5  # fixed content lasts at least this long
 _ACTIVE = 1.5  # gray levels: a block of the content that changes (moves, animates)
-_ACTIVE_SHARE = 0.1  # ... in this share of the content's box: it moves / animates
+_ACTIVE_SHARE = 0.1  # ... in this share of the content's box (>= 1 block): it moves / animates
 _CARD_FLAT = 1.0  # an end card: blocks flatter than this (gray levels) ...
 _CARD_SHARE = 0.5  # ... make up this share of the picture, still, while >= 2 blocks animate
 
@@ -83,13 +89,25 @@ def _fixed(d: NDArray, s: NDArray, fps: float) -> tuple[NDArray[np.bool_], NDArr
     """``(fixed, now)``, (T, B) each: blocks fixed in the frame (textured, still against a
     moving scene, for most of the 1 s around each frame), and still at that frame."""
     g = np.median(d, axis=1)
-    now = (s >= TEXTURE) & (d < STILL_REL * g[:, None]) & (g >= MOVING)[:, None]
+    still = (d < STILL_REL * g[:, None]) & (d < STILL_ABS)
+    now = (s >= TEXTURE) & still & (g >= MOVING)[:, None]
     n = max(3, round(fps))
     c = np.cumsum(np.vstack([np.zeros((1, d.shape[1])), now]), axis=0)
     T = d.shape[0]
     lo = np.clip(np.arange(T) - n // 2, 0, T)
     hi = np.clip(np.arange(T) + n // 2 + 1, 0, T)
     return (c[hi] - c[lo]) >= _FIXED_SHARE * (hi - lo)[:, None], now
+
+
+def _ring(region: NDArray[np.bool_], shape) -> NDArray[np.bool_]:
+    """The blocks next to ``region`` (8-neighbours; longitude wraps), not in it."""
+    r = region.reshape(shape)
+    p = np.pad(r, ((1, 1), (0, 0)))
+    out = np.zeros_like(p)
+    for dr in (-1, 0, 1):
+        for dc in (-1, 0, 1):
+            out |= np.roll(np.roll(p, dr, axis=0), dc, axis=1)
+    return (out[1:-1] & ~r).ravel()
 
 
 def _runs(x: NDArray[np.bool_]) -> list[tuple[int, int]]:
@@ -103,7 +121,8 @@ def _active(d: NDArray, box: NDArray[np.bool_], first: int, last: int) -> NDArra
     blocks change), as a (T,) mask."""
     T = d.shape[0]
     out = np.zeros(T, bool)
-    seg = np.mean(d[first : last + 1][:, box] >= _ACTIVE, axis=1) >= _ACTIVE_SHARE
+    need = max(1, round(_ACTIVE_SHARE * int(box.sum())))
+    seg = np.sum(d[first : last + 1][:, box] >= _ACTIVE, axis=1) >= need
     out[first : last + 1] = seg
     return out
 
@@ -143,8 +162,8 @@ def fixed_content(block_diff, block_std, fps: float, *, onset=None, shape=(16, 3
         if b - a + 1 < _MIN_S * fps:
             continue
         region = fixed[a : b + 1].mean(axis=0) >= 0.5
-        if region.sum() < MIN_BLOCKS:
-            continue
+        if region.sum() < MIN_BLOCKS or np.median(d[a : b + 1][:, _ring(region, shape)]) < _RING:
+            continue  # the scene right around it must move (a slow wall is no fixed content)
         rr, cc = np.divmod(np.flatnonzero(region), cols)
         r0, r1, c0, c1 = int(rr.min()), int(rr.max()), int(cc.min()), int(cc.max())
         box = np.zeros((rows, cols), bool)
