@@ -6,12 +6,12 @@ moves, and both move the flow without being motion of the world:
 ``overlay`` (a screen-fixed graphic)
     a lower third, a logo, a title, an end card: composited onto the equirect picture,
     often animated (text typing, sliding, zooming). Left out of the opacity thresholds,
-    statistics and moments while it appears or animates, as the other artefacts.
+    statistics and moments from its appearance to its end, as the other artefacts.
 ``camera-fixed``
     a hand, a rig, a selfie stick, a thumb at the lens: physically attached to the camera,
     so it keeps its place in the equirect frame. Viewers *see* it, so its flow is kept in
     the EPOF (thresholds, statistics, opacity); only the frames in which it moves or
-    enters are never ranked as a provocative moment.
+    enters are labelled, and never ranked as a provocative moment.
 
 Both are found from the per-block signals of :mod:`simulator.preprocess.artefacts`
 (128 x 64 gray picture, 32 x 16 blocks of 4 x 4 pixels: change per frame and spatial
@@ -147,7 +147,7 @@ def fixed_content(block_diff, block_std, fps: float, *, onset=None, shape=(16, 3
     (rows, cols)). ``onset`` (T,) marks cuts and fades (end cards start at one).
 
     Returns ``{"overlay": (T,) bool, "camera-fixed": (T,) bool, "events": [...]}``: the
-    frames in which a graphic appears or animates, the frames in which camera-fixed content
+    frames in which a graphic appears or is on screen, the frames in which camera-fixed content
     enters or moves, and one event per piece of content (kind, first and last frame of its
     presence, its bounding box in blocks ``[row0, row1, col0, col1]`` and in degrees
     ``[lon0, lon1, lat0, lat1]``)."""
@@ -175,9 +175,13 @@ def fixed_content(block_diff, block_std, fps: float, *, onset=None, shape=(16, 3
         fill = region.sum() / box.sum()
         graphic = a >= fps and 0 < r0 and r1 < rows - 1 and fill >= PANEL_FILL
         kind = "overlay" if graphic else "camera-fixed"
-        # appearing: the quarter second before it is still (sliding, fading in); then the
-        # frames in which it moves or animates
-        act = _active(d, box.ravel() if graphic else region, a, b)
+        # a graphic: from the quarter second before it is still (sliding, fading in) to its
+        # end (its animation may lie in blocks its edges share with the scene); camera-fixed
+        # content: the quarter second before it is still, then the frames in which it moves
+        act = np.zeros(T, bool)
+        act[a : b + 1] = True
+        if not graphic:
+            act = _active(d, region, a, b)
         act[max(0, a - round(fps / 4)) : a] = a >= fps
         out[kind] |= act
         out["events"].append({"kind": kind, "first": a, "last": b, "blocks": [r0, r1, c0, c1],
