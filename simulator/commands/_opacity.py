@@ -44,9 +44,9 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
     g.add_argument(
         "--opacity-rule",
         choices=OPACITY_RULES,
-        default=OPACITY_RULE_DEFAULT,
+        default=None,  # not given: OPACITY_RULE_DEFAULT (a --preset can tell it was not given)
         help="; ".join(f"{k}: {v}" for k, v in OPACITY_RULE_HELP.items())
-        + " (docs/epof.md: the thresholds and why)",
+        + f" (not given: {OPACITY_RULE_DEFAULT}; docs/epof.md: the thresholds and why)",
     )
     g.add_argument(
         "--low-dps",

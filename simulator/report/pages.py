@@ -201,7 +201,10 @@ EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></s
         if an.get("error"):
             return _page("Analysis", f"<p>The analysis was not made: {_e(an['error'])}</p>")
         parts = []
-        for name, title in (("table.csv", "Means per condition and Mann-Whitney tests"),
+        for name, title in (("tests.csv", "Tests of the design (effect sizes, 95 % intervals, Holm)"),
+                            ("model.csv", "Mixed model: ssq_total ~ condition + flow + mssq"),
+                            ("power.csv", "Power (participants needed)"),
+                            ("table.csv", "The paper's table: K_OF means per condition, Mann-Whitney"),
                             ("normality.csv", "Normality (Shapiro-Wilk)"), ("scores.csv", "Scores")):  # fmt: skip
             p = folder / name
             if p.is_file():
@@ -217,6 +220,9 @@ EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></s
                 "<h2>Boxplots</h2>",
                 '<img class="plot" src="media/analysis/boxplots.png" alt="boxplots">',
             ]
+        if (folder / "analysis.md").is_file():
+            parts += ["<h2>In plain words: which test, why, what the effect means</h2>",
+                      f"<pre>{_e((folder / 'analysis.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip
         if (folder / "report.md").is_file():
             parts += ["<h2>Report (formula used, exclusions)</h2>",
                       f"<pre>{_e((folder / 'report.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip

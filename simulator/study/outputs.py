@@ -13,9 +13,9 @@ session flow taken from their EPOF (``DATA.csv`` there is what was analysed).
 
 from __future__ import annotations
 
+import concurrent.futures
 import csv
 import dataclasses
-import io
 import json
 import math
 import platform
@@ -29,12 +29,14 @@ import scipy
 from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
+from simulator.analyze.stats import StatsOptions
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output
+from simulator.core.fileio import atomic_output, write_csv
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.media.source import Source
 from simulator.mitigation.bands import draw_bands
 from simulator.sphere.geometry import extract_view
+from simulator.study.tasks import PART_MEAN_COLUMNS
 
 __all__ = [
     "artefact_frames",
@@ -58,9 +60,6 @@ def _cell(v) -> str:
     return str(v)
 
 
-#: The means of the EPOF's parts (:mod:`simulator.epof.parts`), after the given columns;
-#: empty for a viewing whose grid has no per-frame camera rotation.
-PART_MEAN_COLUMNS = ("epof_rot_mean_dps", "epof_trans_mean_dps")
 
 
 def _part_means(epof_csv: Path) -> dict:
@@ -77,18 +76,17 @@ def _part_means(epof_csv: Path) -> dict:
 
 def write_viewings_csv(path, rows: list[dict], columns) -> None:
     """One row per viewing, in manifest order; floats as the EPOF CSV writes them; then
-    the means of the EPOF's rotational and translational parts, read from the viewing's
+    the means of the EPOF's rotational and translational parts (:data:`PART_MEAN_COLUMNS`)
+    as the row has them (the EPOF task's), else read from the viewing's
     ``epof/<viewing>.csv`` beside ``path``."""
     columns = (*columns, *PART_MEAN_COLUMNS)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
+    table = []
     for r in rows:
-        if r.get("viewing") and r.get("status") == "ok":
+        have = all(c in r for c in PART_MEAN_COLUMNS)  # the task's (or the resumed row's)
+        if r.get("viewing") and r.get("status") == "ok" and not have:
             r = {**r, **_part_means(Path(path).parent / "epof" / f"{r['viewing']}.csv")}
-        w.writerow([_cell(r.get(c, "")) for c in columns])
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+        table.append([r.get(c, "") for c in columns])
+    write_csv(path, columns, table, fmt=_cell)  # text cells guarded (csv_cell)
 
 
 def _load_epof(path: Path) -> np.ndarray:
@@ -235,7 +233,10 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
                       lens_fov_deg=v.lens_fov_deg)  # fmt: skip
     for mo in moments:  # the frame's own time (a variable-rate video: not frame / fps)
         mo["time_s"] = float(src.info.times_s([mo["frame"]])[0])
-    _thumbnails(src, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    # the thumbnails decode (FFmpeg, outside the GIL) while the map is drawn
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="thumbnails")
+    thumbs = pool.submit(_thumbnails, src, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    pool.shutdown(wait=False)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
     T = m.shape[0]
@@ -270,14 +271,10 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         fig.savefig(tmp)
     plt.close(fig)
     written.append("provocative.png")
+    thumbs.result()  # its error, if any, is this video's
     cols = ("rank", "time_s", "frame", "yaw_deg", "pitch_deg", "pof_dps", "thumbnail")
-    buf = io.StringIO()
-    wr = csv.writer(buf, lineterminator="\n")
-    wr.writerow(cols)
-    for mo in moments:
-        wr.writerow([_cell(mo.get(c, "")) for c in cols])
-    with atomic_output(folder / "moments.csv") as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    write_csv(folder / "moments.csv", cols, [[mo.get(c, "") for c in cols] for mo in moments],
+              fmt=_cell)  # fmt: skip
     written += ["moments.csv", *(mo["thumbnail"] for mo in moments if "thumbnail" in mo)]
     kinds: dict[str, int] = {}
     for k in art.values():
@@ -319,21 +316,23 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             flow = _cell(
                 float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
             )
-        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["id", "condition", *extra, "flow", "epof_csv"])
-    w.writerows(rows)
+        video = [] if "video" in header else [vs[0]["video"] if len({x["video"] for x in vs}) == 1 else ""]
+        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv, *video])
     data = folder / "DATA.csv"
-    with atomic_output(data) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    # the video column lets the analysis give per-video tables and warn on pooled flows
+    vcol = [] if "video" in header else ["video"]
+    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv", *vcol], rows, fmt=_cell)
     info = {"dir": str(folder), "data": str(data),
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:
         study = read_study(data, flow_stat=q["flow_stat"])
-        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"],
-                           k_of_formula=q.get("k_of", "invariant"),
-                           notes=confound_notes(table))  # fmt: skip
+        kw = {"exclude_below": q["exclude_below"], "conditions": q["conditions"],
+              "k_of_formula": q.get("k_of", "invariant")}  # fmt: skip
+        try:  # the design's statistics (tests.csv, model.csv, analysis.md) where the data allow
+            an = analyze_study(study, notes=confound_notes(table), stats=StatsOptions(), **kw)
+        except InputError as e:  # too few for them: the paper's analysis alone, and why
+            an = analyze_study(study, notes=[*confound_notes(table), f"no design statistics: {e}"],
+                               **kw)  # fmt: skip
         info["files"] = [p.name for p in write_report(an, folder)]
         info["problems"] = list(study.problems)
         info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]

@@ -60,7 +60,7 @@ def _video_dict(v: VideoSpec) -> dict:
 
 def _item(w: ViewingSpec) -> dict:
     return {"id": w.id, "trace": "" if w.trace is None else str(w.trace), "format": w.format,
-            "user": w.user, "plot": w.plot}  # fmt: skip
+            "user": w.user, "plot": w.plot, "trace_opts": asdict(w.trace_opts)}  # fmt: skip
 
 
 #: Runs of a task whose worker process died before it is failed (a task's own errors
@@ -140,6 +140,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
         if w.id in plan.unchanged:
             prev = plan.unchanged[w.id]
             rows[w.id] = {**base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
+                          **{c: prev[c] for c in tasks.PART_MEAN_COLUMNS if c in prev},
                           "status": "ok", "warnings": prev.get("warnings", ""),
                           "resumed": True}  # fmt: skip
     timings["plan"] = time.perf_counter() - t0
@@ -332,7 +333,8 @@ class _Scheduler:
         if w.id not in self.results or (w.render and w.id not in self.renders):
             return
         r = self.results[w.id]
-        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
+        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS},
+               **{c: r[c] for c in tasks.PART_MEAN_COLUMNS if c in r}}  # fmt: skip
         status = r["status"]
         if status == "ok" and w.render and self.renders[w.id]["status"] != "ok":
             status = f"render: {self.renders[w.id]['status']}"

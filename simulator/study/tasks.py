@@ -22,10 +22,11 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
+from simulator.core.traceopts import TraceOptions, translate
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
-from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
+from simulator.media.gridfile import GridFile, cells_from_meta, check_field_values, load_grid
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
 from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
@@ -35,12 +36,13 @@ from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.study.viewers import SCRIPTED
+from simulator.traces.clock import check_span, place, read_trace
 from simulator.traces.path import HeadPath, synth
-from simulator.traces.readers import TraceFile, load_headpath
+from simulator.traces.readers import TraceFile
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec
 
-__all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
+__all__ = ["PART_MEAN_COLUMNS", "epof_task", "preprocess_task", "render_task", "viewing_stats"]
 
 # Per worker process: kept between tasks (a pool or Ray worker runs many tasks).
 _GRIDS: dict[tuple, GridFile] = {}
@@ -64,9 +66,9 @@ def _source(video: dict) -> Source:
 
 
 def _error_line(e: BaseException) -> str:
-    """One line for a failed step: the InputError's message, an OSError's file and reason
-    (a full disk), or the internal error's type."""
-    text = " ".join(str(e).split())
+    """One line for a failed step: the InputError's message (a trace option named by its
+    manifest key), an OSError's file and reason (a full disk), or the internal error's type."""
+    text = translate(" ".join(str(e).split()), "manifest")  # a study's fix: its manifest keys
     if isinstance(e, OSError) and e.strerror:  # an environment error: a full disk, permissions
         return f"{e.filename}: {e.strerror}" if e.filename else e.strerror
     return text if isinstance(e, InputError) else f"internal error: {type(e).__name__}: {text}"
@@ -83,7 +85,7 @@ def _grid(path: str) -> GridFile:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            g = load_grid(path)
+            g = load_grid(path, scan=False)  # the values checked once in memory, below
         if g.field_dps is not None:
             # Read once per worker as float32, not once per viewing: a worker holds one
             # video's field at a time (one grid cached), the price of not decompressing it
@@ -91,6 +93,7 @@ def _grid(path: str) -> GridFile:
             g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
         if g.field_trans_dps is not None:  # the same for the field without the rotation
             g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
+        check_field_values(g)
         _GRIDS[key] = g
     return _GRIDS[key]
 
@@ -104,21 +107,40 @@ def _artefacts(path: str, grid: GridFile) -> Artefacts:
     return _ARTEFACTS[key]
 
 
-def _trace(path: str, fmt: str, user: int | None, grid: GridFile | None = None) -> HeadPath:
-    """The head path of one viewing, with its own warnings (the file's and its user's
-    sampling): a multi-user file is parsed once per worker. A scripted viewer (``fmt``
-    ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+def _trace(item: dict, grid: GridFile | None = None) -> HeadPath:
+    """The head path of one viewing (``item``: ``trace``, ``format``, ``user``,
+    ``trace_opts``), read with its trace options and its own warnings (the file's and its
+    user's sampling): a multi-user file is parsed once per worker. A scripted viewer
+    (``format`` ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+    path, fmt, user = item["trace"], item["format"], item["user"]
     if fmt.startswith(SCRIPTED):
         end = (int(grid.meta.get("start_frame", 0)) + grid.n_frames + 1) / grid.fps
         return synth(fmt[len(SCRIPTED) :], end, seed=int(user or 0))
+    opts = _trace_opts(item)
     if user is None:
-        return load_headpath(path, fmt)
+        return read_trace(path, opts)
     key = (*_file_key(path), fmt)
     if key not in _TRACES:
         if len(_TRACES) > 8:
             _TRACES.clear()
         _TRACES[key] = TraceFile(path, fmt)
-    return _TRACES[key].user(user)
+    return place(_TRACES[key].user(user), opts)
+
+
+def _check_span(item: dict, hp: HeadPath, grid: GridFile) -> None:
+    """A viewing's trace span checked against its grid's whole video (a scripted viewer's
+    covers it): :func:`simulator.traces.clock.check_span`, in the manifest's terms."""
+    if not item["format"].startswith(SCRIPTED):
+        vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+        n_video = int(vid.get("n_frames") or grid.n_frames)
+        name = Path(str(vid.get("path", ""))).name
+        check_span(hp, n_video / grid.fps, _trace_opts(item), video=name)
+
+
+def _trace_opts(item: dict) -> TraceOptions:
+    """A viewing's trace options (the manifest's: errors name its keys)."""
+    given = {k: v for k, v in (item.get("trace_opts") or {}).items() if k != "origin"}
+    return TraceOptions(**given, origin="manifest")
 
 
 def preprocess_task(video: dict, output: str, threads: int) -> dict:
@@ -163,11 +185,20 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
             "cpu_s": time.process_time() - c0}  # fmt: skip
 
 
-def viewing_stats(epof_dps, opacity) -> dict:
-    """The numbers of a viewing's row in ``viewings.csv`` (deg/s; opacity 0..1)."""
+#: The means of the EPOF's parts (:mod:`simulator.epof.parts`) in a viewing's row; empty
+#: for a viewing whose grid has no per-frame camera rotation.
+PART_MEAN_COLUMNS = ("epof_rot_mean_dps", "epof_trans_mean_dps")
+
+
+def viewing_stats(epof_dps, opacity, parts=None) -> dict:
+    """The numbers of a viewing's row in ``viewings.csv`` (deg/s; opacity 0..1); with
+    ``parts = (epof_rot_dps, epof_trans_dps)`` (or None: empty) their means too."""
     e = np.asarray(epof_dps, np.float64)
     o = np.asarray(opacity, np.float64)
+    means = ("", "") if parts is None or any(x is None for x in parts) else (
+        float(np.mean(parts[0])), float(np.mean(parts[1])))  # fmt: skip
     return {
+        **dict(zip(PART_MEAN_COLUMNS, means)),
         "frames": int(e.size),
         "epof_mean_dps": float(np.mean(e)),
         "epof_median_dps": float(np.median(e)),
@@ -226,7 +257,8 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 try:
-                    hp = _trace(it["trace"], it["format"], it["user"], grid)
+                    hp, topts = _trace(it, grid), _trace_opts(it)
+                    _check_span(it, hp, grid)
                     res = compute_epof(
                         grid,
                         hp,
@@ -235,7 +267,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                         frustum=frustum,
                         top_k=opts["top_k"],
                         rule=rule,
-                        hold=opts["hold_last"],
+                        hold=opts["hold_last"] or topts.hold_last,
                         method=opts["method"],
                         artefacts=art,
                     )
@@ -244,7 +276,8 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
             write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
             if it.get("plot"):
                 plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
-            rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
+            parts = (res.epof_rot_dps, res.epof_trans_dps)
+            rec.update(viewing_stats(res.epof_dps, res.opacity, parts), status="ok")
         except Exception as e:  # noqa: BLE001
             rec["status"] = _error_line(e)
         rec["seconds"] = time.perf_counter() - t0
@@ -277,7 +310,8 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             grid = _grid(grid_path)
-            hp = _trace(item["trace"], item["format"], item["user"], grid)
+            hp = _trace(item, grid)
+            _check_span(item, hp, grid)  # as the EPOF task: an implausible span is refused
         s = render_viewing(
             dataclasses.replace(_source(video), eye="left"),
             hp,
