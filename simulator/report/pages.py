@@ -128,6 +128,8 @@ class Site:
         filters += ' <span id="shown"></span>'
         text = ("<p>Click a column header to sort; the filters keep matching rows. "
                 f"{len(self.rows)} viewings.</p>")  # fmt: skip
+        if (self.s.get("model") or {}).get("note"):  # [model]: the predictions' accuracy
+            text += f'<p class="model">{_e(self.s["model"]["note"])}</p>'
         return _page("Viewings", text + f'<p class="filters">{filters}</p>'
                      + _table(cols, body, "viewings sortable"))  # fmt: skip
 
