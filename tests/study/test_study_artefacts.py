@@ -58,6 +58,8 @@ def test_study_moments_leave_out_artefacts(cut_clip, tmp_path):
     assert main(["report", str(out)]) == 0
     page = next((out / "report").glob("video*cut*.html")).read_text()
     assert "frames left out as artefacts (cut: 1)" in page
+    # The summary names the opacity rule: the default, absolute (issue 37).
+    assert "GRF opacity rule absolute 5-30 deg/s" in (out / "report" / "index.html").read_text()
     # --no-artefacts: every frame kept (the cached grid reused), the cut ranked again.
     off = tmp_path / "off"
     assert main(["study", str(m), "-o", str(off), "--cache-dir", str(tmp_path / "c"),
