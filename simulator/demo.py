@@ -34,7 +34,7 @@ from simulator.core.progress import Progress
 from simulator.epof.viewing import compute_epof, write_epof_csv
 from simulator.media.gridfile import load_grid
 from simulator.media.source import Source
-from simulator.mitigation.grf import GrfConfig
+from simulator.mitigation.grf import GrfConfig, rule_from_options
 from simulator.preprocess.paper import preprocess_video
 from simulator.render.eye import RenderConfig
 from simulator.sphere.geometry import head_rotation, perspective_rays
@@ -194,18 +194,23 @@ def _exact_epof(scene, time_s, res) -> np.ndarray:
     )
 
 
+#: The commands' default opacity rule (absolute, docs/epof.md), as ``vimsim epof`` and ``render``.
+_RULE = rule_from_options(lambda name: None, str)
+
+
 def _render(cfg: DemoConfig, source, hpath, outdir, grid, progress) -> None:
     """Render the per-eye videos with GRFs (what ``vimsim render`` runs). The demo stops at
     the first failed step (as every step before it): a failed render raises, and the
     folder keeps no completion marker."""
-    view = ViewSpec(RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)))
+    view = ViewSpec(RenderConfig(eye_size=cfg.render_size, grf=GrfConfig(seed=cfg.seed)),
+                    rule=_RULE)  # fmt: skip
     render_viewing(source, hpath, outdir, grid=grid, view=view, progress=progress)
 
 
 def _epof_and_truth(grid, grid_def, hp, scfg, tpath, out):
     """``(EPOF result, window truth, EPOF of the truth grid, exact viewport EPOF)``; the
     EPOF CSV written to ``out/epof.csv``."""
-    res = compute_epof(grid, hp)
+    res = compute_epof(grid, hp, rule=_RULE)
     write_epof_csv(out / "epof.csv", res)
     tr = load_truth(tpath)
     scene = make_scene(scfg)
@@ -249,6 +254,7 @@ def _summary(cfg, scfg, grid_def, grid, res, accuracy, render_error, log, t_all,
             "flow": grid.meta.get("flow"),
         },
         "epof_dps": {"median": float(np.median(res.epof_dps)), "max": float(np.max(res.epof_dps))},
+        "opacity_rule": _RULE.describe(),
         "opacity_thresholds_dps": [float(v) for v in res.thresholds_dps],
         "accuracy_vs_truth": accuracy,
         "render": {

@@ -10,7 +10,7 @@ import pytest
 
 from simulator.cli import COMMANDS, build_parser, main
 from simulator.core import choices
-from simulator.mitigation.grf import OPACITY_SOURCES
+from simulator.core.choices import OPACITY_SOURCES
 from simulator.sphere import windows
 from simulator.synth import SCENES
 from simulator.traces import readers

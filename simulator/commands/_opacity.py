@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 
 from simulator.commands._types import nonneg_float, percentile, seconds
-from simulator.core.choices import OPACITY_SOURCES, SYSTEM_PRESETS, X264_PRESETS
+from simulator.core.choices import (
+    OPACITY_RULE_DEFAULT,
+    OPACITY_RULE_HELP,
+    OPACITY_RULES,
+    OPACITY_SOURCES,
+    SYSTEM_PRESETS,
+    X264_PRESETS,
+)
 
 __all__ = ["add_opacity_arguments", "add_preset_argument", "rule_from_args", "system_preset"]
 
@@ -49,14 +56,14 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
         type=percentile,
         default=10.0,
         metavar="P",
-        help="opacity 0 at this percentile (10)",
+        help="relative rules (comfort, paper): opacity 0 at this percentile (10)",
     )
     g.add_argument(
         "--high-pct",
         type=percentile,
         default=90.0,
         metavar="P",
-        help="opacity 1 at this percentile (90)",
+        help="relative rules: opacity 1 at this percentile (90)",
     )
     g.add_argument(
         "--opacity-source",
@@ -67,26 +74,26 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
     )
     g.add_argument(
         "--opacity-rule",
-        choices=("comfort", "paper", "absolute"),
-        default="comfort",
-        help="comfort (default): eased, see --ease-in/--ease-out; paper: the paper's rule, "
-        "opacity follows the EPOF frame by frame (no smoothing, no easing); absolute: eased "
-        "as comfort, opacity 0 at --low-dps and 1 at --high-dps deg/s whatever the video "
-        "(comfort and paper are relative: percentiles of this video's flow)",
+        choices=OPACITY_RULES,
+        default=None,  # not given: OPACITY_RULE_DEFAULT (a --preset can tell it was not given)
+        help="; ".join(f"{k}: {v}" for k, v in OPACITY_RULE_HELP.items())
+        + f" (not given: {OPACITY_RULE_DEFAULT}; docs/epof.md: the thresholds and why)",
     )
     g.add_argument(
         "--low-dps",
         type=nonneg_float,
         default=None,
         metavar="A",
-        help="absolute rule: opacity 0 at A deg/s (default 5, the vection band's lower edge)",
+        help="absolute rule (the default): opacity 0 at A deg/s (default 5, the vection "
+        "band's lower edge)",
     )
     g.add_argument(
         "--high-dps",
         type=nonneg_float,
         default=None,
         metavar="B",
-        help="absolute rule: opacity 1 at B deg/s (default 30, the provocative band's lower edge)",
+        help="absolute rule (the default): opacity 1 at B deg/s (default 30, the provocative "
+        "band's lower edge)",
     )
     g.add_argument(
         "--smooth",
@@ -101,7 +108,7 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
         default=None,
         metavar="S",
         help="grains come in: a full 0 -> 1 opacity change takes at least S seconds "
-        "(default 0.4 with the comfort rule; 0 = no limit)",
+        "(default 0.4 with the absolute and comfort rules; 0 = no limit)",
     )
     g.add_argument(
         "--ease-out",
@@ -109,7 +116,7 @@ def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES
         default=None,
         metavar="S",
         help="grains leave: a full 1 -> 0 change takes at least S seconds "
-        "(default 1.5 with the comfort rule; 0 = no limit)",
+        "(default 1.5 with the absolute and comfort rules; 0 = no limit)",
     )
 
 

@@ -151,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "
         f"opacity 0 at {lo:.3g}, 1 at {hi:.3g} deg/s ({res.meta['method']} EPOF, "
-        f"{'paper' if rule.is_paper else 'eased'} opacity rule)"
+        f"{rule.label} opacity rule)"
     )
     return 0
 

@@ -72,7 +72,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(default): the precision vimsim epof uses (float32 POFs, the field's stored dtype)",
     )
     add_fov_arguments(p, what="viewport", default="the grid's window FOV")
-    # The same rule options (and defaults: comfort) as vimsim epof; the 'viewing' source
+    # The same rule options (and defaults: absolute) as vimsim epof; the 'viewing' source
     # needs a whole viewing, which an engine export does not have: not offered.
     add_opacity_arguments(p, sources=("grid",))
     _add_overlay_arguments(p)
@@ -248,7 +248,8 @@ def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation, preset
 
 def _run_cao_csv(args: argparse.Namespace, rule) -> int:
     """``--format cao-csv``: the percentile file from the chosen rule (fixed px/frame for
-    ``--preset cao2021-code``, else the grid's pof_px percentiles; absolute deg/s refused)."""
+    ``--preset cao2021-code``, else the grid's pof_px percentiles, also under the default
+    absolute rule; an absolute deg/s rule asked for is refused)."""
     import dataclasses
 
     import numpy as np
@@ -264,7 +265,7 @@ def _run_cao_csv(args: argparse.Namespace, rule) -> int:
 
         pct, how = (CAO_LOW_PX, CAO_HIGH_PX), "the authors' fixed scale"
         g = dataclasses.replace(g, pof_px=preset_pof_px(g))  # their frame-0 row, if measured
-    elif rule.is_absolute:
+    elif rule.is_absolute and (args.opacity_rule or args.low_dps is not None or args.high_dps is not None):
         raise InputError(
             "--format cao-csv writes px/frame thresholds; an absolute deg/s rule has none: "
             "use --preset cao2021-code or a relative --opacity-rule"

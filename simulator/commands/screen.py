@@ -25,8 +25,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "moments with thumbnails, the whole sphere's flow and a one-page summary.png, and a "
         "comparison table across videos (OUTDIR/screen/comparison.csv) with the share of "
         "time in each named flow band, all on one offline page OUTDIR/screen/index.html "
-        "(docs/screen.md). Codec keyframes, hard cuts, fades "
-        "and static overlays appearing are detected and left out (--no-artefacts: kept).",
+        "(docs/screen.md). Codec keyframes (confirmed by the decoder's key-frame flags), hard "
+        "cuts, fades and screen-fixed graphics (overlays, lower thirds, end cards) are detected "
+        "and left out; camera-fixed content (a hand, a rig, a thumb at the lens) is reported, "
+        "kept in the EPOF and never ranked as a moment (--no-artefacts: all kept). Opacity: the "
+        "absolute rule by default (0 at 5, 1 at 30 deg/s; --opacity-rule paper: the paper's).",
     )
     p.add_argument("videos", nargs="+", metavar="VIDEO", help="the videos (equirect unless --projection or their metadata says otherwise)")
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
@@ -47,7 +50,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="frame layout of every VIDEO (stereo: the left eye is screened)")  # fmt: skip
     add_source_arguments(p, orientation=False)  # --projection, --lens-fov of every VIDEO
     p.add_argument("--no-artefacts", action="store_true",
-                   help="do not detect keyframes, cuts, fades and overlays (keep every frame)")  # fmt: skip
+                   help="do not detect keyframes, cuts, fades, graphics and camera-fixed content "
+                   "(keep every frame)")  # fmt: skip
     p.add_argument("--executor", default="local", metavar="local|ray|ray:ADDRESS",
                    help="as vimsim study (default local)")  # fmt: skip
     p.add_argument("--workers", type=int, default=None, metavar="N",

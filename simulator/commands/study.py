@@ -58,6 +58,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.add_argument(
+        "--no-artefacts",
+        action="store_true",
+        help="keep every frame: codec keyframes, cuts, fades and screen-fixed graphics are "
+        "detected by default (cached in the grid) and left out of the opacity thresholds, "
+        "statistics and moments (as [epof] artefacts = false)",
+    )
+    p.add_argument(
         "--dry-run",
         action="store_true",
         help="check everything the run would (globs, users, that every trace covers its "
@@ -137,6 +144,11 @@ def run(args: argparse.Namespace) -> int:
 
     parse_executor(args.executor)  # an unknown executor is a usage error before anything
     manifest = load_manifest(args.manifest)
+    if args.no_artefacts:  # wins over the manifest's [epof] artefacts
+        from dataclasses import replace
+
+        manifest = replace(manifest, epof={**manifest.epof, "artefacts": False},
+                           videos=tuple(replace(v, artefacts=False) for v in manifest.videos))  # fmt: skip
     if args.dry_run:
         return _dry_run(args, manifest)
     if not args.no_report:  # a report folder holding others' files: refused before any work

@@ -24,6 +24,8 @@ __all__ = [
     "MAX_CLIP_FRAMES",
     "MITIGATIONS",
     "MITIGATION_HELP",
+    "OPACITY_RULE_DEFAULT",
+    "OPACITY_RULE_HELP",
     "OPACITY_RULES",
     "OPACITY_SOURCES",
     "PREPROCESS_METHODS",
@@ -105,9 +107,21 @@ MITIGATIONS: tuple[str, ...] = tuple(MITIGATION_HELP)
 #: Where the opacity percentiles come from: every window of the grid, or this viewing's EPOF.
 OPACITY_SOURCES: tuple[str, ...] = ("grid", "viewing")
 
-#: Opacity rules: ``comfort`` (eased) and ``paper`` are relative (percentiles of the video's
-#: flow); ``absolute`` is eased, between fixed deg/s (``low_dps``/``high_dps``).
-OPACITY_RULES: tuple[str, ...] = ("comfort", "paper", "absolute")
+#: Opacity rules, one entry each (a new rule: one entry here and one branch in
+#: :func:`simulator.mitigation.grf.rule_from_options`): ``absolute`` (the default) is eased,
+#: between fixed deg/s (``low_dps``/``high_dps``, the same for every video); ``comfort``
+#: (eased) and ``paper`` are relative (percentiles of the video's flow).
+OPACITY_RULE_HELP: dict[str, str] = {
+    "comfort": "eased as absolute, opacity 0 at --low-pct and 1 at --high-pct percentile of "
+    "this video's flow (relative)",
+    "paper": "the paper's rule: opacity 0 at the 10th, 1 at the 90th percentile of this "
+    "video's flow (relative; --low-pct/--high-pct), frame by frame (no smoothing, no easing)",
+    "absolute": "the default: opacity 0 at --low-dps (5) and 1 at --high-dps (30) deg/s "
+    "whatever the video, eased (--ease-in/--ease-out); a calm video gets no grains",
+}
+OPACITY_RULES: tuple[str, ...] = tuple(OPACITY_RULE_HELP)
+#: The rule every command, manifest, report and export uses unless told otherwise.
+OPACITY_RULE_DEFAULT = "absolute"
 
 #: Scripted head paths (:func:`simulator.traces.path.synth`).
 SYNTH_KINDS: tuple[str, ...] = ("static", "sweep", "sine", "look-around", "keyframes")

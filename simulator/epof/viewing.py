@@ -29,7 +29,7 @@ from simulator.media.lazyfield import take_rows
 from simulator.media.spherical import view_angles_deg
 from simulator.mitigation.bands import draw_bands
 from simulator.mitigation.grf import OpacityRule
-from simulator.preprocess.artefacts import Artefacts
+from simulator.preprocess.artefacts import KEPT_KINDS, Artefacts
 from simulator.sphere.cells import Frustum
 from simulator.traces.path import HeadPath
 
@@ -221,7 +221,7 @@ def _opacity(rule: OpacityRule, grid: GridFile, e, rows, artefacts: Artefacts | 
     if len(artefacts.kind) != grid.n_frames:
         raise InputError(f"artefacts: {len(artefacts.kind)} frames; the grid has {grid.n_frames}")
     kinds = tuple(artefacts.kind[int(r)] for r in rows)
-    bad = np.array([k != "" for k in kinds], bool)
+    bad = np.array([k not in ("", *KEPT_KINDS) for k in kinds], bool)  # camera-fixed: seen, kept
     keep = ~bad if rule.source == "viewing" else ~artefacts.mask
     thr = rule.fit(grid, e, keep=keep if keep.any() else None)
     return thr, rule(_held(e, bad), thr, fps=grid.fps), kinds

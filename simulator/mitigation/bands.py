@@ -36,6 +36,7 @@ __all__ = [
     "Band",
     "band_of",
     "draw_bands",
+    "rule_text",
     "share_above",
 ]
 
@@ -66,6 +67,19 @@ BANDS: tuple[Band, ...] = (
 #: band's lower edge, 1 at the provocative band's.
 ABSOLUTE_LOW_DPS = 5.0
 ABSOLUTE_HIGH_DPS = 30.0
+
+
+def rule_text(rule: dict | None) -> str:
+    """An opacity rule in a few words for tables and pages: ``absolute 5-30 deg/s``,
+    ``paper P10-P90``, ``comfort P10-P90``; ``rule`` is an ``OpacityRule.describe()`` dict
+    (``name``) or a study's ``[epof]`` options (``opacity_rule``); "" for None. A record
+    from before rules had names says ``relative``."""
+    if not rule:
+        return ""
+    name = rule.get("name") or rule.get("opacity_rule")
+    if rule.get("scale") == "absolute" or (name == "absolute" and rule.get("low_dps") is not None):
+        return f"{name or 'absolute'} {rule['low_dps']:g}-{rule['high_dps']:g} deg/s"
+    return f"{name or 'relative'} P{rule.get('low_pct', 10):g}-P{rule.get('high_pct', 90):g}"
 
 
 def band_of(flow_dps: float) -> str:

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -39,25 +39,18 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, check_input_file
 from simulator.media.video import iter_frames, probe
+from simulator.preprocess.fixedcontent import fixed_content, keyframe_flags
 
-__all__ = [
-    "ARTEFACT_KINDS",
-    "Artefacts",
-    "FrameSignals",
-    "SignalCollector",
-    "artefacts_for_grid",
-    "artefacts_from_meta",
-    "artefacts_meta",
-    "detect_artefacts",
-    "frame_signals",
-    "load_artefacts",
-    "no_artefacts",
-    "save_artefacts",
-    "stored_artefacts",
-]
+__all__ = ["ARTEFACT_KINDS", "KEPT_KINDS", "Artefacts", "FrameSignals", "SignalCollector",
+           "artefacts_for_grid", "artefacts_from_meta", "artefacts_meta", "detect_artefacts",
+           "frame_signals", "load_artefacts", "no_artefacts", "save_artefacts",
+           "stored_artefacts"]  # fmt: skip
 
-#: The kinds, in the order a frame carrying two is labelled (the first wins).
-ARTEFACT_KINDS: tuple[str, ...] = ("cut", "fade", "keyframe", "overlay")
+#: The kinds, in the order a frame carrying two is labelled (the first wins); ``overlay``
+#: and ``camera-fixed``: :mod:`simulator.preprocess.fixedcontent`.
+ARTEFACT_KINDS: tuple[str, ...] = ("cut", "fade", "keyframe", "overlay", "camera-fixed")
+#: Kinds reported but kept in the EPOF (viewers see them): never a provocative moment only.
+KEPT_KINDS: tuple[str, ...] = ("camera-fixed",)
 
 #: Size (W, H) of the grayscale picture the signals are taken from.
 SIGNAL_SIZE = (128, 64)
@@ -106,6 +99,8 @@ class FrameSignals:
     fps : frames per second
     hist : (T,) L1 distance between the 32-bin gray histograms of frames t - 1 and t
         (0..2; camera motion over a 360 picture hardly changes it, a cut does)
+    block_std : (T, B) spatial standard deviation per block (gray levels; fixed content)
+    key : (T,) the decoder's key-frame flags (:func:`~simulator.preprocess.fixedcontent.keyframe_flags`)
     """
 
     mean: NDArray[np.float64]
@@ -115,6 +110,8 @@ class FrameSignals:
     coarse: NDArray[np.float32]
     fps: float
     hist: NDArray[np.float64] | None = None
+    block_std: NDArray | None = None
+    key: NDArray[np.bool_] | None = None
 
     @property
     def n_frames(self) -> int:
@@ -134,8 +131,8 @@ class Artefacts:
 
     @property
     def mask(self) -> NDArray[np.bool_]:
-        """(T,) True on an artefact frame."""
-        return np.array([k != "" for k in self.kind], dtype=bool)
+        """(T,) True on an artefact frame left out of the EPOF (not :data:`KEPT_KINDS`)."""
+        return np.array([k not in ("", *KEPT_KINDS) for k in self.kind], dtype=bool)
 
     def counts(self) -> dict[str, int]:
         """Frames per kind."""
@@ -164,6 +161,7 @@ class SignalCollector:
         self.blocks: list[NDArray] = []
         self.coarse: list[NDArray] = []
         self.hists: list[float] = []
+        self.stds_b: list[NDArray] = []
         self._prev: NDArray | None = None
         self._hist: NDArray | None = None
 
@@ -175,6 +173,8 @@ class SignalCollector:
         self.means.append(float(g.mean()))
         self.stds.append(float(g.std()))
         self.coarse.append(cv2.resize(g, (16, 8), interpolation=cv2.INTER_AREA).ravel())
+        blk = g.reshape(bh, h // bh, bw, w // bw)
+        self.stds_b.append(blk.std(axis=(1, 3)).ravel().astype(np.float16))
         hist = np.bincount(np.clip(g, 0, 255).astype(np.uint8).ravel() // 8, minlength=32) / g.size
         self.hists.append(0.0 if self._hist is None else float(np.abs(hist - self._hist).sum()))
         self._hist = hist
@@ -202,15 +202,8 @@ class SignalCollector:
         bd[0] = bd[1]
         hist = np.array(self.hists)
         hist[0] = hist[1]
-        return FrameSignals(
-            np.array(self.means),
-            np.array(self.stds),
-            corr,
-            bd,
-            np.stack(self.coarse),
-            float(fps),
-            hist,
-        )
+        return FrameSignals(np.array(self.means), np.array(self.stds), corr, bd,
+                            np.stack(self.coarse), float(fps), hist, np.stack(self.stds_b))  # fmt: skip
 
 
 def frame_signals(
@@ -224,7 +217,7 @@ def frame_signals(
     col = SignalCollector()
     for f in iter_frames(video, fmt="gray", layout=layout, eye=eye, start=start, end=end):
         col.add(f)
-    return col.result(info.fps, str(video))
+    return replace(col.result(info.fps, str(video)), key=keyframe_flags(video, start=start, end=end))
 
 
 def _neighbour_median(x: NDArray, nb: int = _NB) -> NDArray:
@@ -421,6 +414,13 @@ def detect_artefacts(
     labels["keyframe"][0] = labels["cut"][0] = False  # row 0 repeats row 1
     if sig is not None:  # weaker resets on a regular period count too
         labels["keyframe"] |= _on_period(labels["keyframe"], (jump >= _DIFF_RATIO_PERIODIC) & ~cut)
+    if sig is not None and sig.key is not None and len(sig.key) == T:  # the decoder's own flags
+        labels["keyframe"] &= np.asarray(sig.key, bool)
+    fixed = {"camera-fixed": np.zeros(T, bool), "events": []}
+    if sig is not None and sig.block_std is not None:  # screen-fixed graphics, camera-fixed content
+        fixed = fixed_content(sig.block_diff, sig.block_std, rate, onset=labels["cut"] | labels["fade"])
+        labels["overlay"] |= fixed["overlay"]
+    labels["camera-fixed"] = fixed["camera-fixed"]
     period = _periodic(np.flatnonzero(labels["keyframe"]).tolist())
     kind = [""] * T
     for k in reversed(ARTEFACT_KINDS):  # the first kind in ARTEFACT_KINDS wins
@@ -435,15 +435,17 @@ def detect_artefacts(
     for e in events:
         e["start_s"] = e["start_frame"] / rate if rate else math.nan
         e["end_s"] = e["end_frame"] / rate if rate else math.nan
-    return Artefacts(tuple(kind), tuple(events), period, meta={"detected": True,
-                     "signals": "picture+flow" if sig is not None else "flow"})  # fmt: skip
+    return Artefacts(tuple(kind), tuple(events), period, meta={"detected": True, "fixed": fixed["events"],
+                     "signals": "picture+flow" if sig is not None else "flow",
+                     "keyframe_flags": sig is not None and sig.key is not None})  # fmt: skip
 
 
 def artefacts_meta(art: Artefacts) -> dict:
     """``art`` as a grid file's ``meta["artefacts"]``: its runs (events), not one entry per
     frame, so that the meta stays small for long videos."""
     return {"n_frames": len(art.kind), "keyframe_period": art.keyframe_period,
-            "signals": art.meta.get("signals", ""), "events": [dict(e) for e in art.events]}  # fmt: skip
+            "signals": art.meta.get("signals", ""), "events": [dict(e) for e in art.events],
+            "fixed": list(art.meta.get("fixed", []))}  # fmt: skip
 
 
 def artefacts_from_meta(d: dict) -> Artefacts:
@@ -458,7 +460,8 @@ def artefacts_from_meta(d: dict) -> Artefacts:
     except (KeyError, TypeError, ValueError, IndexError):
         raise InputError("grid meta artefacts: malformed; preprocess the video again") from None
     return Artefacts(tuple(kind), tuple(d["events"]), d.get("keyframe_period"),
-                     meta={"detected": True, "signals": d.get("signals", ""), "stored": True})  # fmt: skip
+                     meta={"detected": True, "signals": d.get("signals", ""), "stored": True,
+                           "fixed": d.get("fixed", [])})  # fmt: skip
 
 
 def artefacts_for_grid(grid, *, video=None) -> Artefacts:

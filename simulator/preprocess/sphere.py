@@ -20,7 +20,7 @@ import functools
 import math
 import warnings
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
@@ -36,6 +36,7 @@ from simulator.media.gridfile import FieldSpool, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
+from simulator.preprocess.fixedcontent import keyframe_flags
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
 from simulator.preprocess.slowflow import SlowRefine, slow_refine_desc
@@ -487,7 +488,9 @@ def preprocess_sphere(
             warnings.warn(f"{src}: expected {end_f - start_f} frames, decoded {T}", stacklevel=2)
         meta = sphere_meta(source, T, start_f, desc, cov, config, default_stride, field_dtype)
         if col is not None:
-            meta["artefacts"] = artefacts_meta(detect_artefacts(col.result(fps, src), dps))
+            sig = replace(col.result(fps, src),  # codec keyframes: confirmed by the packets' flags
+                          key=keyframe_flags(source.path, start=start_f, end=end_f))  # fmt: skip
+            meta["artefacts"] = artefacts_meta(detect_artefacts(sig, dps))
         meta["ego"] = EGO_META
         save_grid(
             out, dps, px, grid, meta, field_dps=(spool, field_dtype),

@@ -8,6 +8,8 @@ import json
 import re
 from pathlib import Path
 
+from simulator.mitigation.bands import rule_text as _rule_text
+
 __all__ = ["Site", "video_href", "viewing_href"]
 
 _SAFE = re.compile(r"[^A-Za-z0-9._-]")
@@ -96,7 +98,8 @@ class Site:
         }
         parts += ["<h2>Timings</h2>", _dl(t), "<h2>Versions</h2>", _dl(s.get("versions") or {})]
         parts.insert(0, f"<p>Study <b>{_e(s.get('name') or '')}</b>, manifest "
-                        f"{_e(Path(str(s.get('manifest', ''))).name)}, executor {_e(s.get('executor', ''))}.</p>")  # fmt: skip
+                        f"{_e(Path(str(s.get('manifest', ''))).name)}, executor {_e(s.get('executor', ''))}, "
+                        f"GRF opacity rule {_e(_rule_text((s.get('settings') or {}).get('epof')))}.</p>")  # fmt: skip
         return _page("Study summary", "\n".join(parts))
 
     def viewings_page(self) -> str:

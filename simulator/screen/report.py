@@ -28,7 +28,8 @@ from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
 from simulator.media.lazyfield import field_chunks
 from simulator.media.source import Source
-from simulator.mitigation.bands import BANDS, band_of, draw_bands, share_above
+from simulator.preprocess.artefacts import KEPT_KINDS
+from simulator.mitigation.bands import BANDS, band_of, draw_bands, rule_text, share_above
 from simulator.screen.page import write_screen_page
 from simulator.sphere.geometry import extract_view
 
@@ -183,7 +184,8 @@ def _video_report(v, grid_path: Path, epofs: list, out: OutputFolder, artefacts:
     T = g["pof"].shape[0]
     n = min([T, *(len(r.frame) for r in epofs)])
     kinds = list(epofs[0].artefact[:n]) if epofs and epofs[0].artefact is not None else [""] * n
-    bad = np.array([k != "" for k in kinds], bool)
+    # left out of the statistics; every kind (camera-fixed too) out of the moments
+    bad = np.array([k not in ("", *KEPT_KINDS) for k in kinds], bool)
     e = np.stack([np.asarray(r.epof_dps[:n]) for r in epofs])  # (viewers, n)
     op = np.stack([np.asarray(r.opacity[:n]) for r in epofs])
     t = np.asarray(epofs[0].time_s[:n])
@@ -199,7 +201,7 @@ def _video_report(v, grid_path: Path, epofs: list, out: OutputFolder, artefacts:
                zip(frames, t, g["sphere"][:n], g["trans"][:n], g["rot"][:n], kinds))  # fmt: skip
     p0 = int(np.argmin(np.abs(pitch)))
     m = g["pof"][:n, p0, :]
-    moments = _moments(m, yaw, g["fps"], bad)
+    moments = _moments(m, yaw, g["fps"], np.array([k != "" for k in kinds], bool))
     _thumbnails(v, g, moments, folder, float(pitch[p0]))
     _write_csv(folder / "moments.csv", ("rank", "time_s", "frame", "yaw_deg", "pitch_deg",
                "pof_dps", "band", "directions", "thumbnail"),
@@ -244,10 +246,7 @@ def _events(kinds, t) -> list[dict]:
 
 
 def _rule_name(r) -> str:
-    rule = (r.meta.get("settings") or {}).get("opacity_rule") or {}
-    if rule.get("scale") == "absolute":
-        return f"absolute {rule.get('low_dps'):g}-{rule.get('high_dps'):g} deg/s"
-    return f"relative P{rule.get('low_pct', 10):g}-P{rule.get('high_pct', 90):g}"
+    return rule_text((r.meta.get("settings") or {}).get("opacity_rule"))
 
 
 def _plt():

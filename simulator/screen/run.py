@@ -15,6 +15,7 @@ import math
 import re
 from pathlib import Path
 
+from simulator.core.choices import OPACITY_RULE_DEFAULT
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.discomfort.model import Model, load_model
@@ -185,7 +186,7 @@ def _epof_options(given: dict, artefacts: bool) -> dict:
     d = {
         "hfov_deg": None, "vfov_deg": None, "method": "auto", "top_k": None, "hold_last": True,
         "low_pct": 10.0, "high_pct": 90.0, "opacity_source": "grid", "smooth_s": 0.0,
-        "opacity_rule": "comfort", "ease_in_s": None, "ease_out_s": None,
+        "opacity_rule": OPACITY_RULE_DEFAULT, "ease_in_s": None, "ease_out_s": None,
     }  # fmt: skip
     d.update(given)
     d["artefacts"] = bool(artefacts)

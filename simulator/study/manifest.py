@@ -16,7 +16,8 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS, SYSTEM_PRESETS
+from simulator.core.choices import MITIGATIONS, OPACITY_RULE_DEFAULT, OPACITY_RULES, PROJECTIONS
+from simulator.core.choices import SYSTEM_PRESETS
 from simulator.core.choices import X264_PRESETS as _PRESETS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
@@ -339,7 +340,9 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
 
 def _epof(m: Path, t) -> dict:
     e = Entry(m, "[epof]", t or {}, _EPOF_KEYS)
-    rule = e.get("opacity_rule", (str,), "comfort", choices=OPACITY_RULES)
+    preset = e.get("preset", (str,), "vimsim", choices=SYSTEM_PRESETS)
+    dflt = {"paper": "paper", "cao2021-code": None}.get(preset, OPACITY_RULE_DEFAULT)
+    rule = e.get("opacity_rule", (str,), dflt, choices=OPACITY_RULES)
     dps = [e.number(k, None, lo=0.0) for k in ("low_dps", "high_dps")]
     if rule == "absolute":  # the defaults: the named bands' edges (rule_from_options checks)
         dps = [d if v is None else v for v, d in zip(dps, (ABSOLUTE_LOW_DPS, ABSOLUTE_HIGH_DPS))]
@@ -348,7 +351,6 @@ def _epof(m: Path, t) -> dict:
     high = e.number("high_pct", 90.0, lo=0.0, hi=100.0)
     if not low < high:
         e.fail(f"low_pct ({low}) must be below high_pct ({high})")
-    preset = e.get("preset", (str,), "vimsim", choices=SYSTEM_PRESETS)
     bad = [k for k in ("top_k", "artefacts", "fov", "hfov", "vfov", "headset") if k in e.t]
     if preset == "cao2021-code" and bad:  # the nearest window: no FOV, no top-k
         e.fail(f"preset = 'cao2021-code' cannot be combined with {bad[0]}")
@@ -364,14 +366,15 @@ def _epof(m: Path, t) -> dict:
         "high_pct": high,
         "opacity_source": e.get("opacity_source", (str,), "grid", choices=("grid", "viewing")),
         "smooth_s": e.number("smooth", 0.0, lo=0.0),
-        # As vimsim epof: the eased comfort rule by default, the paper's one option away.
+        # As vimsim epof: the absolute rule by default, the paper's one option away.
         "opacity_rule": rule,
         "ease_in_s": e.number("ease_in", None, lo=0.0),
         "ease_out_s": e.number("ease_out", None, lo=0.0),
         "low_dps": dps[0],  # the absolute rule's (None with another rule)
         "high_dps": dps[1],
         # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
-        "artefacts": e.get("artefacts", (bool,), False),
+        # keyframes, cuts, fades, overlays, camera-fixed: by default, not in the authors' system
+        "artefacts": e.get("artefacts", (bool,), preset != "cao2021-code"),
         "preset": preset,  # as --preset (docs/parity.md); the render's too, checked by _view
     }
 

@@ -26,6 +26,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder
 from simulator.discomfort.model import load_model
 from simulator.discomfort.predict import MODEL_COLUMNS, model_note, model_summary
+from simulator.mitigation.bands import rule_text
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
@@ -45,7 +46,7 @@ __all__ = ["VIEWING_COLUMNS", "default_cache_dir", "dry_run", "run_study"]
 VIEWING_COLUMNS = (
     "viewing", "participant", "condition", "video", "trace", "user", "frames",
     "epof_mean_dps", "epof_median_dps", "epof_p90_dps", "epof_max_dps", "opacity_mean",
-    "share_opacity_ge_0_5", "status", "warnings",
+    "share_opacity_ge_0_5", "opacity_rule", "status", "warnings",
 )  # fmt: skip
 _STAT_COLUMNS = VIEWING_COLUMNS[6:13]
 #: Warnings of one viewing in its ``warnings`` cell are joined by this.
@@ -155,7 +156,8 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
     ex.close(wait=False)  # Ray's runtime stops while the outputs are written
 
     t0 = time.perf_counter()
-    table = [rows[w.id] for w in manifest.viewings]
+    rule = rule_text(manifest.epof)  # one [epof] table: the same rule in every row
+    table = [{**rows[w.id], "opacity_rule": rule} for w in manifest.viewings]
     cols = VIEWING_COLUMNS
     if manifest.model is not None:  # [model]: each viewing's predicted discomfort
         cols = (*cols, *MODEL_COLUMNS)

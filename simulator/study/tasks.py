@@ -247,9 +247,9 @@ def viewing_stats(epof_dps, opacity, parts=None) -> dict:
 
 def _rule(opts: dict) -> OpacityRule:
     """The opacity rule of the ``[epof]`` table, by ``vimsim epof``'s one builder
-    (:func:`simulator.mitigation.grf.rule_from_options`: the eased comfort rule by default;
-    ``opacity_rule = "paper"``: the paper's unsmoothed rule; ``"absolute"``: between
-    ``low_dps`` and ``high_dps``)."""
+    (:func:`simulator.mitigation.grf.rule_from_options`: by default ``"absolute"``, eased
+    between ``low_dps`` and ``high_dps`` deg/s; ``opacity_rule = "paper"``: the paper's
+    unsmoothed rule; ``"comfort"``: eased percentiles)."""
     names = {"smooth": "smooth_s", "ease_in": "ease_in_s", "ease_out": "ease_out_s"}
 
     def get(k):

@@ -18,7 +18,7 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from simulator.core.choices import EPOF_METHODS, MITIGATIONS, SYSTEM_PRESETS
+from simulator.core.choices import EPOF_METHODS, MITIGATIONS, OPACITY_RULE_DEFAULT, SYSTEM_PRESETS
 from simulator.core.errors import InputError
 from simulator.core.resources import check_fits
 from simulator.mitigation.cao2021 import cao_grf_config
@@ -64,7 +64,7 @@ VIEW_OPTIONS: dict[str, object] = {
     "low_pct": 10.0,
     "high_pct": 90.0,
     "opacity_source": "grid",
-    "opacity_rule": "comfort",
+    "opacity_rule": OPACITY_RULE_DEFAULT,
     "smooth": None,
     "ease_in": None,
     "ease_out": None,
@@ -405,8 +405,9 @@ class _Options:
         preset = self.choice("preset", SYSTEM_PRESETS)
         if preset == "vimsim":
             return preset
+        raw = self.o.get if self.mapping else (lambda k: getattr(self.o, k, None))
         given = [k for k, v in (("method", "sphere"), ("opacity_rule", "absolute"))
-                 if self.get(k) == v]  # fmt: skip
+                 if raw(k) == v]  # as given: the absolute rule is also the default  # fmt: skip
         if preset == "cao2021-code":
             keys = ("grain_size", "density", "method", *RULE_OPTIONS)
             given += [k for k in keys if self.get(k) != VIEW_OPTIONS.get(k) and k not in given]

@@ -45,3 +45,20 @@ def test_wrong_length_is_refused(tmp_path):
     gf = load_grid(_gridfile(tmp_path, g, np.ones((10, *g.shape)), fps=10.0))
     with pytest.raises(Exception, match="artefacts: 3 frames; the grid has 10"):
         compute_epof(gf, synth("static", 2.0, rate_hz=50), artefacts=Artefacts(("",) * 3))
+
+
+def test_camera_fixed_frames_stay_in_the_epof(tmp_path):
+    """A hand or a thumb at the lens is seen: its frames stay in the thresholds and the
+    opacity follows them (nothing held), while the CSV still names them."""
+    g = GRIDS["default"]
+    pof = np.full((40, *g.shape), 10.0) + np.linspace(0, 5, 40)[:, None, None]
+    pof[20] = 500.0  # the thumb enters
+    gf = load_grid(_gridfile(tmp_path, g, pof, fps=10.0))
+    hp = synth("static", 4.0, rate_hz=50)
+    rule = OpacityRule(low_pct=0, high_pct=100)
+    kinds = tuple("camera-fixed" if i == 20 else "" for i in range(40))
+    res = compute_epof(gf, hp, rule=rule, artefacts=Artefacts(kinds))
+    plain = compute_epof(gf, hp, rule=rule)
+    assert res.thresholds_dps == pytest.approx(plain.thresholds_dps)  # kept in the thresholds
+    np.testing.assert_allclose(res.opacity, plain.opacity)  # not held
+    assert res.artefact == kinds and not Artefacts(kinds).mask.any()

@@ -146,6 +146,10 @@ def _reference(tmp_path: Path, grid: Path, seed: int, *extra) -> tuple:
     return ref, qt, q
 
 
+#: The rule the un-eased runtime opacity is compared in (vimsim epof's paper rule, _reference).
+PAPER = ("--opacity-rule", "paper")
+
+
 def _check_agreement(ref, e, op, frames, *, rel=1e-4):
     np.testing.assert_array_equal(frames, ref.frame)  # same frame for every time
     err = np.abs(e - ref.epof_dps) / np.abs(ref.epof_dps)
@@ -161,7 +165,7 @@ def test_paper_mode_agrees_with_vimsim_epof(tmp_path, harness, capsys):
     mode: float32 within 1e-4 relative; float16 within float16's rounding (2^-11, a weighted
     mean of values each rounded by at most that); the C# overlap table equals Python's."""
     grid = _paper_grid(tmp_path / "g.npz")
-    pct = ["--low-pct", "35", "--high-pct", "65"]
+    pct = ["--opacity-rule", "paper", "--low-pct", "35", "--high-pct", "65"]
     ref, qt, (y, p, r) = _reference(tmp_path, grid, 3, *pct)
     assert (np.abs(ref.pitch_deg) > 89.0).sum() >= 100 and (np.abs(ref.yaw_deg) > 179.0).sum() >= 90
     assert np.ptp(ref.opacity) == 1.0  # the opacity rule is exercised over its whole range
@@ -189,7 +193,7 @@ def test_paper_198_and_another_viewport_fov(tmp_path, harness):
         tmp_path / "g.npz", "paper-198", T=300, fps=24.0, hfov_deg=90.0, vfov_deg=80.0
     )
     ref, qt, (y, p, r) = _reference(tmp_path, grid, 5, "--fov", "100")
-    assert main(["export", str(grid), "-o", str(tmp_path / "x"), "--fov", "100"]) == 0
+    assert main(["export", str(grid), "-o", str(tmp_path / "x"), "--fov", "100", *PAPER]) == 0
     assert read_export(tmp_path / "x")[0]["viewport"] == {"hfov_deg": 100.0, "vfov_deg": 100.0}
     _mono(
         harness,
@@ -206,7 +210,7 @@ def test_sphere_mode_agrees_with_vimsim_epof(tmp_path, harness):
     grid = _sphere_grid(tmp_path / "s.npz")
     ref, qt, (y, p, r) = _reference(tmp_path, grid, seed=11)
     assert ref.frame[0] == 40
-    assert main(["export", str(grid), "-o", str(tmp_path / "x")]) == 0
+    assert main(["export", str(grid), "-o", str(tmp_path / "x"), *PAPER]) == 0
     h, data = read_export(tmp_path / "x")
     assert h["mode"] == "sphere" and data.dtype == np.float16 and data.shape == (N_POSES, 45, 90)
     np.testing.assert_array_equal(data, load_grid(grid).field_dps)  # stored exactly
@@ -229,7 +233,7 @@ def test_sphere_mode_agrees_with_vimsim_epof(tmp_path, harness):
 def test_easing_matches_vimsim_epof_smooth(tmp_path, harness):
     """OpacityEasing.Step per video frame = vimsim epof --smooth S's opacity column."""
     grid = _sphere_grid(tmp_path / "s.npz", T=200, start_frame=0)
-    no_ease = ["--ease-in", "0", "--ease-out", "0"]
+    no_ease = ["--opacity-rule", "comfort", "--ease-in", "0", "--ease-out", "0"]
     ref, _, _ = _reference(tmp_path, grid, 2, "--smooth", "0.4", *no_ease)
     raw, _, _ = _reference(tmp_path, grid, 2)
     assert main(["export", str(grid), "-o", str(tmp_path / "x"), "--smooth", "0.4", *no_ease]) == 0
@@ -269,8 +273,11 @@ def test_default_comfort_opacity_matches_vimsim_epof(tmp_path, harness, mode):
     raw = read_epof_csv(raw_csv).opacity
     inp = tmp_path / "in.bin"
     inp.write_bytes(struct.pack("<i", T) + raw.astype("<f4").tobytes())
-    custom = ["--smooth", "0.1", "--ease-in", "0.2", "--ease-out", "0.7"]
-    for name, opts in (("default", []), ("custom", custom)):
+    # The comfort rule: the paper's thresholds (raw) with the default easing; the default
+    # rule (absolute) eases the same way (test_unity_runtime.py).
+    comfort = ["--opacity-rule", "comfort"]
+    custom = [*comfort, "--smooth", "0.1", "--ease-in", "0.2", "--ease-out", "0.7"]
+    for name, opts in (("default", comfort), ("custom", custom)):
         assert main(["epof", str(grid), str(hp), "-o", str(tmp_path / f"{name}.csv"), *opts]) == 0
         assert main(["export", str(grid), "-o", str(tmp_path / name), *opts]) == 0
         ref = read_epof_csv(tmp_path / f"{name}.csv")
@@ -279,7 +286,7 @@ def test_default_comfort_opacity_matches_vimsim_epof(tmp_path, harness, mode):
         assert (r["ease_in_s"], r["ease_out_s"], r["smoothing_s"]) == want
         op = read_export(tmp_path / name)[0]["opacity"]
         assert (op["ease_in_s"], op["ease_out_s"], op["smoothing_s"]) == want
-        assert op["name"] == "eased"
+        assert op["name"] == "comfort" and op["eased"] and op["scale"] == "relative"
         _mono(harness, "ease", tmp_path / name, inp, tmp_path / f"{name}.ease", ";",
               "play", tmp_path / name, q, tmp_path / f"{name}.play")  # fmt: skip
         eased = np.fromfile(tmp_path / f"{name}.ease", "<f4")
@@ -463,7 +470,13 @@ def test_csharp_loader_errors_name_file_and_problem(tmp_path, harness):
         assert r.returncode == 3, r.stdout + r.stderr
         kind, path, msg, _field = r.stdout.strip().split("|")
         assert kind == "VimsimLoadException" and path.endswith(name) and problem in msg, msg
-    assert _mono(harness, "load", tmp_path / "x").stdout.strip() == "ok sphere"
+    # The rule as exported: export_unity's default is the paper's (the library's OpacityRule()).
+    assert _mono(harness, "load", tmp_path / "x").stdout.strip() == "ok sphere paper relative"
+    # vimsim export's default is the absolute rule (issue 37): header and C# runtime say so.
+    assert main(["export", str(grid), "-o", str(tmp_path / "d")]) == 0
+    op = read_export(tmp_path / "d")[0]["opacity"]
+    assert (op["name"], op["scale"], op["low_dps"], op["high_dps"]) == ("absolute", "absolute", 5.0, 30.0)
+    assert _mono(harness, "load", tmp_path / "d").stdout.strip() == "ok sphere absolute absolute"
 
 
 def test_absolute_rule_carried_into_the_header(tmp_path):

@@ -85,7 +85,7 @@ const edges = [rt.range.startS - 1e-3, rt.range.startS, rt.range.endS - 1e-3, rt
 return {epof: out, us, mode: rt.mode, page, grains: {count: g.count, centres: Array.from(g.centres),
         config: g.config, expected: m.GrainLayout.grainCount(g.config.grain_deg, g.config.density)},
         edges, covers: edges.map((t) => rt.covers(t)), outside: edges.map((t) => rt.epof(t, 10, 5, 0)),
-        range: rt.range, source: rt.source, mitigation: rt.mitigation,
+        range: rt.range, source: rt.source, mitigation: rt.mitigation, rule: [rt.opacityRule, rt.opacityScale],
         nanOpacity: [rt.opacity(NaN), rt.createEasing().update(NaN, 0.1)],
         opacity: [rt.opacity(rt.lowDps), rt.opacity(rt.highDps), rt.opacity((rt.lowDps + rt.highDps) / 2)],
         eased: (() => { const e = rt.createEasing(); return [0, 1, 1, 1, 0, 0].map((x) => e.step(x)); })()};
@@ -142,7 +142,8 @@ def test_js_epof_matches_python(browser, grid_path, tmp_path, mode):
     assert got["nanOpacity"] == [None, None]  # NaN (JSON null)
     warnings = [c for c in browser.drain()[0] + console if "outside the export" in c["message"]]
     assert len(warnings) == 1, warnings  # once per runtime
-    # The opacity rule and the comfort easing (python: OpacityRule.__call__ with fps).
+    # The opacity rule (named as exported) and the comfort easing (OpacityRule.__call__ with fps).
+    assert got["rule"] == ["comfort", "relative"]
     assert np.allclose(got["opacity"], [0, 1, 0.5], atol=1e-12)
     lo, hi = res.header["opacity"]["low_dps"], res.header["opacity"]["high_dps"]
     rule = comfort_rule()

@@ -57,7 +57,7 @@ def _mono(exe, *args, check=True):
 def test_clock_steps_once_per_video_frame_as_vimsim_epof(tmp_path, harness):
     """A player at 30 fps rendered at 90 Hz: each video frame is seen three times (the later
     two with other head poses: held). The clock's eased opacity at each frame equals vimsim
-    epof's default (comfort) opacity column within 1e-6; a seek back restarts the easing at
+    epof's default (absolute) opacity column within 1e-6; a seek back restarts the easing at
     the raw opacity; a paused player (the same frame for many calls) holds."""
     T, start = 150, 20
     grid = _sphere_grid(tmp_path / "g.npz", T, start)
@@ -71,10 +71,12 @@ def test_clock_steps_once_per_video_frame_as_vimsim_epof(tmp_path, harness):
         ",".join(repr(float(v)) for v in r) for r in zip(frames / 30.0, yaw, pitch, roll)
     ]
     path.write_text("\n".join(rows) + "\n")
-    assert main(["epof", str(grid), str(path), "-o", str(tmp_path / "e.csv")]) == 0
+    # The default (absolute) rule, its deg/s inside this grid's flow (18-47 deg/s): eased both ways.
+    dps = ["--low-dps", "18", "--high-dps", "47"]
+    assert main(["epof", str(grid), str(path), "-o", str(tmp_path / "e.csv"), *dps]) == 0
     ref = read_epof_csv(tmp_path / "e.csv")
     assert ref.frame[0] == start and len(ref.frame) == T
-    assert main(["export", str(grid), "-o", str(tmp_path / "x")]) == 0
+    assert main(["export", str(grid), "-o", str(tmp_path / "x"), *dps]) == 0
     # Render frames: each video frame three times, poses after the first are noise (held).
     f3 = np.repeat(frames, 3).astype(np.float64)
     y3, p3, r3 = (np.repeat(a, 3).astype(np.float32) for a in (yaw, pitch, roll))

@@ -10,7 +10,7 @@ import pytest
 from media_helpers import gray_frames, write_clip
 
 from simulator.core.errors import InputError
-from simulator.mitigation.grf import OpacityRule, comfort_rule, ease
+from simulator.mitigation.opacity import OpacityRule, comfort_rule, ease
 
 
 def _data_lines(path):

@@ -29,7 +29,7 @@ def test_clean_scene_has_no_artefacts():
     rng = np.random.default_rng(0)
     pof = 20 + rng.standard_normal((T, 11, 24))
     a = detect_artefacts(_signals(rng), pof)
-    assert a.counts() == {"cut": 0, "fade": 0, "keyframe": 0, "overlay": 0}
+    assert a.counts() == {"cut": 0, "fade": 0, "keyframe": 0, "overlay": 0, "camera-fixed": 0}
     assert a.events == ()
 
 

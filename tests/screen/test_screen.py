@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+
 import numpy as np
 import pytest
 from media_helpers import cut_clip
@@ -26,7 +28,7 @@ def still(tmp_path):
         (["--opacity-rule", "absolute", "--low-dps", "5", "--high-dps", "5"], "--low-dps"),
         (["--opacity-rule", "absolute", "--high-dps", "nan"], "--high-dps"),
         (["--opacity-rule", "absolute", "--low-dps", "inf"], "--low-dps"),
-        (["--low-dps", "3"], "--opacity-rule absolute"),
+        (["--opacity-rule", "paper", "--low-dps", "3"], "--opacity-rule absolute"),
     ],
 )
 def test_bad_options_exit_2(tmp_path, still, capsys, extra, msg):
@@ -71,9 +73,8 @@ def screened(clips, tmp_path_factory):
     d = tmp_path_factory.mktemp("screened")
     out, cache = d / "o", d / "cache"
     rc = main(["screen", str(clips / "calm.mp4"), str(clips / "cut.mp4"), "-o", str(out),
-               "--viewers", "3", "--cache-dir", str(cache), "--workers", "1", "--no-progress",
-               "--opacity-rule", "absolute"])  # fmt: skip
-    assert rc == 0
+               "--viewers", "3", "--cache-dir", str(cache), "--workers", "1", "--no-progress"])  # fmt: skip
+    assert rc == 0  # the default opacity rule: absolute (issue 37)
     return out
 
 
@@ -87,14 +88,15 @@ def test_screen_end_to_end(clips, screened, tmp_path, capsys):
     assert set(by) == {"calm", "cut"} and by["calm"]["viewers"] == "3"
     assert by["cut"]["artefact_kinds"] == "cut:1"  # the cut found, left out
     assert float(by["calm"]["opacity_mean"]) == 0.0  # absolute rule: a calm clip, no grains
-    assert by["calm"]["opacity_rule"] == "absolute 5-30 deg/s"
+    assert by["calm"]["opacity_rule"] == "absolute 5-30 deg/s"  # the default rule, named
+    with open(out / "viewings.csv", newline="") as f:
+        assert {r["opacity_rule"] for r in csv.DictReader(f)} == {"absolute 5-30 deg/s"}
     epof = (out / "epof" / "cut-viewer001.csv").read_text().splitlines()
     data = [ln for ln in epof if not ln.startswith("#")]
     assert data[0].endswith(",artefact") and data[11].endswith(",cut")  # row of frame 10
     for f in ("summary.png", "map.png", "map.csv", "epof_distribution.csv", "sphere_flow.csv",
               "moments.csv", "moment_1.png"):  # fmt: skip
         assert (out / "screen" / "cut" / f).is_file()
-    import csv
     import json
 
     # The whole sphere's flow, its translational part and the camera's rotation (sphere

@@ -18,9 +18,10 @@ from simulator.traces.path import save_headpath_csv, synth
 
 
 def _epof_rows(path) -> np.ndarray:
-    """The data rows of an EPOF CSV (its '#' settings lines and header skipped)."""
+    """The numbers of an EPOF CSV's fixed columns (its '#' settings lines and header skipped;
+    the ``artefact`` column a study writes by default is text)."""
     lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
-    return np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    return np.loadtxt(lines[1:], delimiter=",", ndmin=2, usecols=range(7))
 
 
 EXAMPLE = Path(__file__).resolve().parents[2] / "examples" / "study_example.csv"
@@ -167,7 +168,7 @@ def test_study_epof_equals_vimsim_epof(ran, base, tmp_path):
         ("clip-multi_user2-NR", "multi.txt", "2"),
     ):
         ref = tmp_path / f"{vid}.csv"
-        argv = ["epof", str(grid), str(base / trace), "-o", str(ref)]
+        argv = ["epof", str(grid), str(base / trace), "-o", str(ref), "--artefacts"]  # a study's default
         assert main(argv + (["--user", user] if user else [])) == 0
         assert (out / "epof" / f"{vid}.csv").read_bytes() == ref.read_bytes()
 

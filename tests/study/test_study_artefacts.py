@@ -44,9 +44,8 @@ def test_provocative_moments_exclude_rows():
 def test_study_moments_leave_out_artefacts(cut_clip, tmp_path):
     m = tmp_path / "s.toml"
     m.write_text(f'[[videos]]\nid = "cut"\npath = "{cut_clip}"\nmethod = "sphere"\n\n'
-                 '[[viewings]]\nvideo = "cut"\nviewers = { n = 2, seed = 3 }\n\n'
-                 '[epof]\nartefacts = true\nopacity_rule = "absolute"\n')  # fmt: skip
-    out = tmp_path / "o"
+                 '[[viewings]]\nvideo = "cut"\nviewers = { n = 2, seed = 3 }\n')  # fmt: skip
+    out = tmp_path / "o"  # artefacts detected by default (issue 37)
     assert main(["study", str(m), "-o", str(out), "--cache-dir", str(tmp_path / "c"),
                  "--workers", "1", "--no-progress"]) == 0  # fmt: skip
     s = json.loads((out / "study.json").read_text())
@@ -59,3 +58,15 @@ def test_study_moments_leave_out_artefacts(cut_clip, tmp_path):
     assert main(["report", str(out)]) == 0
     page = next((out / "report").glob("video*cut*.html")).read_text()
     assert "frames left out as artefacts (cut: 1)" in page
+    # The summary names the opacity rule: the default, absolute (issue 37).
+    assert "GRF opacity rule absolute 5-30 deg/s" in (out / "report" / "index.html").read_text()
+    # --no-artefacts: every frame kept (the cached grid reused), the cut ranked again.
+    off = tmp_path / "off"
+    assert main(["study", str(m), "-o", str(off), "--cache-dir", str(tmp_path / "c"),
+                 "--workers", "1", "--no-progress", "--no-report", "--no-artefacts"]) == 0  # fmt: skip
+    s = json.loads((off / "study.json").read_text())
+    assert s["outputs"]["videos"]["cut"]["artefact_frames_left_out"] == 0
+    header = [ln for ln in next((off / "epof").glob("*.csv")).read_text().splitlines() if ln[:1] != "#"][0]
+    assert "artefact" not in header
+    rows = (off / "videos" / "cut" / "moments.csv").read_text().splitlines()
+    assert 10 in [int(r.split(",")[2]) for r in rows[1:]]

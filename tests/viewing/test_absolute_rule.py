@@ -31,13 +31,18 @@ def test_cli_and_table_give_the_same_absolute_rule():
     assert a.ease_in_s > 0  # eased as the comfort rule
     d = ViewSpec.from_options({"opacity_rule": "absolute"}).rule  # the bands' edges by default
     assert (d.low_dps, d.high_dps) == (ABSOLUTE_LOW_DPS, ABSOLUTE_HIGH_DPS)
-    assert not ViewSpec.from_options({}).rule.is_absolute
+    # The default (issue 37): the absolute rule at the bands' edges, named so in every record.
+    assert ViewSpec.from_options({}).rule == d and d.describe()["name"] == "absolute"
+    assert rule_from_args(_cli_args("epof")) == d == ViewSpec.from_options(_cli_args("render")).rule
+    paper = ViewSpec.from_options({"opacity_rule": "paper"}).rule
+    assert not paper.is_absolute and paper.is_paper and paper.describe()["name"] == "paper"
 
 
 @pytest.mark.parametrize(
     ("argv", "table", "cli_name", "key"),
     [
-        (["--low-dps", "3"], {"low_dps": 3}, "--low-dps", "low_dps"),
+        (["--opacity-rule", "paper", "--low-dps", "3"], {"opacity_rule": "paper", "low_dps": 3},
+         "--low-dps", "low_dps"),
         (["--opacity-rule", "absolute", "--low-dps", "30", "--high-dps", "5"],
          {"opacity_rule": "absolute", "low_dps": 30, "high_dps": 5}, "--low-dps", "low_dps"),
     ],
@@ -68,6 +73,8 @@ def test_manifest_absolute_rule_reaches_epof_task_and_render_view(tmp_path):
     m.write_text(body.replace("high_dps = 40", "high_dps = 2"))
     with pytest.raises(InputError, match=r"\[epof\] low_dps"):
         load_manifest(m)
-    m.write_text(body.replace('opacity_rule = "absolute"\n', ""))
+    m.write_text(body.replace('opacity_rule = "absolute"\n', 'opacity_rule = "comfort"\n'))
     with pytest.raises(InputError, match=r"\[epof\] high_dps needs"):
         load_manifest(m)
+    m.write_text(body.replace('opacity_rule = "absolute"\n', ""))  # the default: absolute
+    assert _rule(load_manifest(m).epof) == view_rule

@@ -5,7 +5,7 @@
 //   var e = Vimsim.VimsimEpof.Load(dir);              // reads DIR/vimsim_epof.bin (or LoadAsync)
 //   if (e.Covers(videoTimeS)) { ... }                 // the export has this time's frame
 //   float epof = e.Epof(videoTimeS, yawDeg, pitchDeg, rollDeg);   // deg/s; NaN outside the range
-//   float raw = e.RawOpacity(epof);                   // un-eased GRF opacity, 0..1 (the paper's rule)
+//   float raw = e.RawOpacity(epof);                   // un-eased GRF opacity, 0..1 (rule: e.OpacityRule)
 //   var clock = e.CreatePlaybackClock();              // then per rendered frame, with the player's frame:
 //   clock.Advance(videoFrame, yawDeg, pitchDeg, rollDeg);  // clock.EasedOpacity = vimsim epof's column
 //
@@ -92,6 +92,10 @@ namespace Vimsim
         /// <summary>Opacity 0 at or below this EPOF (deg/s), 1 at or above OpacityHighDps.</summary>
         public double OpacityLowDps { get; private set; }
         public double OpacityHighDps { get; private set; }
+        /// <summary>The opacity rule's name ("absolute", vimsim's default: fixed deg/s for every video;
+        /// "paper" or "comfort": percentiles of this video's flow) and scale ("absolute" or "relative").</summary>
+        public string OpacityRule { get; private set; }
+        public string OpacityScale { get; private set; }
         /// <summary>Time constant (s) of the opacity's exponential smoothing; 0 = none (see CreateEasing).</summary>
         public double SmoothingS { get; private set; }
         /// <summary>Ease-in time (s): a full 0 -> 1 opacity change takes at least this long; 0 = no limit.</summary>
@@ -269,6 +273,8 @@ namespace Vimsim
             var op = hd.Obj("opacity");
             OpacityLowDps = op.Num("low_dps");
             OpacityHighDps = op.Num("high_dps");
+            OpacityRule = op.Has("name") ? op.Str("name") : "";
+            OpacityScale = op.Has("scale") ? op.Str("scale") : "relative";
             SmoothingS = op.Num("smoothing_s");
             EaseInS = op.Num("ease_in_s");
             EaseOutS = op.Num("ease_out_s");
@@ -570,7 +576,7 @@ namespace Vimsim
         }
 
         /// <summary>Un-eased GRF opacity (0..1) of an EPOF (deg/s): linear from OpacityLowDps to
-        /// OpacityHighDps, clamped (vimsim epof --opacity-rule paper); NaN for NaN.</summary>
+        /// OpacityHighDps, clamped (the exported rule, OpacityRule, before easing); NaN for NaN.</summary>
         public float RawOpacity(float epofDps)
         {
             if (float.IsNaN(epofDps)) return float.NaN;

@@ -57,7 +57,7 @@ namespace Vimsim
 
         /// <summary>EPOF of the current video frame, deg/s (NaN outside the export or before it loads).</summary>
         public float Epof { get { return clock == null ? float.NaN : clock.Epof; } }
-        /// <summary>Un-eased GRF opacity (the paper's rule), 0..1.</summary>
+        /// <summary>Un-eased GRF opacity (the exported rule before easing), 0..1.</summary>
         public float RawOpacity { get { return clock == null ? float.NaN : clock.RawOpacity; } }
         /// <summary>Opacity eased once per video frame with the exported rule (= vimsim epof's column), 0..1.</summary>
         public float EasedOpacity { get { return clock == null ? float.NaN : clock.EasedOpacity; } }

@@ -65,7 +65,9 @@ def _opacity_section(rule: OpacityRule, lo: float, hi: float) -> dict:
     return {
         "rule": "linear",
         "formula": "clamp((epof - low_dps) / (high_dps - low_dps), 0, 1); if high_dps <= low_dps: 1 where epof > low_dps else 0",
-        "name": "paper" if rule.is_paper else "eased",
+        # the rule's name (simulator.core.choices.OPACITY_RULES: absolute, the default; paper; comfort)
+        "name": rule.label,
+        "eased": not rule.is_paper,
         "easing": "per video frame, starting at the first value: v += a (x - v), a = 1 - exp(-1 / (fps smoothing_s)) "
         "(smoothing_s > 0); then the change is limited to at most +1 / (fps ease_in_s) and at least "
         "-1 / (fps ease_out_s) (each > 0; 0 = no limit)",
@@ -73,7 +75,7 @@ def _opacity_section(rule: OpacityRule, lo: float, hi: float) -> dict:
         "ease_out_s": float(rule.ease_out_s),
         "low_pct": float(rule.low_pct),
         "high_pct": float(rule.high_pct),
-        "source": "absolute: fixed deg/s (--opacity-rule absolute), the same for every video"
+        "source": "absolute: fixed deg/s (--opacity-rule absolute, the default), the same for every video"
         if rule.is_absolute
         else "grid: every window of every frame of pof_dps (only the windows the projection covers)",
         # relative: low/high_dps are percentiles of this video's flow; absolute: fixed deg/s

@@ -369,6 +369,9 @@ export class VimsimEpof {
     this.vfovDeg = header.viewport.vfov_deg;
     const o = header.opacity;
     this.lowDps = o.low_dps; this.highDps = o.high_dps;
+    // the opacity rule's name ("absolute", the default: fixed deg/s; "paper", "comfort":
+    // percentiles of this video's flow) and its scale ("absolute" or "relative")
+    this.opacityRule = o.name; this.opacityScale = o.scale;
     this.rowLength = header.data.shape[1] * header.data.shape[2];
     this.rowBuf = new Float32Array(this.rowLength); // the frame last queried, as float32
     this.rowOf = -1;

@@ -185,7 +185,7 @@ static class EpofHarness
         try
         {
             var e = VimsimEpof.Load(bin);
-            Console.WriteLine("ok " + e.Mode);
+            Console.WriteLine("ok " + e.Mode + " " + e.OpacityRule + " " + e.OpacityScale);
             return 0;
         }
         catch (VimsimLoadException ex)
