@@ -110,6 +110,9 @@ class ViewingSpec:
     render_opts: dict | None = None
     #: Also plot this viewing's EPOF (``epof/<id>.png``).
     plot: bool = False
+    #: Its render options whether rendered or not (what its mitigation is, what the
+    #: report's replay of it draws).
+    own_render: dict | None = None
 
 
 @dataclass(frozen=True)
@@ -279,7 +282,8 @@ def _viewings(
         if "viewers" in e.t:  # scripted viewers (simulator.study.viewers): no trace file
             ropts, cond = _viewing_render_opts(e, m, where, data, render), e.get("condition", (str,), "")
             r, plot = e.get("render", (bool,), False), e.get("plot", (bool,), False)
-            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot)
+            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot,
+                                ropts)
                     for i, p, s, k in scripted_viewers(e, vid, seen, where, _ID_RE)]  # fmt: skip
             continue
         pattern = e.get("trace", (str,), required=True)
@@ -304,7 +308,7 @@ def _viewings(
                 seen[vw_id] = where
                 r = u in rendered
                 out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, r,
-                                       ropts if r else None, plot))  # fmt: skip
+                                       ropts if r else None, plot, ropts))  # fmt: skip
     return tuple(out)
 
 

@@ -41,11 +41,15 @@ from simulator.study.plan import (
 __all__ = ["VIEWING_COLUMNS", "default_cache_dir", "dry_run", "run_study"]
 
 VIEWING_COLUMNS = (
-    "viewing", "participant", "condition", "video", "trace", "user", "frames",
-    "epof_mean_dps", "epof_median_dps", "epof_p90_dps", "epof_max_dps", "opacity_mean",
-    "share_opacity_ge_0_5", "status", "warnings",
+    "viewing", "participant", "condition", "video", "trace", "user", "mitigation",
+    "opacity_rule", "frames", "epof_mean_dps", "epof_median_dps", "epof_p90_dps",
+    "epof_max_dps", "opacity_mean", "share_opacity_ge_0_5", "visible_flow_mean_dps",
+    "status", "warnings",
 )  # fmt: skip
-_STAT_COLUMNS = VIEWING_COLUMNS[6:13]
+_STAT_COLUMNS = VIEWING_COLUMNS[8:15]
+#: From the viewing's render (empty when not rendered): the mean flow its mitigation lets
+#: through to the eye (deg/s, vimsim render's ``visible_flow_dps``).
+_RENDER_COLUMNS = ("visible_flow_mean_dps",)
 #: Warnings of one viewing in its ``warnings`` cell are joined by this.
 WARNING_SEP = " | "
 
@@ -138,7 +142,8 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
     for w in manifest.viewings:
         if w.id in plan.unchanged:
             prev = plan.unchanged[w.id]
-            rows[w.id] = {**base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
+            rows[w.id] = {**base_row(w),
+                          **{c: prev.get(c, "") for c in (*_STAT_COLUMNS, *_RENDER_COLUMNS)},
                           "status": "ok", "warnings": prev.get("warnings", ""),
                           "resumed": True}  # fmt: skip
     timings["plan"] = time.perf_counter() - t0
@@ -196,6 +201,9 @@ def _summary(manifest, out, cache, ex_info, video_info, table, report) -> dict:
             "render": manifest.render,
             "grf": manifest.grf,
             "questionnaires": manifest.questionnaires,
+            # the render options of each viewing with its own keys (the rest: "render")
+            "viewings": {w.id: w.own_render for w in manifest.viewings
+                         if w.own_render is not None and w.own_render != manifest.render},
         },
         "videos": video_info,
         "counts": {
@@ -331,6 +339,8 @@ class _Scheduler:
             return
         r = self.results[w.id]
         row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
+        if w.render:
+            row.update({c: self.renders[w.id].get(c, "") for c in _RENDER_COLUMNS})
         status = r["status"]
         if status == "ok" and w.render and self.renders[w.id]["status"] != "ok":
             status = f"render: {self.renders[w.id]['status']}"
