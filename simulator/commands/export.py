@@ -4,6 +4,7 @@ for a game engine or a web player, with its runtime (Unity: ``VimsimEpof.cs``; w
 from __future__ import annotations
 
 import argparse
+import sys
 
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import (
@@ -13,6 +14,7 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
 )
+from simulator.core.errors import InputError
 
 __all__ = ["register", "run"]
 
@@ -50,6 +52,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "(and the overlap table in paper mode) with an ES-module runtime (vimsim.js, "
         "vimsim_grains.js, vimsim_gl.js) and example.html (docs/web.md); the overlay options "
         "apply to both",
+    )
+    p.add_argument(
+        "--video",
+        default=None,
+        metavar="VIDEO",
+        help="web: the grid's source video (mono equirect), copied in for example.html to "
+        "play (default: the grid's own video when it is still at its recorded path)",
     )
     p.add_argument(
         "--method",
@@ -131,6 +140,8 @@ def run(args: argparse.Namespace) -> int:
     grf, mitigation = _overlay_from_args(args)  # the same overlay options for both formats
     if args.format == "web":
         return _run_web(args, hfov, vfov, rule, grf, mitigation)
+    if args.video is not None:
+        raise InputError("--video is for --format web (the video example.html plays)")
     res = export_unity(
         args.grid,
         args.output,
@@ -158,12 +169,40 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _web_video(args: argparse.Namespace):
+    """``(video for example.html or None, a note when the grid's own is not used)``:
+    ``--video``, else the grid's source video when it is still there and mono equirect."""
+    if args.video is not None:
+        return args.video, None
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    try:
+        with np.load(args.grid, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+    except (OSError, ValueError, KeyError):
+        return None, None  # the export itself names a bad grid
+    path = Path(str((meta.get("video") or {}).get("path") or ""))
+    if not path.is_absolute():
+        path = Path(args.grid).resolve().parent / path
+    mono = (meta.get("layout") or "mono") == "mono" and (meta.get("projection") or "equirect") == "equirect"
+    if path.is_file() and mono:
+        return str(path), None
+    why = "is not mono equirect" if path.is_file() else f"({path}) is not there"
+    return None, f"the grid's video {why}: example.html shows no video (give --video VIDEO)"
+
+
 def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation) -> int:
     from simulator.export.web import export_web
 
+    video, note = _web_video(args)
     res = export_web(args.grid, args.output, method=args.method, dtype=args.dtype,
                      hfov_deg=hfov, vfov_deg=vfov, rule=rule, grf=grf,
-                     mitigation=mitigation)  # fmt: skip
+                     mitigation=mitigation, video=video)  # fmt: skip
+    if note:
+        print(f"vimsim export: note: {note}", file=sys.stderr)
     h = res.header
     print(
         f"wrote {res.out_dir}: {', '.join(f.name for f in res.files)} ({res.mode} mode; viewport "
