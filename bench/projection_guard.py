@@ -23,7 +23,10 @@ REAL = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "real" /
 if not REAL.is_dir():
     REAL = Path("/work/shared/data/real/equirect")
 #: Stereo files of the real data and their layouts (the rest are mono).
-LAYOUTS = {"dolphins_stereo_tb.jpg": ("top-bottom", "tb"), "MaryOculus.mp4": ("side-by-side", "sbs")}
+LAYOUTS = {
+    "dolphins_stereo_tb.jpg": ("top-bottom", "tb"),
+    "MaryOculus.mp4": ("side-by-side", "sbs"),
+}
 MEDIA = (".mp4", ".webm", ".jpg", ".png")
 
 
@@ -38,7 +41,11 @@ def to_dfisheye(src: Path, dst: Path, lens_fov: float) -> None:
     st = LAYOUTS.get(src.name, (None, "2d"))[1]
     vf = (f"v360=input=e:output=dfisheye:in_stereo={st}:out_stereo=2d:h_fov={lens_fov}:"
           f"v_fov={lens_fov}:w=1024:h=512,setsar=1")  # fmt: skip
-    extra = ["-frames:v", "1"] if dst.suffix == ".png" else ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-an"]
+    extra = (
+        ["-frames:v", "1"]
+        if dst.suffix == ".png"
+        else ["-c:v", "libx264", "-pix_fmt", "yuv420p", "-an"]
+    )
     subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-y", "-i", str(src), "-vf", vf,
                     *extra, str(dst)], check=True)  # fmt: skip
 
@@ -55,7 +62,7 @@ def frame_verdicts(path: Path, layout: str, n_max: int) -> list[bool | None]:
 
 
 def opens(path: Path, layout: str, projection: str | None) -> str:
-    """"ok" or the refusal's line."""
+    """ "ok" or the refusal's line."""
     from simulator.core.errors import InputError
     from simulator.media.source import Source
 
@@ -87,7 +94,9 @@ def main(argv=None) -> int:
             stats["genuine_refused"] += "looks like dual fisheye" in got
             stats["genuine_not_2to1"] += "expected an equirectangular image" in got
             if "expected an equirectangular image" in got:  # 16:9 thumbnails: not equirect
-                print(f"{f.relative_to(REAL)}: not 2:1, refused ({got.split(': ', 1)[1][:60]}..); skipped")
+                print(
+                    f"{f.relative_to(REAL)}: not 2:1, refused ({got.split(': ', 1)[1][:60]}..); skipped"
+                )
                 continue
             stats["genuine_frames"] += len(v)
             stats["genuine_flagged"] += sum(x is True for x in v)

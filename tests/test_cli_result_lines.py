@@ -11,7 +11,6 @@ import pytest
 
 from simulator.cli import build_parser, main
 
-
 #: Commands whose result line is a verdict, not a written path.
 _NO_PATH = {("compare",)}
 
@@ -29,7 +28,9 @@ def _analysis_data(path):
         w = csv.writer(f)
         w.writerow(["id", "condition", "ssq_n", "ssq_o", "ssq_d", "ssq_total", "mssq", "flow"])
         for i in range(8):
-            w.writerow([f"p{i}", "GR" if i % 2 else "NR", 9.54, 7.58, 13.92, 10 + 3 * i, 5 + i, 40 + i])
+            w.writerow(
+                [f"p{i}", "GR" if i % 2 else "NR", 9.54, 7.58, 13.92, 10 + 3 * i, 5 + i, 40 + i]
+            )
     return path
 
 

@@ -73,7 +73,9 @@ def looks_dual_fisheye(frame: NDArray[np.uint8]) -> bool | None:
     h, w = frame.shape[:2]
     if h < 16 or abs(w / (2.0 * h) - 1.0) > 0.02:
         return None
-    gray = frame if frame.ndim == 2 else cv2.cvtColor(np.ascontiguousarray(frame), cv2.COLOR_RGB2GRAY)
+    gray = (
+        frame if frame.ndim == 2 else cv2.cvtColor(np.ascontiguousarray(frame), cv2.COLOR_RGB2GRAY)
+    )
     small = cv2.resize(gray, (2 * _SIDE, _SIDE), interpolation=cv2.INTER_AREA).astype(np.float32)
     corners, sectors = _regions()
     dark_p90, ring_means = [], []

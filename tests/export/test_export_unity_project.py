@@ -19,7 +19,7 @@ from simulator.sphere.geometry import lonlat_to_dir
 from simulator.sphere.windows import grid_preset
 
 CELL, T = 6.0, 4
-_GUID = re.compile(rb"^guid: ([0-9a-f]{32})$", re.M)
+_GUID = re.compile(rb"^guid: ([0-9a-f]{32})$", re.MULTILINE)
 
 
 def _grid(path, content_hash: str, seed: int):
@@ -44,7 +44,9 @@ def _grid(path, content_hash: str, seed: int):
 
 
 def _files(folder) -> dict[str, bytes]:
-    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file()}
+    return {
+        p.relative_to(folder).as_posix(): p.read_bytes() for p in folder.rglob("*") if p.is_file()
+    }
 
 
 def test_two_exports_import_into_one_project(tmp_path):

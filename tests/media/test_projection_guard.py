@@ -42,7 +42,7 @@ def _lens_circles(h: int = 128) -> np.ndarray:
     """A camera's dual fisheye: two textured discs, black outside them."""
     rng = np.random.default_rng(0)
     img = rng.integers(60, 220, (h, 2 * h, 3), dtype=np.uint8)
-    y, x = np.mgrid[0:h, 0:2 * h]
+    y, x = np.mgrid[0:h, 0 : 2 * h]
     r = np.hypot((x % h) - (h - 1) / 2, y - (h - 1) / 2) / (h / 2)
     img[r > 0.98] = 0
     return img
@@ -109,7 +109,9 @@ def test_aspect_refusals_list_the_projections_that_fit(tmp_path):
 def test_real_equirect_never_flagged_its_dual_fisheye_always(tmp_path):
     """Every 2:1 file of the real data opens as equirect; its v360 dual fisheye is refused.
     (bench/projection_guard.py measures every frame.)"""
-    files = sorted(p for p in REAL.rglob("*") if p.suffix.lower() in (".mp4", ".webm", ".jpg", ".png"))
+    files = sorted(
+        p for p in REAL.rglob("*") if p.suffix.lower() in (".mp4", ".webm", ".jpg", ".png")
+    )
     assert len(files) >= 8, files
     opened = refused = 0
     for f in files:
