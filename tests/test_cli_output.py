@@ -68,8 +68,14 @@ def test_progress_only_on_a_terminal(monkeypatch):
 
     monkeypatch.setattr("sys.stderr", io.StringIO())  # a pipe or a file
     assert progress_stream() is None
-    with progress_bar("x") as bar:
+    with progress_bar("x", enabled=False) as bar:  # --no-progress: nothing at all
         assert bar is None
+    term = Term()
+    monkeypatch.setattr("sys.stderr", term)
+    with progress_bar("x") as bar:  # a terminal and no log: the bar alone
+        bar(1, 2)
+        bar(2, 2)
+    assert "vimsim x:" not in term.getvalue()
     term = Term()
     monkeypatch.setattr("sys.stderr", term)
     assert progress_stream() is term
@@ -78,6 +84,49 @@ def test_progress_only_on_a_terminal(monkeypatch):
     log = io.StringIO()
     monkeypatch.setattr("sys.stderr", Tee(term, log))
     assert progress_stream() is term  # the bar on the terminal, never in the log
+
+
+def test_progress_lines_without_a_terminal():
+    """stderr a pipe or a file (nohup, a cluster job): plain 'k/n, elapsed, eta' lines at
+    most every interval, and a last one at the end when any was written."""
+    from simulator.commands._progress import ProgressLines
+
+    now = [0.0]
+    out = io.StringIO()
+    p = ProgressLines("study", "task", out, interval_s=10.0, clock=lambda: now[0])
+    for k, t in [(1, 3.0), (2, 9.9), (3, 10.0), (4, 12.0), (5, 25.0), (8, 26.0)]:
+        now[0] = t
+        p(k, 8)
+    p(8, 8)  # the end reported twice: one last line
+    assert out.getvalue().splitlines() == [
+        "vimsim study: 3/8 tasks, elapsed 10 s, eta 17 s",
+        "vimsim study: 5/8 tasks, elapsed 25 s, eta 15 s",
+        "vimsim study: 8/8 tasks, elapsed 26 s, eta 0 s",
+    ]
+    quick = io.StringIO()
+    q = ProgressLines("render", "frame", quick, clock=lambda: 1.0)
+    q(1, 2, failed=1)  # done within the interval: no line at all
+    assert quick.getvalue() == ""
+
+
+def test_progress_lines_reach_the_log_and_the_pipe(monkeypatch):
+    import simulator.commands._progress as P
+
+    class Term(io.StringIO):
+        def isatty(self):
+            return True
+
+    monkeypatch.setattr(P, "LINE_INTERVAL_S", 0.0)
+    monkeypatch.setattr(P.ProgressLines.__init__, "__kwdefaults__",
+                        {"interval_s": 0.0, "clock": P.time.monotonic})  # fmt: skip
+    for term in (io.StringIO(), Term()):  # a pipe, then a terminal: the log gets lines in both
+        log = io.StringIO()
+        monkeypatch.setattr("sys.stderr", Tee(term, log))
+        with progress_bar("screen", unit="task") as bar:
+            bar(1, 3)
+            bar(3, 3)
+        assert "vimsim screen: 1/3 tasks" in log.getvalue()
+        assert ("vimsim screen: 1/3 tasks" in term.getvalue()) == (not term.isatty())
 
 
 def test_quiet_keeps_error_lines():

@@ -2,9 +2,13 @@
 
 Every command prints its result line on stdout and its diagnostics (warnings, notes,
 errors) on stderr. A progress bar is drawn only on a terminal (never into a pipe or a
-log file) and never with ``--quiet``. ``--quiet`` keeps the result line and error lines
-and drops the other diagnostics; ``--log FILE`` appends everything the command says
-(result, warnings, notes, errors; no progress bars) to FILE as well.
+log file) and never with ``--quiet``. Where no bar is drawn (stderr a pipe or a file:
+nohup, a cluster job, ``2> log``), long work writes a plain line instead,
+``vimsim study: 12/48 tasks, elapsed 31 s, eta 93 s``, at most every
+:data:`LINE_INTERVAL_S` seconds (and a last one when it ends, if it wrote any); ``--log``
+receives those lines too, with or without a terminal. ``--quiet`` keeps the result line
+and error lines and drops the other diagnostics; ``--log FILE`` appends everything the
+command says (result, warnings, notes, errors, progress lines; no bars) to FILE as well.
 """
 
 from __future__ import annotations
@@ -12,10 +16,14 @@ from __future__ import annotations
 import contextlib
 import io
 import sys
+import time
 import warnings
 from collections.abc import Iterator
 
-__all__ = ["Tee", "progress_bar", "progress_stream", "warnings_to_stderr"]
+__all__ = ["LINE_INTERVAL_S", "ProgressLines", "Tee", "progress_bar", "progress_stream", "warnings_to_stderr"]
+
+#: Seconds between two plain progress lines (a stream that is not a terminal, and --log).
+LINE_INTERVAL_S = 10.0
 
 
 class Tee(io.TextIOBase):
@@ -64,36 +72,83 @@ def progress_stream():
         return None
 
 
+def _line_sink():
+    """Where plain progress lines go: stderr when it is not a terminal (through the
+    :class:`Tee`, so the log gets them too), the log alone when a bar is drawn on the
+    terminal, None when there is a terminal and no log."""
+    err = sys.stderr
+    if isinstance(err, Tee):
+        return err if (err.quiet or not err.terminal.isatty()) else err.log
+    try:
+        return None if err.isatty() else err
+    except (AttributeError, ValueError):
+        return None
+
+
+class ProgressLines:
+    """``progress(done, total, failed=0)`` writing ``"<desc>: k/n <unit>s, elapsed, eta"``
+    lines to a stream, at most every ``interval_s`` seconds, and a last line at the end
+    (when it wrote any): the progress of a command whose stderr is not a terminal."""
+
+    def __init__(self, desc: str, unit: str, stream, *, interval_s: float = LINE_INTERVAL_S,
+                 clock=time.monotonic):  # fmt: skip
+        self.desc, self.unit, self.stream, self.interval_s = desc, unit, stream, interval_s
+        self.clock = clock
+        self.t0 = self.last = clock()
+        self.wrote = False
+
+    def __call__(self, done: int, total: int, failed: int = 0) -> None:
+        now = self.clock()
+        k = done + failed
+        if total > 0 and k >= total:  # the end: a last line if any was written
+            if self.wrote:
+                self._write(k, total, failed, now)
+            self.wrote = False  # a next step (the demo's stages) starts afresh
+            return
+        if now - self.last >= self.interval_s:
+            self._write(k, total, failed, now)
+
+    def _write(self, k: int, total: int, failed: int, now: float) -> None:
+        el = now - self.t0
+        eta = f"{el / k * (total - k):.0f} s" if 0 < k <= total else "?"
+        extra = f" ({failed} failed)" if failed else ""
+        self.stream.write(f"vimsim {self.desc}: {k}/{total} {self.unit}s{extra}, "
+                          f"elapsed {el:.0f} s, eta {eta}\n")  # fmt: skip
+        self.stream.flush()
+        self.wrote, self.last = True, now
+
+
 @contextlib.contextmanager
 def progress_bar(desc: str, *, unit: str = "frame", enabled: bool = True) -> Iterator:
-    """A ``progress(done, total)`` callback drawing a tqdm bar on the terminal (None if
-    disabled, or when stderr is not a terminal: :func:`progress_stream`)."""
+    """A ``progress(done, total, failed=0)`` callback: a tqdm bar on the terminal and/or
+    plain lines (:class:`ProgressLines`) where there is no terminal and into ``--log``;
+    None if disabled (``--no-progress``) or when nothing would be shown."""
     stream = progress_stream()
-    if not enabled or stream is None:
+    sink = _line_sink()
+    if not enabled or (stream is None and sink is None):
         yield None
         return
-    from tqdm import tqdm
-
+    lines = ProgressLines(desc, unit, sink) if sink is not None else None
     bar = None
 
-    def cb(done: int, total: int) -> None:
+    def cb(done: int, total: int, failed: int = 0) -> None:
         nonlocal bar
-        if bar is not None and (total != bar.total or done < bar.n):
+        if lines is not None:
+            lines(done, total, failed)
+        if stream is None:
+            return
+        from tqdm import tqdm
+
+        if bar is not None and (total != bar.total or done + failed < bar.n):
             bar.close()  # a new step (e.g. the demo's next stage) starts a new bar
             bar = None
         if bar is None:
-            bar = tqdm(
-                total=total,
-                initial=done,
-                unit=unit,
-                desc=desc,
-                mininterval=0.5,
-                dynamic_ncols=True,
-                leave=False,
-                file=stream,
-            )
+            bar = tqdm(total=total, initial=done + failed, unit=unit, desc=desc,
+                       mininterval=0.5, dynamic_ncols=True, leave=False, file=stream)  # fmt: skip
         else:
-            bar.update(done - bar.n)
+            bar.update(done + failed - bar.n)
+        if failed:
+            bar.set_postfix_str(f"done {done}, failed {failed}", refresh=False)
 
     try:
         yield cb

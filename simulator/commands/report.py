@@ -8,6 +8,15 @@ import sys
 __all__ = ["register", "run"]
 
 
+def add_browser_width(p: argparse.ArgumentParser) -> None:
+    """``--browser-width PX`` (report and study): the width of the report's browser copies."""
+    p.add_argument(
+        "--browser-width", default=None, metavar="PX",
+        help="width of the report's browser copy of each video, an even number of pixels "
+        "(default 2048; a wider source is scaled down, never up)",
+    )  # fmt: skip
+
+
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``report`` parser."""
     p = subparsers.add_parser(
@@ -33,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--no-build", action="store_true", help="with --serve: serve the report as it is"
     )
+    add_browser_width(p)
+    p.add_argument("--no-progress", action="store_true", help="no progress bar or lines")
     p.set_defaults(func=run)
 
 
@@ -40,6 +51,7 @@ def run(args: argparse.Namespace) -> int:
     """Build (InputError -> exit 2, nothing written), then optionally serve."""
     import time
 
+    from simulator.commands._progress import progress_bar
     from simulator.core.errors import InputError
     from simulator.report.build import build_report, check_study
     from simulator.report.serve import start_server
@@ -52,7 +64,8 @@ def run(args: argparse.Namespace) -> int:
         if not (folder / "index.html").is_file():
             raise InputError(f"{folder}: no report yet; run vimsim report {args.outdir}")
     else:
-        res = build_report(args.outdir)
+        with progress_bar("report (browser copy)", enabled=not args.no_progress) as bar:
+            res = build_report(args.outdir, browser_width=args.browser_width, progress=bar)
         folder = res.folder
         print(f"vimsim report: {res.files} files in {res.seconds:.1f} s -> {res.index}")
     if not args.serve:

@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from simulator.commands._opacity import add_opacity_arguments
-from simulator.commands._progress import progress_stream
+from simulator.commands._progress import progress_bar
 from simulator.commands._source import add_source_arguments
 from simulator.commands._types import nonneg_int
 from simulator.core.choices import LAYOUTS
@@ -57,8 +57,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Screen the videos; 0 all viewers ok, 3 some failed, 2 bad input (nothing done)."""
-    from tqdm import tqdm
-
     from simulator.commands._opacity import rule_from_args
     from simulator.core.errors import InputError
     from simulator.screen.run import check_viewers, screen_videos
@@ -73,28 +71,13 @@ def run(args: argparse.Namespace) -> int:
             "smooth_s": rule.smoothing_s, "ease_in_s": rule.ease_in_s, "ease_out_s": rule.ease_out_s,
             "opacity_rule": "absolute" if rule.is_absolute else args.opacity_rule,
             "low_dps": rule.low_dps, "high_dps": rule.high_dps}  # fmt: skip
-    bars: list = []
-    stream = None if args.no_progress else progress_stream()  # a terminal only, as study's
-
-    def progress(done: int, failed: int, total: int) -> None:
-        if stream is None:
-            return
-        if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="screen", file=stream,
-                             dynamic_ncols=True))  # fmt: skip
-        bars[0].total = total
-        bars[0].n = done + failed
-        bars[0].refresh()
-
-    try:
+    with progress_bar("screen", unit="task", enabled=not args.no_progress) as bar:
         s = screen_videos(args.videos, args.output, viewers=args.viewers, kind=args.viewer_kind,
                           seed=args.seed, epof=epof, artefacts=not args.no_artefacts,
                           grids=args.grid, layout=args.layout, projection=args.projection,
                           lens_fov_deg=args.lens_fov, executor=args.executor, workers=args.workers,
-                          cache_dir=args.cache_dir, progress=progress)  # fmt: skip
-    finally:
-        for bar in bars:
-            bar.close()
+                          cache_dir=args.cache_dir,
+                          progress=None if bar is None else (lambda d, f, t: bar(d, t, f)))  # fmt: skip
     for f in s["failures"]:
         print(f"vimsim screen: failed {f['viewing']}: {f['status']}", file=sys.stderr)
     for vid, vo in s["screen"]["videos"].items():

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from simulator.commands._types import positive_int
+from simulator.commands.report import add_browser_width
 
 __all__ = ["register", "run"]
 
@@ -68,6 +69,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         action="store_true",
         help="do not write OUTDIR/report/ (the HTML report; vimsim report OUTDIR makes it later)",
     )
+    add_browser_width(p)
     p.set_defaults(func=run)
 
 
@@ -111,9 +113,25 @@ def _dry_run(args: argparse.Namespace, manifest) -> int:
     return 2 if plan["problems"] else 0
 
 
+def _check_browser_width(width, manifest) -> None:
+    """InputError unless ``--browser-width`` is an even width no wider than any mono
+    equirect video of the study (other layouts are checked when their copy is made)."""
+    from simulator.core.errors import InputError
+    from simulator.media.video import probe
+    from simulator.report.build import check_browser_width
+
+    w = check_browser_width(width)
+    for v in manifest.videos:
+        if v.layout == "mono" and v.projection == "equirect" and v.path.is_file():
+            vw = probe(v.path).width
+            if w > vw:
+                raise InputError(f"{v.path}: --browser-width {w} is wider than the video "
+                                 f"({vw} px); give at most {vw - vw % 2}")  # fmt: skip
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the study; 0 all viewings ok, 3 some failed, 2 bad manifest (nothing done)."""
-    from simulator.commands._progress import progress_stream
+    from simulator.commands._progress import progress_bar
     from simulator.study import load_manifest, run_study
     from simulator.study.executors import parse_executor
 
@@ -127,23 +145,9 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import check_report_folder
 
         check_report_folder(Path(args.output) / "report")
-    from tqdm import tqdm  # not for a dry run: importing it costs 0.2 s
-    bars: list = []  # made on the first report: nothing is drawn before the work starts
-    stream = None if args.no_progress else progress_stream()  # a terminal only
-
-    def progress(done: int, failed: int, total: int) -> None:
-        if stream is None:
-            return
-        if not bars:
-            bars.append(tqdm(total=total, unit="task", desc="study", file=stream,
-                             dynamic_ncols=True))  # fmt: skip
-        bar = bars[0]
-        bar.total = total
-        bar.n = done + failed
-        bar.set_postfix_str(f"done {done}, failed {failed}", refresh=False)
-        bar.refresh()
-
-    try:
+        if args.browser_width is not None:  # a bad width: refused before any work
+            _check_browser_width(args.browser_width, manifest)
+    with progress_bar("study", unit="task", enabled=not args.no_progress) as bar:
         s = run_study(
             manifest,
             args.output,
@@ -151,11 +155,8 @@ def run(args: argparse.Namespace) -> int:
             workers=args.workers,
             cache_dir=args.cache_dir,
             resume=args.resume,
-            progress=progress,
+            progress=None if bar is None else (lambda done, failed, total: bar(done, total, failed)),
         )
-    finally:
-        for bar in bars:
-            bar.close()
     c = s["counts"]
     report_error = None
     if not args.no_report:
@@ -163,7 +164,8 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import build_report
 
         try:
-            rep = build_report(args.output)
+            with progress_bar("report (browser copy)", enabled=not args.no_progress) as bar:
+                rep = build_report(args.output, browser_width=args.browser_width, progress=bar)
             print(f"vimsim study: report {rep.seconds:.1f} s (plots and tables "
                   f"{s['timings_s']['outputs']:.1f} s) -> {rep.index}", file=sys.stderr)  # fmt: skip
         except InputError as e:  # the study is complete; only its report is missing

@@ -237,9 +237,24 @@ class ViewportQuery:
             return out
         if f.ndim != 3 or f.shape[0] != len(yaw):
             raise InputError(f"{f.shape[0]} field frames but {len(yaw)} orientations")
-        flat = f.reshape(f.shape[0], -1)
-        for t in range(len(yaw)):
+        return self.many_stacked((f,), yaw, pitch, roll)[0]
+
+    def many_stacked(self, fields, yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
+        """Exact EPOF ``(K, T)`` of ``K`` fields ``(T, n_lat, n_lon)`` seen through the same
+        viewports (one orientation per frame): one weight lookup and one gather per frame
+        for all ``K`` (the fields are interleaved per cell), e.g. an EPOF and its parts."""
+        yaw, pitch, roll = (np.asarray(a, float).ravel() for a in (yaw_deg, pitch_deg, roll_deg))
+        T, n_lon = len(yaw), self._n_lon
+        if not all(np.shape(f) == (T, *self.cells.shape) for f in fields):
+            shapes = [np.shape(f) for f in fields]
+            raise InputError(f"fields {shapes} for {T} orientations of {self.cells.shape} cells")
+        if not (np.isfinite(yaw).all() and np.isfinite(pitch).all() and np.isfinite(roll).all()):
+            raise InputError("head orientation has non-finite values")
+        # (T, cells, K): a gather of one cell fetches its K values from adjacent memory
+        st = np.stack([np.asarray(f).reshape(T, -1) for f in fields], axis=-1)
+        out = np.empty((T, len(fields)))
+        for t in range(T):
             key, shift = self._key(yaw[t], pitch[t], roll[t])
             _, w, wsum, rowbase, cols = self._bin(key)
-            out[t] = float(flat[t][rowbase + (cols + shift) % n_lon] @ w) / wsum
-        return out
+            out[t] = (w @ st[t][rowbase + (cols + shift) % n_lon]) / wsum
+        return out.T

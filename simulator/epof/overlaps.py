@@ -103,6 +103,10 @@ def _window_runs(grid: WindowGrid, lat_step_deg: float, lon_step_deg: float):
     return start, length
 
 
+#: Plain numbers a single query may be given (Python's and numpy's scalars).
+_SCALARS = (int, float, np.integer, np.floating)
+
+
 class ViewportOverlaps:
     """Overlap fractions of a viewport with every window of a grid, from a precomputed table.
 
@@ -184,6 +188,9 @@ class ViewportOverlaps:
         tab.setflags(write=False)
         self.table = tab
         self._flat = tab.reshape(-1, P * Y)
+        # each table row's total overlap (the denominator of the fast single query), float64
+        self._row_sums = tab.sum(axis=(3, 4), dtype=np.float64)
+        self._rows4 = tab.reshape(*tab.shape[:3], P * Y)
         nr, nu = len(self.roll_grid), self.n_u + 1
         self._corner = np.array(
             [a * nr * nu + b * nu + c for a in (0, 1) for b in (0, 1) for c in (0, 1)], np.int64
@@ -258,7 +265,10 @@ class ViewportOverlaps:
         return out
 
     def _fast_one(self, pof2d: NDArray[np.float32], yaw: float, pitch: float, roll: float) -> float:
-        """One query, plain Python index arithmetic (the per-frame real-time path)."""
+        """One query, plain Python index arithmetic (the per-frame real-time path): the 8
+        table rows around the orientation are dotted with the POF first (one matrix-vector
+        product), their trilinear weights applied to the 8 sums and to the rows' totals
+        (precomputed), so no overlap vector is built."""
         if not (-90.0 <= pitch <= 90.0):
             return float(self.epof(pof2d, yaw, pitch, roll, chunk=1))
         roll = (roll + 180.0) % 360.0 - 180.0
@@ -273,19 +283,20 @@ class ViewportOverlaps:
         fu = (a - k) * self.n_u
         u0 = min(int(fu), self.n_u - 1)
         wu = fu - u0
-        blk = self.table[i0 : i0 + 2, j0 : j0 + 2, u0 : u0 + 2].reshape(8, -1)
-        p0, p1, r0, r1, v0, v1 = 1 - wp, wp, 1 - wr, wr, 1 - wu, wu
-        w = np.array(
-            [p0 * r0 * v0, p0 * r0 * v1, p0 * r1 * v0, p0 * r1 * v1,
-             p1 * r0 * v0, p1 * r0 * v1, p1 * r1 * v0, p1 * r1 * v1],
-            np.float32,
-        )  # fmt: skip
-        ol = w @ blk
-        den = float(ol.sum())
+        g = pof2d.reshape(-1)[self._perm[k % self.shape[1]]]
+        n0, n1, n2, n3, n4, n5, n6, n7 = (self._rows4[i0 : i0 + 2, j0 : j0 + 2, u0 : u0 + 2] @ g).flat
+        d0, d1, d2, d3, d4, d5, d6, d7 = self._row_sums[i0 : i0 + 2, j0 : j0 + 2, u0 : u0 + 2].flat
+        v0 = 1.0 - wu
+        r0 = 1.0 - wr
+        den = (1.0 - wp) * (r0 * (v0 * d0 + wu * d1) + wr * (v0 * d2 + wu * d3)) + wp * (
+            r0 * (v0 * d4 + wu * d5) + wr * (v0 * d6 + wu * d7)
+        )
         if den <= 1e-6:
             return float(self.epof(pof2d, yaw, pitch, roll, chunk=1))
-        g = pof2d.reshape(-1)[self._perm[k % self.shape[1]]]
-        return float(ol @ g) / den
+        num = (1.0 - wp) * (r0 * (v0 * n0 + wu * n1) + wr * (v0 * n2 + wu * n3)) + wp * (
+            r0 * (v0 * n4 + wu * n5) + wr * (v0 * n6 + wu * n7)
+        )
+        return float(num / den)
 
     def epof(self, pof, yaw_deg, pitch_deg, roll_deg=0.0, frames=None, *, top_k=None, chunk=1024):
         """EPOF (same unit as ``pof``) of each query.
@@ -314,11 +325,11 @@ class ViewportOverlaps:
         if (
             top_k is None
             and chunk != 1
-            and np.ndim(yaw_deg) == 0
-            and np.ndim(pitch_deg) == 0
-            and np.ndim(roll_deg) == 0
-            and np.ndim(frames) == 0
-        ):
+            and isinstance(yaw_deg, _SCALARS)
+            and isinstance(pitch_deg, _SCALARS)
+            and isinstance(roll_deg, _SCALARS)
+            and (frames is None or isinstance(frames, _SCALARS))
+        ):  # one query of plain numbers: the real-time path (isinstance, not np.ndim: 4 us)
             fi = 0 if frames is None else int(frames)
             if not 0 <= fi < T:
                 raise InputError(f"frame {fi} out of range 0..{T - 1}")

@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.epof.exact import viewport_epof
+from simulator.epof.exact import shared_query
 from simulator.media.gridfile import require_field
 from simulator.media.lazyfield import LazyField, take_rows
 from simulator.sphere.cells import CellGrid, Frustum
@@ -185,6 +185,7 @@ def viewport_parts_total(
     )
     total = np.empty(T)
     rot = np.empty(T)
+    query = shared_query(cells.cell_deg, fr)
     held = _held_rot_field(field, trans, omega, cells)  # fields in memory: once per grid
     # the same rows of both fields at a time (either may be lazy, the other in memory)
     n = min([x.chunk_rows for x in (field, trans) if isinstance(x, LazyField)] or [256])
@@ -195,8 +196,6 @@ def viewport_parts_total(
             part = held[i0:i1]
         else:
             part = f * rotation_share(f, _rows(trans, i0, i1), omega[i0:i1], cells)
-        sl = slice(i0, i1)
-        kw = {"frustum": fr}
-        total[sl] = viewport_epof(f, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
-        rot[sl] = viewport_epof(part, cells.cell_deg, yaw[sl], pitch[sl], roll[sl], **kw)
+        sl = slice(i0, i1)  # one integration of the viewport for the EPOF and its part
+        total[sl], rot[sl] = query.many_stacked((f, part), yaw[sl], pitch[sl], roll[sl])
     return rot, total - rot, total

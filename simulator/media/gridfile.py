@@ -45,7 +45,10 @@ from simulator.media.lazyfield import LazyField
 from simulator.sphere.cells import CellGrid
 from simulator.sphere.windows import WindowGrid
 
-__all__ = ["FORMAT", "VERSION", "FieldSpool", "GridFile", "content_hash", "load_grid", "save_grid"]
+__all__ = [
+    "FORMAT", "VERSION", "FieldSpool", "GridFile", "check_field_values", "content_hash", "load_grid",
+    "save_grid",
+]
 
 FORMAT = "vimsim-grid"
 VERSION = 1
@@ -316,9 +319,13 @@ def _check_meta(p: Path, meta: dict) -> None:
             raise InputError(f"{p}: grid meta field.cell_deg must be a number > 0")
 
 
-def load_grid(path: str | os.PathLike) -> GridFile:
+def load_grid(path: str | os.PathLike, *, scan: bool = True) -> GridFile:
     """Read and validate a grid file; InputError (one line) if it is not a vimsim grid
-    of this version or its arrays are inconsistent."""
+    of this version or its arrays are inconsistent.
+
+    ``scan=False`` leaves out the pass over the sphere fields' values (finite, >= 0: a
+    decompression of each); the caller checks them with :func:`check_field_values` (e.g.
+    once they are read into memory) or knows them checked."""
     p = check_input_file(path, "grid")
     if not zipfile.is_zipfile(p):
         raise InputError(f"{p}: not a vimsim grid file (expected a .npz made by vimsim preprocess)")
@@ -394,11 +401,9 @@ def load_grid(path: str | os.PathLike) -> GridFile:
             raise InputError(
                 f"{p}: {k} has negative values ({float(a.min()):.3g}); flow magnitudes are >= 0"
             )
-    if "field_dps" in arrs:
-        finite, lo = arrs["field_dps"].scan()
-        if not finite or lo < 0:
-            raise InputError(f"{p}: field_dps must be (T, n_lat, n_lon), finite and >= 0")
-    extras = _check_ego(p, arrs, dps.shape[0])
+    if "field_dps" in arrs and scan:
+        _check_values(p, "field_dps", arrs["field_dps"])
+    extras = _check_ego(p, arrs, dps.shape[0], scan)
     try:
         WindowGrid.from_dict(meta["grid"])
     except (TypeError, KeyError, ValueError, AttributeError, InputError) as e:
@@ -422,7 +427,28 @@ _LAZY = ("field_dps", "field_trans_dps")
 _EGO = {"ego_omega_dps": (3,), "ego_confidence": ()}
 
 
-def _check_ego(p: Path, arrs: dict, T: int) -> dict:
+def _check_values(p, name: str, field) -> None:
+    """InputError unless a field (lazy or in memory) is finite and >= 0."""
+    if isinstance(field, LazyField):
+        finite, lo = field.scan()
+    else:
+        a = np.asarray(field)
+        finite = bool(np.isfinite(a).all())
+        lo = float(a.min()) if a.size else 0.0
+    if not finite or lo < 0:
+        raise InputError(f"{p}: {name} must be (T, n_lat, n_lon), finite and >= 0")
+
+
+def check_field_values(grid: GridFile) -> None:
+    """The value checks :func:`load_grid` ``(scan=False)`` left out, on the grid's fields
+    as they are now (in memory: no decompression)."""
+    for name in _LAZY:
+        f = getattr(grid, name)
+        if f is not None:
+            _check_values(grid.path, name, f)
+
+
+def _check_ego(p: Path, arrs: dict, T: int, scan: bool = True) -> dict:
     """The per-frame camera-rotation arrays of a grid (all or none), checked."""
     have = [k for k in (*_EGO, "field_trans_dps") if k in arrs]
     if not have:
@@ -439,9 +465,10 @@ def _check_ego(p: Path, arrs: dict, T: int) -> dict:
             raise InputError(f"{p}: {k} must be finite floats of shape {(T, *tail)}")
         out[k] = a.astype(np.float32, copy=False)
     ft, f = arrs["field_trans_dps"], arrs["field_dps"]
-    finite, lo = ft.scan()
-    if ft.shape != f.shape or not finite or lo < 0:
+    if ft.shape != f.shape:
         raise InputError(f"{p}: field_trans_dps must match field_dps, finite and >= 0")
+    if scan:
+        _check_values(p, "field_trans_dps", ft)
     return out
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
+from simulator.core.progress import Counter
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.export.unity import VERSION as DATA_VERSION
 from simulator.export.web import JS_FILES, MANIFEST_VERSION, export_web, js_source
@@ -41,17 +42,27 @@ __all__ = [
     "MANIFEST",
     "MAX_WEB_SIDE",
     "ReportResult",
+    "BROWSER_WIDTH",
     "browser_copy",
     "build_report",
+    "check_browser_width",
     "check_report_folder",
     "check_study",
 ]
 
 MANIFEST = ".vimsim-report.json"
 ASSETS = ("report.css", "report.js", "replay.js")
-#: Largest side (pixels) of a browser copy: WebGL2 guarantees 2048, every current desktop
-#: browser 4096 or more; a larger or non-H.264 source is re-encoded to fit.
+#: Largest side (pixels) a browser copy may have: WebGL2 guarantees 2048, every current
+#: desktop browser 4096 or more.
 MAX_WEB_SIDE = 4096
+#: Default width (pixels) of a browser copy (``--browser-width``): the replay shows a
+#: ~100 deg view of it in a window of at most ~1280 px, i.e. ~3.5 source px per view px at
+#: 2048 wide (sharper than the screen); a wider or non-H.264 source is scaled to fit.
+BROWSER_WIDTH = 2048
+#: x264 preset of a re-encoded browser copy: the fastest that keeps the replay sharp at the
+#: report's view size (bench/report_speed.py prints the view PSNR of each preset).
+BROWSER_PRESET = "superfast"
+BROWSER_CRF = 20
 
 
 @dataclass(frozen=True)
@@ -124,16 +135,35 @@ def _source_key(path: Path) -> str:
     return f"{st.st_size}:{st.st_mtime_ns}"
 
 
+def check_browser_width(width) -> int:
+    """``--browser-width`` as an int: InputError unless a positive even number of pixels
+    no larger than :data:`MAX_WEB_SIDE`."""
+    try:
+        w = int(width)
+    except (TypeError, ValueError):
+        w = -1
+    if str(width).strip() != str(w) or w <= 0 or w % 2 or w > MAX_WEB_SIDE:
+        raise InputError(
+            f"--browser-width must be a positive even number of pixels <= {MAX_WEB_SIDE} "
+            f"(e.g. 2048); got {width!r}"
+        )
+    return w
+
+
 def browser_copy(
     src: str | os.PathLike, dst: Path, layout: str = "mono", eye: str = "left",
-    projection: str = "equirect", lens_fov_deg: float | None = None,
+    projection: str = "equirect", lens_fov_deg: float | None = None, *,
+    width: int = BROWSER_WIDTH, explicit: bool = False, progress=None,
 ) -> dict:  # fmt: skip
     """The study's browser copy of a video: H.264 yuv420p MP4 (no audio), the source's
-    (left-eye) equirect at its own resolution when no side exceeds :data:`MAX_WEB_SIDE`
-    (stream-copied when the source already is H.264 yuv420p mono equirect), else scaled
-    to fit. Another ``projection`` (the replay draws an equirect texture) is converted to
-    its equirect working frame (:class:`simulator.media.source.Source`; uncovered
-    directions black), as every vimsim command sees it.
+    (left-eye) equirect at most ``width`` pixels wide (:data:`BROWSER_WIDTH`):
+    the source itself or a stream copy when it already is H.264 yuv420p mono equirect
+    that wide or less, else scaled and encoded (x264 :data:`BROWSER_PRESET`). Another
+    ``projection`` (the replay draws an equirect texture) is converted to its equirect
+    working frame (:class:`simulator.media.source.Source`; uncovered directions black),
+    as every vimsim command sees it. ``explicit``: the width was asked for
+    (``--browser-width``): InputError when it is wider than the source's equirect.
+    ``progress(done, total)`` is told of the frames encoded.
 
     Returns ``{"how", "width", "height", "start_s"}``: ``start_s`` is what to add to the
     copy's media time to get the source's clock (the clock of the EPOF rows and head
@@ -149,44 +179,94 @@ def browser_copy(
         codec, pix = s.codec_context.name, s.codec_context.pix_fmt
         mp4 = "mp4" in c.format.name.split(",") and len(c.streams.video) == 1
     w, h = info.width, info.height
-    playable = (
-        layout == "mono" and projection == "equirect" and codec == "h264" and pix == "yuv420p"
-        and max(w, h) <= MAX_WEB_SIDE
-    )  # fmt: skip
+    plain = layout == "mono" and projection == "equirect"
+    if explicit and plain and width > w:
+        raise InputError(f"{src}: --browser-width {width} is wider than the video ({w} px); "
+                         f"give at most {w - w % 2}")  # fmt: skip
+    playable = plain and codec == "h264" and pix == "yuv420p" and w <= width and h <= MAX_WEB_SIDE
     if playable and mp4:
         with atomic_output(dst) as tmp:
             shutil.copyfile(src, tmp)
         return {"how": "copy of the source (H.264 MP4)", "width": w, "height": h, "start_s": 0.0}
     if playable:
-        with atomic_output(dst) as tmp, av.open(str(src)) as ic:
-            oc = av.open(str(tmp), "w", format="mp4", options={"movflags": "+faststart"})
-            try:
-                st = oc.add_stream_from_template(ic.streams.video[0])
-                for pkt in ic.demux(ic.streams.video[0]):
-                    if pkt.size == 0:  # the demuxer's end-of-stream flush packet
-                        continue
-                    pkt.stream = st
-                    oc.mux(pkt)
-            finally:
-                oc.close()
+        _stream_copy(src, dst)
         return {"how": "stream copy into MP4", "width": w, "height": h, "start_s": 0.0}
+    # a variable-rate source keeps its frame times (from its first frame), as the replay seeks them
+    times = info.times_s() if info.variable_rate else None
+    start_s = float(info.times_s([0])[0])
+    if plain:
+        size = _fit(w, h, width)
+        _scaled_copy(src, dst, info, size, times, progress)
+    else:
+        size = _converted_copy(src, dst, info, (layout, projection, eye, lens_fov_deg), width,
+                               times, explicit, progress)  # fmt: skip
+    how = f"re-encoded (H.264 {BROWSER_PRESET} crf {BROWSER_CRF}, {size[0]}x{size[1]})"
+    return {"how": how, "width": size[0], "height": size[1], "start_s": start_s}
+
+
+def _fit(w: int, h: int, width: int) -> tuple[int, int]:
+    """Even ``(width, height)`` of a ``w x h`` frame scaled down to at most ``width`` wide
+    and :data:`MAX_WEB_SIDE` high (never up)."""
+    k = min(1.0, width / w, MAX_WEB_SIDE / h)
+    return max(2, round(w * k / 2) * 2), max(2, round(h * k / 2) * 2)
+
+
+def _stream_copy(src, dst: Path) -> None:
+    """The video stream of ``src`` into an MP4 at ``dst`` as it is (no decoding)."""
+    import av
+
+    with atomic_output(dst) as tmp, av.open(str(src)) as ic:
+        oc = av.open(str(tmp), "w", format="mp4", options={"movflags": "+faststart"})
+        try:
+            st = oc.add_stream_from_template(ic.streams.video[0])
+            for pkt in ic.demux(ic.streams.video[0]):
+                if pkt.size == 0:  # the demuxer's end-of-stream flush packet
+                    continue
+                pkt.stream = st
+                oc.mux(pkt)
+        finally:
+            oc.close()
+
+
+def _scaled_copy(src, dst: Path, info, size, times, progress) -> None:
+    """A mono equirect source decoded on FFmpeg's threads, scaled by swscale (area) to
+    ``size`` in yuv420p and encoded, frame for frame: no RGB round trip."""
+    import av
+
+    counter = Counter(progress, info.n_frames)
+    with av.open(str(src)) as ic, VideoWriter(dst, info.fps, size, crf=BROWSER_CRF,
+                                              preset=BROWSER_PRESET, times_s=times) as vw:  # fmt: skip
+        st = ic.streams.video[0]
+        st.thread_type = "AUTO"
+        for f in ic.decode(st):
+            vw.encode(f.reformat(width=size[0], height=size[1], format="yuv420p",
+                                 interpolation="AREA"))  # fmt: skip
+            counter.update()
+
+
+def _converted_copy(src, dst: Path, info, how, width, times, explicit, progress):
+    """Another layout or projection: the eye's equirect working frame (RGB) scaled to fit
+    ``width`` and encoded; returns the copy's size."""
     import cv2
 
+    layout, projection, eye, lens_fov_deg = how
     source = Source.open(src, layout=layout, projection=projection, eye=eye,
                          lens_fov_deg=lens_fov_deg, orientation=False)  # fmt: skip
     frames = source.frames(fmt="rgb24")  # the eye, converted to equirect
     first = next(frames)
     fh, fw = first.shape[:2]
-    k = min(1.0, MAX_WEB_SIDE / max(fw, fh))
-    size = (max(2, round(fw * k / 2) * 2), max(2, round(fh * k / 2) * 2))
-    # a variable-rate source keeps its frame times (from its first frame), as the replay seeks them
-    times = info.times_s() if info.variable_rate else None
-    with VideoWriter(dst, info.fps, size, crf=18, times_s=times) as vw:
+    if explicit and width > fw:
+        raise InputError(f"{src}: --browser-width {width} is wider than the video's equirect "
+                         f"frame ({fw} px); give at most {fw - fw % 2}")  # fmt: skip
+    size = _fit(fw, fh, width)
+    counter = Counter(progress, info.n_frames)
+    with VideoWriter(dst, info.fps, size, crf=BROWSER_CRF, preset=BROWSER_PRESET,
+                     times_s=times) as vw:  # fmt: skip
         for f in _chain(first, frames):
             vw.write(f if (f.shape[1], f.shape[0]) == size else
                      cv2.resize(f, size, interpolation=cv2.INTER_AREA))  # fmt: skip
-    return {"how": "re-encoded (H.264 crf 18)", "width": size[0], "height": size[1],
-            "start_s": float(info.times_s([0])[0])}
+            counter.update()
+    return size
 
 
 def _layout(grid: Path) -> dict:
@@ -220,7 +300,7 @@ def _grf(settings: dict) -> GrfConfig:
 
 
 def _video_data(
-    out: Path, tmp: Path, s: dict, vid: str, vinfo: dict, old: Path, copies: dict
+    out: Path, tmp: Path, s: dict, vid: str, vinfo: dict, old: Path, copies: dict, copy_opts: dict
 ) -> dict:
     """data/<vid>/ (the web export), media/<vid>.mp4 (the browser copy, reused from the old
     report when the source is unchanged), media/<vid>/ (the study's plots, thumbnails)."""
@@ -248,7 +328,7 @@ def _video_data(
     src = Path(vinfo.get("path", ""))
     (tmp / "media" / vid).mkdir(parents=True, exist_ok=True)
     if src.is_file():
-        key = _source_key(src)
+        key = f"{_source_key(src)}:{copy_opts['width']}"
         prev = (copies.get(vid) or {}).get("copy")
         target = tmp / "media" / f"{vid}.mp4"
         # (a copy from before "start_s" was recorded is made again)
@@ -257,7 +337,7 @@ def _video_data(
             os.link(old / "media" / f"{vid}.mp4", target)
             res["copy"] = prev
         else:
-            res["copy"] = {**browser_copy(src, target, **_layout(grid)), "key": key}
+            res["copy"] = {**browser_copy(src, target, **_layout(grid), **copy_opts), "key": key}
     vdir = out / "videos" / vid
     for name in ("epof_viewers.png", "provocative.png"):
         if (vdir / name).is_file():
@@ -345,9 +425,18 @@ def _write(folder: Path, rel: str, data: bytes | str, written: list[str]) -> Non
     written.append(rel)
 
 
-def build_report(outdir: str | os.PathLike) -> ReportResult:
-    """Write ``OUTDIR/report/`` for a complete study (see the module docstring)."""
+def build_report(
+    outdir: str | os.PathLike, *, browser_width: int | None = None, progress=None
+) -> ReportResult:
+    """Write ``OUTDIR/report/`` for a complete study (see the module docstring).
+
+    ``browser_width``: the browser copies' width (``--browser-width``; default
+    :data:`BROWSER_WIDTH`, InputError if wider than a video); ``progress(done, total)``
+    is told of the frames of each copy being encoded."""
     t0 = time.perf_counter()
+    explicit = browser_width is not None
+    copy_opts = {"width": check_browser_width(browser_width) if explicit else BROWSER_WIDTH,
+                 "explicit": explicit, "progress": progress}  # fmt: skip
     out, s = check_study(outdir)
     folder = out / "report"
     listed = check_report_folder(folder)
@@ -367,7 +456,7 @@ def build_report(outdir: str | os.PathLike) -> ReportResult:
             _write(tmp, f"assets/{n}", js_source(n), written)
         videos = {}
         for vid, vinfo in (s.get("videos") or {}).items():
-            videos[vid] = _video_data(out, tmp, s, vid, vinfo, folder, old_copies)
+            videos[vid] = _video_data(out, tmp, s, vid, vinfo, folder, old_copies, copy_opts)
         site = pages.Site(s, rows, videos)
         for rel, html in site.static_pages():
             _write(tmp, rel, html, written)

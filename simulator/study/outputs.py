@@ -13,6 +13,7 @@ session flow taken from their EPOF (``DATA.csv`` there is what was analysed).
 
 from __future__ import annotations
 
+import concurrent.futures
 import csv
 import dataclasses
 import io
@@ -35,6 +36,7 @@ from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.media.source import Source
 from simulator.mitigation.bands import draw_bands
 from simulator.sphere.geometry import extract_view
+from simulator.study.tasks import PART_MEAN_COLUMNS
 
 __all__ = [
     "artefact_frames",
@@ -58,9 +60,6 @@ def _cell(v) -> str:
     return str(v)
 
 
-#: The means of the EPOF's parts (:mod:`simulator.epof.parts`), after the given columns;
-#: empty for a viewing whose grid has no per-frame camera rotation.
-PART_MEAN_COLUMNS = ("epof_rot_mean_dps", "epof_trans_mean_dps")
 
 
 def _part_means(epof_csv: Path) -> dict:
@@ -77,14 +76,16 @@ def _part_means(epof_csv: Path) -> dict:
 
 def write_viewings_csv(path, rows: list[dict], columns) -> None:
     """One row per viewing, in manifest order; floats as the EPOF CSV writes them; then
-    the means of the EPOF's rotational and translational parts, read from the viewing's
+    the means of the EPOF's rotational and translational parts (:data:`PART_MEAN_COLUMNS`)
+    as the row has them (the EPOF task's), else read from the viewing's
     ``epof/<viewing>.csv`` beside ``path``."""
     columns = (*columns, *PART_MEAN_COLUMNS)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(columns)
     for r in rows:
-        if r.get("viewing") and r.get("status") == "ok":
+        have = all(c in r for c in PART_MEAN_COLUMNS)  # the task's (or the resumed row's)
+        if r.get("viewing") and r.get("status") == "ok" and not have:
             r = {**r, **_part_means(Path(path).parent / "epof" / f"{r['viewing']}.csv")}
         w.writerow([_cell(r.get(c, "")) for c in columns])
     with atomic_output(path) as tmp:
@@ -235,7 +236,10 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
                       lens_fov_deg=v.lens_fov_deg)  # fmt: skip
     for mo in moments:  # the frame's own time (a variable-rate video: not frame / fps)
         mo["time_s"] = float(src.info.times_s([mo["frame"]])[0])
-    _thumbnails(src, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    # the thumbnails decode (FFmpeg, outside the GIL) while the map is drawn
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="thumbnails")
+    thumbs = pool.submit(_thumbnails, src, moments, grid.hfov_deg, grid.vfov_deg, folder)
+    pool.shutdown(wait=False)
     fig, ax = plt.subplots(figsize=(10, 4.2), dpi=110)
     step = float(np.diff(grid.yaw_deg).mean()) if len(grid.yaw_deg) > 1 else 360.0
     T = m.shape[0]
@@ -270,6 +274,7 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
         fig.savefig(tmp)
     plt.close(fig)
     written.append("provocative.png")
+    thumbs.result()  # its error, if any, is this video's
     cols = ("rank", "time_s", "frame", "yaw_deg", "pitch_deg", "pof_dps", "thumbnail")
     buf = io.StringIO()
     wr = csv.writer(buf, lineterminator="\n")

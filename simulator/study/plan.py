@@ -10,6 +10,7 @@ checked against its video's, and each render range against the video's length.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
@@ -20,7 +21,7 @@ from pathlib import Path
 
 from simulator import __version__
 from simulator.core.errors import InputError
-from simulator.core.fileio import OutputFolder
+from simulator.core.fileio import OutputFolder, atomic_output
 from simulator.core.mapcache import cache_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
@@ -125,7 +126,7 @@ def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
     plan = Plan(grids, {k: p.is_file() for k, p in grids.items()}, {}, {}, [])
     for v in m.videos:  # an entry is checked before use (format, video, options)
         mine = grids[v.id] == v.grid_file  # the user's grid: checked already, never removed
-        why = cache_problem(grids[v.id], v) if plan.hits[v.id] and not mine else None
+        why = cache_problem(grids[v.id], v, remember=True) if plan.hits[v.id] and not mine else None
         if why is not None:
             plan.hits[v.id] = False
             plan.stale[v.id] = f"rebuilt: {why}"
@@ -215,17 +216,35 @@ def check_videos(manifest: Manifest) -> None:
             ) from None
 
 
-def cache_problem(path: Path, v: VideoSpec) -> str | None:
+def cache_problem(path: Path, v: VideoSpec, *, remember: bool = False) -> str | None:
     """Why the cached grid ``path`` cannot serve video ``v`` (None: it can). Checked before
     use: the grid file's format (every array and its meta, as :func:`load_grid` checks),
     the content hash of the video it was made from, and its options (method, layout,
-    eye, window matrix shape, cell size)."""
+    eye, window matrix shape, cell size).
+
+    ``remember`` (the study's own cache entries, never a user's file): the fields' values
+    (a decompression of each) are checked once per entry, a ``.checked`` mark beside it
+    holding the file's size, time and inode when they passed."""
+    mark = path.with_name(path.name + ".checked")
     try:
+        st = path.stat()
+        stamp = f"{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+        known = remember and mark.is_file() and mark.read_text(encoding="ascii") == stamp
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            g = load_grid(path)
-    except (InputError, OSError, ValueError, KeyError, EOFError) as e:
+            g = load_grid(path, scan=not known)
+    except (InputError, OSError, ValueError, KeyError, EOFError, UnicodeDecodeError) as e:
         return f"not a valid grid file ({' '.join(str(e).split())[:120]})"
+    problem = _cache_mismatch(g, v)
+    if problem is None and remember and not known:
+        with contextlib.suppress(OSError):  # a read-only cache: checked again next time
+            with atomic_output(mark) as tmp:
+                Path(tmp).write_text(stamp, encoding="ascii")
+    return problem
+
+
+def _cache_mismatch(g, v: VideoSpec) -> str | None:
+    """Why a loaded cached grid was made of another video or with other options."""
     meta = g.meta if isinstance(g.meta, dict) else {}
     video = meta.get("video") if isinstance(meta.get("video"), dict) else {}
     if video.get("content_hash") != content_hash(v.path):

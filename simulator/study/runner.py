@@ -144,6 +144,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
             prev = plan.unchanged[w.id]
             rows[w.id] = {**base_row(w),
                           **{c: prev.get(c, "") for c in (*_STAT_COLUMNS, *_RENDER_COLUMNS)},
+                          **{c: prev[c] for c in tasks.PART_MEAN_COLUMNS if c in prev},
                           "status": "ok", "warnings": prev.get("warnings", ""),
                           "resumed": True}  # fmt: skip
     timings["plan"] = time.perf_counter() - t0
@@ -338,7 +339,8 @@ class _Scheduler:
         if w.id not in self.results or (w.render and w.id not in self.renders):
             return
         r = self.results[w.id]
-        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS}}
+        row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS},
+               **{c: r[c] for c in tasks.PART_MEAN_COLUMNS if c in r}}  # fmt: skip
         if w.render:
             row.update({c: self.renders[w.id].get(c, "") for c in _RENDER_COLUMNS})
         status = r["status"]

@@ -25,7 +25,7 @@ from simulator.core.fileio import atomic_output, json_text
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
-from simulator.media.gridfile import GridFile, cells_from_meta, load_grid
+from simulator.media.gridfile import GridFile, cells_from_meta, check_field_values, load_grid
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
 from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
@@ -40,7 +40,7 @@ from simulator.traces.readers import TraceFile, load_headpath
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec
 
-__all__ = ["epof_task", "preprocess_task", "render_task", "viewing_stats"]
+__all__ = ["PART_MEAN_COLUMNS", "epof_task", "preprocess_task", "render_task", "viewing_stats"]
 
 # Per worker process: kept between tasks (a pool or Ray worker runs many tasks).
 _GRIDS: dict[tuple, GridFile] = {}
@@ -83,7 +83,7 @@ def _grid(path: str) -> GridFile:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            g = load_grid(path)
+            g = load_grid(path, scan=False)  # the values checked once in memory, below
         if g.field_dps is not None:
             # Read once per worker as float32, not once per viewing: a worker holds one
             # video's field at a time (one grid cached), the price of not decompressing it
@@ -91,6 +91,7 @@ def _grid(path: str) -> GridFile:
             g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
         if g.field_trans_dps is not None:  # the same for the field without the rotation
             g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
+        check_field_values(g)
         _GRIDS[key] = g
     return _GRIDS[key]
 
@@ -163,11 +164,20 @@ def preprocess_task(video: dict, output: str, threads: int) -> dict:
             "cpu_s": time.process_time() - c0}  # fmt: skip
 
 
-def viewing_stats(epof_dps, opacity) -> dict:
-    """The numbers of a viewing's row in ``viewings.csv`` (deg/s; opacity 0..1)."""
+#: The means of the EPOF's parts (:mod:`simulator.epof.parts`) in a viewing's row; empty
+#: for a viewing whose grid has no per-frame camera rotation.
+PART_MEAN_COLUMNS = ("epof_rot_mean_dps", "epof_trans_mean_dps")
+
+
+def viewing_stats(epof_dps, opacity, parts=None) -> dict:
+    """The numbers of a viewing's row in ``viewings.csv`` (deg/s; opacity 0..1); with
+    ``parts = (epof_rot_dps, epof_trans_dps)`` (or None: empty) their means too."""
     e = np.asarray(epof_dps, np.float64)
     o = np.asarray(opacity, np.float64)
+    means = ("", "") if parts is None or any(x is None for x in parts) else (
+        float(np.mean(parts[0])), float(np.mean(parts[1])))  # fmt: skip
     return {
+        **dict(zip(PART_MEAN_COLUMNS, means)),
         "frames": int(e.size),
         "epof_mean_dps": float(np.mean(e)),
         "epof_median_dps": float(np.median(e)),
@@ -244,7 +254,8 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
             write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
             if it.get("plot"):
                 plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
-            rec.update(viewing_stats(res.epof_dps, res.opacity), status="ok")
+            parts = (res.epof_rot_dps, res.epof_trans_dps)
+            rec.update(viewing_stats(res.epof_dps, res.opacity, parts), status="ok")
         except Exception as e:  # noqa: BLE001
             rec["status"] = _error_line(e)
         rec["seconds"] = time.perf_counter() - t0

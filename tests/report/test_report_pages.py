@@ -10,6 +10,8 @@ import sys
 import urllib.request
 from pathlib import Path
 
+import pytest
+
 from simulator.report.pages import Site
 
 
@@ -90,10 +92,11 @@ def _clip(path: Path, size: str, codec: list[str], frames: int = 3) -> Path:
 
 def test_browser_copy_kinds(tmp_path):
     """The browser copy: a copy of an H.264 MP4, a stream copy of H.264 in another container,
-    a re-encoding otherwise (another codec; one eye of a stereo video; larger than 4096)."""
+    a re-encoding otherwise (another codec; one eye of a stereo video; wider than the
+    browser width, 2048 by default)."""
     import av
 
-    from simulator.report.build import MAX_WEB_SIDE, browser_copy
+    from simulator.report.build import browser_copy
 
     def info(p):
         with av.open(str(p)) as c:
@@ -106,16 +109,36 @@ def test_browser_copy_kinds(tmp_path):
         (_clip(tmp_path / "b.mkv", "128x64", h264), "mono", "stream copy", (128, 64)),
         (_clip(tmp_path / "c.avi", "128x64", ["-c:v", "mpeg4"]), "mono", "re-encoded", (128, 64)),
         (_clip(tmp_path / "d.mp4", "128x128", h264), "top-bottom", "re-encoded", (128, 64)),
-        (
-            _clip(tmp_path / "e.mp4", "4200x2100", h264, 1),
-            "mono",
-            "re-encoded",
-            (MAX_WEB_SIDE, 2048),
-        ),
+        # wider than the default browser width (2048): scaled down to it
+        (_clip(tmp_path / "e.mp4", "2560x1280", h264, 1), "mono", "re-encoded", (2048, 1024)),
+        # ... unless a width is asked for: then the source as it is
+        (tmp_path / "e.mp4", "mono", "copy of the source", (2560, 1280), {"width": 2560}),
+        (tmp_path / "e.mp4", "mono", "re-encoded", (1024, 512), {"width": 1024}),
     ]
-    for src, layout, how, size in cases:
-        dst = tmp_path / f"{src.stem}.web.mp4"
-        r = browser_copy(src, dst, layout=layout)
+    for src, layout, how, size, *opts in cases:
+        dst = tmp_path / f"{src.stem}.{len(opts)}.{size[0]}.web.mp4"
+        r = browser_copy(src, dst, layout=layout, **(opts[0] if opts else {}))
         assert how in r["how"] and (r["width"], r["height"]) == size, (src.name, r)
         codec, pix, w, h, _ = info(dst)
         assert (codec, pix, w, h) == ("h264", "yuv420p", *size), (src.name, codec, pix, w, h)
+
+
+@pytest.mark.parametrize("width", ["0", "-2", "1023", "abc", "8192", "1e3"])
+def test_browser_width_refused(width):
+    """--browser-width: a positive even number of pixels, at most 4096 (exit 2 in the CLI)."""
+    from simulator.core.errors import InputError
+    from simulator.report.build import check_browser_width
+
+    with pytest.raises(InputError, match="--browser-width"):
+        check_browser_width(width)
+    assert check_browser_width("1024") == 1024
+
+
+def test_browser_width_wider_than_the_source(tmp_path):
+    from simulator.core.errors import InputError
+    from simulator.report.build import browser_copy
+
+    src = _clip(tmp_path / "a.mp4", "128x64", ["-c:v", "libx264", "-pix_fmt", "yuv420p"])
+    with pytest.raises(InputError, match=r"a.mp4: --browser-width 256 is wider than the video"):
+        browser_copy(src, tmp_path / "w.mp4", width=256, explicit=True)
+    assert not (tmp_path / "w.mp4").exists()

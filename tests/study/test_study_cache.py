@@ -103,3 +103,35 @@ def test_not_a_video_is_a_manifest_error(study, tmp_path, capsys):
     err = capsys.readouterr().err
     assert rc == 2 and err.count("\n") == 1 and "'clip'" in err and "bad.mp4" in err, err
     assert "internal error" not in err and not out.exists()
+
+
+def test_field_values_checked_once_per_cache_entry(study, tmp_path):
+    """A cache entry's field values are scanned once: a ``.checked`` mark holds the file's
+    size, time and inode; a changed file (NaN in its field) is scanned again and refused;
+    a user's own grid gets no mark."""
+    import numpy as np
+
+    from simulator.study.plan import cache_problem
+
+    v = load_manifest(study / "s.toml").videos[0]
+    g = _grid(study)
+    mark = g.with_name(g.name + ".checked")
+    mark.unlink(missing_ok=True)
+    assert cache_problem(g, v, remember=True) is None  # scanned, then marked
+    st = g.stat()
+    assert mark.read_text() == f"{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+    good = g.read_bytes()
+    try:
+        with np.load(g, allow_pickle=False) as z:
+            arrs = {k: z[k] for k in z.files}
+        arrs["field_dps"][0, 0, 0] = np.nan
+        np.savez_compressed(g, **arrs)  # a new stamp: scanned again
+        assert "not a valid grid file" in cache_problem(g, v, remember=True)
+    finally:
+        g.write_bytes(good)
+    assert cache_problem(g, v, remember=True) is None  # passes again, a new mark
+    st = g.stat()
+    assert mark.read_text() == f"{st.st_size}:{st.st_mtime_ns}:{st.st_ino}"
+    mine = tmp_path / "mine.npz"
+    mine.write_bytes(good)
+    assert cache_problem(mine, v) is None and not (tmp_path / "mine.npz.checked").exists()
