@@ -95,16 +95,16 @@ def _lenses_agree(gray: NDArray[np.uint8]) -> bool:
     """Lenses that fill their squares (ffmpeg ``v360``'s dfisheye: no black corners): with
     lenses over 180 deg, the directions near 90 deg from both axes are seen by both lenses;
     read as dual fisheye (vimsim's model, as v360's) the two images agree there. Two places
-    of an equirect do not (correlation of the row-detrended images: v360 dual fisheye
-    >= 0.977, real equirects <= 0.53: bench/projection_guard.py). The azimuths near the
-    four axes are left out: there the two places are neighbours in an equirect too (its
-    seams at longitude 0 and 180, its poles)."""
+    of an equirect do not (correlation of the row-detrended images where both have picture:
+    v360 dual fisheye >= 0.977, real equirects <= 0.53: bench/projection_guard.py). The
+    azimuths near the four axes are left out: there the two places are neighbours in an
+    equirect too (its seams at longitude 0 and 180, its poles)."""
     h, w = gray.shape
     if w > 1024:
         gray = cv2.resize(gray, (1024, 512), interpolation=cv2.INTER_AREA)
         h, w = gray.shape
-    g = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 1.5)
-    g -= g.mean(axis=1, keepdims=True)  # an equirect's horizontal layering (sky, ground)
+    raw = cv2.GaussianBlur(gray.astype(np.float32), (0, 0), 1.5)
+    g = raw - raw.mean(axis=1, keepdims=True)  # an equirect's horizontal layering (sky, ground)
     ew = w / 2.0
     phi = np.linspace(0.0, 2 * math.pi, 720, endpoint=False)
     off_axis = np.abs((phi + math.pi / 4) % (math.pi / 2) - math.pi / 4) > math.radians(20)
@@ -113,8 +113,14 @@ def _lenses_agree(gray: NDArray[np.uint8]) -> bool:
         d = math.radians(lens_deg)
         theta = np.linspace(math.pi - d / 2, d / 2, 6)[None, :]  # angle from the front axis
         rf, rb = theta / d, (math.pi - theta) / d  # radii in each lens image (0.5: its rim)
-        a = _sample(g, ew + (rf * c + 0.5) * ew - 0.5, (0.5 - rf * s) * h - 0.5)
-        b = _sample(g, ew - (rb * c + 0.5) * ew - 0.5, (0.5 - rb * s) * h - 0.5)
+        front = (ew + (rf * c + 0.5) * ew - 0.5, (0.5 - rf * s) * h - 0.5)
+        back = (ew - (rb * c + 0.5) * ew - 0.5, (0.5 - rb * s) * h - 0.5)
+        # pairs with picture on both sides: black on both (a region a projection does not
+        # cover, e.g. a VR180 copy's back half) would agree without telling anything
+        lit = (_sample(raw, *front) > DARK_LEVEL) & (_sample(raw, *back) > DARK_LEVEL)
+        if lit.mean() < 0.5:
+            continue
+        a, b = _sample(g, *front)[lit], _sample(g, *back)[lit]
         if a.std() > 3.0 and b.std() > 3.0 and float(np.corrcoef(a, b)[0, 1]) >= _AGREE:
             return True
     return False

@@ -68,6 +68,21 @@ def test_lens_circles_and_dark_frames():
     assert looks_dual_fisheye(eq) is False
 
 
+def test_half_covered_equirect_is_not_flagged():
+    """A VR180 source's equirect copy (the back half black) is not two lenses: black on
+    both sides of an overlap pair tells nothing."""
+    pano = Path(__file__).resolve().parents[2] / "simulator" / "data" / "panorama.jpg"
+    eq = np.asarray(Image.open(pano).convert("RGB").resize((512, 256)))
+    assert looks_dual_fisheye(eq) is False
+    half = eq.copy()
+    half[:, :128], half[:, 384:] = 0, 0
+    assert looks_dual_fisheye(half) is False
+    # the same with a mirror-symmetric picture in the covered half: still no
+    sym = half.copy()
+    sym[:, 128:256] = sym[:, 256:384][:, ::-1]
+    assert looks_dual_fisheye(sym) is not True
+
+
 def test_v360_dual_fisheye_refused_equirect_not(clip, tmp_path, capsys):
     assert Source.open(clip).projection == "equirect"  # the genuine equirect opens
     fe = tmp_path / "fe.mp4"
