@@ -13,6 +13,7 @@ not empty, not a directory where a file is expected, not the same file as an inp
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import os
 import sys
@@ -25,6 +26,7 @@ __all__ = ["build_parser", "main"]
 COMMANDS: dict[str, str] = {
     "viewport": "viewport",
     "preprocess": "preprocess",
+    "grid": "grid",
     "ego": "ego",
     "headpath": "headpath",
     "epof": "epof",
@@ -176,18 +178,20 @@ def main(argv: list[str] | None = None) -> int:
             file=sys.stderr,
         )
         return 2
+    from simulator.commands._log import open_log
     from simulator.commands._signals import exit_status, handle_signals, signal_name
-    from simulator.core.fileio import input_scope
+    from simulator.core.fileio import before_output, input_scope, known_inputs
 
     name = f"vimsim {args.command}"
     log = None
+    refused = False
     saved = sys.stdout, sys.stderr
     try:
         with handle_signals():
             inputs = _inputs_named(args)
             with input_scope(inputs):
                 _check_outputs(args, inputs)
-                log = _open_log(args, inputs, argv)
+                log = open_log(args, inputs, argv, FOLDER_OUTPUTS)
                 if log is not None or getattr(args, "quiet", False):
                     from simulator.commands._progress import Tee
 
@@ -198,8 +202,17 @@ def main(argv: list[str] | None = None) -> int:
 
                 if deprecation_note():
                     print(f"{name}: {deprecation_note()}", file=sys.stderr)
-                return int(args.func(args) or 0)
+                try:
+                    with before_output(log.open if log is not None else lambda: None):
+                        rc = int(args.func(args) or 0)
+                    if log is not None:
+                        log.open()  # a run that wrote nothing (a dry run): checked now
+                    return rc
+                finally:
+                    if log is not None:
+                        log.inputs = known_inputs()
     except InputError as e:
+        refused = log is None or log.fh is None  # refused before its checks passed: no log
         print(f"{name}: error: {_one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
@@ -225,38 +238,13 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for s in (sys.stdout, sys.stderr):
             if s not in saved:
-                s.flush()
+                with contextlib.suppress(OSError):  # a full disk under the log: said above
+                    s.flush()
         sys.stdout, sys.stderr = saved
-        if log is not None:
+        if log is not None and refused:
             log.close()
-
-
-def _open_log(args: argparse.Namespace, inputs: list[str], argv) -> object | None:
-    """The ``--log`` file opened for appending (InputError before any work when it names
-    an input, the output, or a folder)."""
-    path = getattr(args, "log", None)
-    if path is None:
-        return None
-    from datetime import UTC, datetime
-
-    from simulator.core.fileio import check_not_input
-
-    if not str(path).strip() or os.path.isdir(path):
-        raise InputError(f"--log {path!r}: expected a file to append to, not a folder")
-    out = getattr(args, "output", None)
-    try:
-        check_not_input(path, [*inputs, *([out] if out else [])])
-    except InputError:
-        raise InputError(
-            f"--log {path}: is an input or the output of this command; refusing to append to it"
-        ) from None
-    try:
-        fh = open(path, "a", encoding="utf-8", buffering=1)  # noqa: SIM115 -- closed in main
-    except OSError as e:
-        raise InputError(f"--log {path}: cannot append ({e.strerror or e})") from None
-    cmd = " ".join(sys.argv[1:] if argv is None else map(str, argv))
-    fh.write(f"# {datetime.now(UTC):%Y-%m-%dT%H:%M:%SZ} vimsim {cmd}\n")
-    return fh
+        elif log is not None:
+            log.finish()
 
 
 #: The most characters of one word (a name, a value: often user text) a message quotes,

@@ -85,13 +85,16 @@ def _box(kind: bytes, payload: bytes) -> bytes:
     return struct.pack(">I", 8 + len(payload)) + kind + payload
 
 
-def sv3d_box(yaw: float, pitch: float, roll: float) -> bytes:
-    """A Spherical Video V2 ``sv3d`` box (equirect, the pose in 16.16 fixed point)."""
+def sv3d_box(yaw: float, pitch: float, roll: float, projection: str = "equi") -> bytes:
+    """A Spherical Video V2 ``sv3d`` box (the pose in 16.16 fixed point): ``projection``
+    ``equi`` (equirect) or ``cbmp`` (cubemap, layout 0 and padding 0: what YouTube and 360
+    cameras write for EAC)."""
     pose = struct.pack(">iii", *(round(v * 65536) for v in (yaw, pitch, roll)))
     prhd = _box(b"prhd", b"\0\0\0\0" + pose)
-    equi = _box(b"equi", b"\0\0\0\0" + bytes(16))
+    body = bytes(16) if projection == "equi" else bytes(8)  # equi: 4 bounds; cbmp: layout, pad
+    proj = _box(projection.encode(), b"\0\0\0\0" + body)
     svhd = _box(b"svhd", b"\0\0\0\0" + b"vimsim test\0")
-    return _box(b"sv3d", svhd + _box(b"proj", prhd + equi))
+    return _box(b"sv3d", svhd + _box(b"proj", prhd + proj))
 
 
 def _child(data: bytes, start: int, end: int, kind: bytes) -> int:
@@ -104,7 +107,8 @@ def _child(data: bytes, start: int, end: int, kind: bytes) -> int:
     raise AssertionError(f"no {kind!r} box")
 
 
-def with_pose(src, dst, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> None:
+def with_pose(src, dst, yaw: float, pitch: float = 0.0, roll: float = 0.0, *,
+              projection: str = "equi") -> None:
     """``dst`` = the MP4 ``src`` (moov after mdat, one video track) with an ``sv3d`` box
     appended to its sample entry; the sizes of the boxes holding it grow to match."""
     data = bytearray(Path(src).read_bytes())
@@ -116,7 +120,7 @@ def with_pose(src, dst, yaw: float, pitch: float = 0.0, roll: float = 0.0) -> No
     assert _child(data, 0, len(data), b"mdat") < heads[0]  # chunk offsets stay valid
     entry = start  # the first sample entry (avc1)
     heads.append(entry)
-    box = sv3d_box(yaw, pitch, roll)
+    box = sv3d_box(yaw, pitch, roll, projection)
     at = entry + struct.unpack(">I", data[entry : entry + 4])[0]
     data[at:at] = box
     for off in heads:

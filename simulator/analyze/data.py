@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import difflib
 import math
 from collections.abc import Callable, Sequence
@@ -26,7 +25,7 @@ from simulator.analyze.scores import (
 )
 from simulator.core.choices import FLOW_STATS
 from simulator.core.errors import InputError
-from simulator.core.fileio import check_input_file
+from simulator.core.fileio import check_input_file, csv_row
 
 __all__ = ["FLOW_STATS", "Study", "read_study", "session_flow"]
 
@@ -91,7 +90,7 @@ def _read_rows(path: Path) -> tuple[list[str], list[tuple[int, list[str]]]]:
     if not lines:
         raise InputError(f"{path}: no header line; expected a CSV with columns id,condition,...")
     # one record per line: an unbalanced quote never swallows the lines after it
-    parsed = [next(csv.reader([ln]), []) for _, ln in lines]
+    parsed = [csv_row(ln, f"{path}: line {n}") for n, ln in lines]
     header = [_norm_col(c) for c in parsed[0]]
     if len(header) == 1 and ";" in lines[0][1]:
         raise InputError(f"{path}: header is separated by ';'; expected commas (CSV)")
@@ -185,7 +184,7 @@ def session_flow(path: str | Path, stat: str = "mean") -> float:
     with open(p, newline="", encoding="utf-8-sig") as fh:
         # '#' lines (the settings vimsim writes above the header) are comments.
         rows = [
-            (n, next(csv.reader([ln])))
+            (n, csv_row(ln, f"{p}: line {n}"))
             for n, ln in enumerate(fh, start=1)
             if ln.strip() and not ln.lstrip().startswith("#")
         ]

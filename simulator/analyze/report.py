@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import math
 import warnings
 from collections.abc import Sequence
@@ -15,7 +14,7 @@ from numpy.typing import NDArray
 from simulator.analyze.data import Participant, Study
 from simulator.analyze.scores import K_OF_TEXT, k_of
 from simulator.core.errors import InputError
-from simulator.core.fileio import OutputFolder, atomic_output, csv_cell
+from simulator.core.fileio import OutputFolder, atomic_output, write_csv
 
 __all__ = ["Analysis", "analyze_study", "p_text", "write_report"]
 
@@ -298,12 +297,8 @@ def _fmt(v: object, digits: int = 10) -> str:
 
 
 def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
-    with atomic_output(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(header)
-        for r in rows:
-            # text cells (ids, labels, reasons) cannot start a spreadsheet formula
-            w.writerow([csv_cell(v) if isinstance(v, str) else _fmt(v) for v in r])
+    # text cells (ids, labels, reasons) cannot start a spreadsheet formula
+    write_csv(path, header, rows, fmt=_fmt)
 
 
 def p_text(p: float) -> str:

@@ -7,7 +7,7 @@ import sys
 
 from simulator.commands._opacity import add_opacity_arguments, rule_from_args
 from simulator.commands._types import add_fov_arguments, frustum_from_args, positive_int
-from simulator.core.choices import EPOF_METHODS
+from simulator.core.choices import EPOF_METHODS, SYSTEM_PRESETS
 
 __all__ = ["register", "run"]
 
@@ -52,11 +52,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="use only the K largest overlaps (the paper's figure shows 4); default all",
     )
     p.add_argument(
-        "--hold-last",
-        action="store_true",
-        help="hold the first/last pose where the head path does not cover the video",
-    )
-    p.add_argument(
         "--flow-weights",
         default=None,
         metavar="rot=A,trans=B",
@@ -65,6 +60,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "sphere-mode grid with the per-frame camera rotation",
     )
     add_opacity_arguments(p)
+    p.add_argument(
+        "--preset",
+        choices=SYSTEM_PRESETS,
+        default="vimsim",
+        help="vimsim (default): the options as given; paper: the paper's text (--method paper "
+        "--opacity-rule paper); cao2021-code: the authors' Unity code (the nearest window's "
+        "flow with their CSV list indexing, row k-2 at frame k, opacity on the fixed 0.18..53.73 "
+        "px/frame scale; adds a flow_px column; docs/parity.md)",
+    )
     p.add_argument(
         "--artefacts",
         action="store_true",
@@ -96,8 +100,10 @@ def _check_output_file(path: str) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Compute and write the EPOF CSV (and plot); InputError -> exit 2 with nothing written."""
+    from pathlib import Path
+
     from simulator.commands._progress import warnings_to_stderr
-    from simulator.commands.headpath import load_headpath_args
+    from simulator.commands.headpath import load_headpath_args, print_warnings
     from simulator.epof import compute_epof, plot_epof, write_epof_csv
     from simulator.media.gridfile import load_grid
 
@@ -108,10 +114,17 @@ def run(args: argparse.Namespace) -> int:
     from simulator.epof.parts import parse_flow_weights
 
     weights = None if args.flow_weights is None else parse_flow_weights(args.flow_weights)
+    _apply_preset(args)
     with warnings_to_stderr("vimsim epof"):
         rule = rule_from_args(args)
         grid = load_grid(args.grid)
-    hp = load_headpath_args(args, args.headpath, "vimsim epof")
+    vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+    n_video = int(vid.get("n_frames") or grid.n_frames)  # the whole video, not the grid's part
+    notes: list[str] = []  # span warnings: printed once the EPOF is written
+    hp = load_headpath_args(args, args.headpath, "vimsim epof", n_video / grid.fps,
+                            Path(str(vid.get("path") or args.grid)).name, notes)  # fmt: skip
+    if args.preset == "cao2021-code":
+        return _run_nearest(args, grid, hp)
     art = None
     if args.artefacts:
         from simulator.preprocess.artefacts import artefacts_for_grid
@@ -137,11 +150,58 @@ def run(args: argparse.Namespace) -> int:
     write_epof_csv(args.output, res)  # the CSV first: a plot is never left without it
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid}")
+    print_warnings("vimsim epof", notes)
     lo, hi = res.thresholds_dps
     print(
         f"wrote {args.output}: {len(res.frame)} frames, EPOF median {float(_median(res.epof_dps)):.3g} deg/s, "
         f"opacity 0 at {lo:.3g}, 1 at {hi:.3g} deg/s ({res.meta['method']} EPOF, "
         f"{'paper' if rule.is_paper else 'eased'} opacity rule)"
+    )
+    return 0
+
+
+def _apply_preset(args: argparse.Namespace) -> None:
+    """``--preset paper`` sets the paper's method and rule; ``cao2021-code`` refuses the
+    options its rule has no use for (InputError, one line)."""
+    from simulator.core.errors import InputError
+
+    if args.preset == "vimsim":
+        return
+    given = [o for o, on in (("--method sphere", args.method == "sphere"),
+                             ("--flow-weights", args.flow_weights is not None),
+                             ("--opacity-rule absolute", args.opacity_rule == "absolute"))
+             if on]  # fmt: skip
+    if args.preset == "cao2021-code":
+        given += [o for o, on in (("--top-k", args.top_k is not None),
+                                  ("--artefacts", args.artefacts),
+                                  ("--method paper", args.method == "paper"),
+                                  ("a viewport FOV (the nearest window has none)",
+                                   any(getattr(args, k, None) is not None
+                                       for k in ("fov", "hfov", "vfov", "headset"))))
+                  if on]  # fmt: skip
+    if given:
+        raise InputError(f"--preset {args.preset} cannot be combined with {', '.join(given)}")
+    if args.preset == "paper":
+        args.method, args.opacity_rule = "paper", "paper"
+
+
+def _run_nearest(args: argparse.Namespace, grid, hp) -> int:
+    """``--preset cao2021-code``: the authors' runtime, with the ``flow_px`` column."""
+    from simulator.epof import plot_epof, write_epof_csv
+    from simulator.epof.nearest import FLOW_PX_COLUMN, nearest_epof
+    from simulator.mitigation.cao2021 import FixedPxRule
+
+    pct = (grid.meta.get("cao") or {}).get("percentiles_px")  # an imported percentile file
+    rule = FixedPxRule(*pct) if pct else FixedPxRule()
+    res = nearest_epof(grid, hp, rule=rule, hold=args.hold_last)
+    write_epof_csv(args.output, res, extra={FLOW_PX_COLUMN: res.meta["flow_px"]})
+    if args.plot:
+        plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid} (cao2021-code)")
+    rule = res.meta["rule"]
+    print(
+        f"wrote {args.output}: {len(res.frame)} frames, nearest-window flow median "
+        f"{float(_median(res.meta['flow_px'])):.3g} px/frame, opacity 0 at {rule.low_px:g}, 1 at "
+        f"{rule.high_px:g} px/frame (cao2021-code: the authors' runtime)"
     )
     return 0
 

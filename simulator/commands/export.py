@@ -14,11 +14,12 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
 )
+from simulator.core.choices import SYSTEM_PRESETS
 from simulator.core.errors import InputError
 
 __all__ = ["register", "run"]
 
-_FORMATS = ("unity", "web")
+_FORMATS = ("unity", "web", "cao-csv")
 _METHODS = ("auto", "paper", "sphere")  # = simulator.export.unity.METHODS (light import)
 _DTYPES = ("auto", "float16", "float32")  # = simulator.export.unity.DTYPES
 #: = simulator.core.choices.MITIGATIONS; local-grf is refused with its reason (the overlay
@@ -51,7 +52,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="unity (default): vimsim_epof.bin + the C# runtime; web: the same vimsim_epof.bin "
         "(and the overlap table in paper mode) with an ES-module runtime (vimsim.js, "
         "vimsim_grains.js, vimsim_gl.js) and example.html (docs/web.md); the overlay options "
-        "apply to both",
+        "apply to both; cao-csv: a paper-mode grid's pof_px in the authors' Unity layout (one "
+        "horizontal_<yaw>_vertical_<pitch>.csv per window and percentileData.csv, from --preset "
+        "cao2021-code's fixed 0.18/53.73 px/frame or the grid's --low-pct/--high-pct "
+        "percentiles of pof_px; docs/parity.md)",
+    )
+    p.add_argument(
+        "--preset",
+        choices=SYSTEM_PRESETS,
+        default="vimsim",
+        help="cao-csv: cao2021-code writes the authors' fixed scale 0.18 and 53.73 px/frame to "
+        "percentileData.csv; vimsim (default) and paper the grid's percentiles (docs/parity.md)",
     )
     p.add_argument(
         "--video",
@@ -137,11 +148,13 @@ def run(args: argparse.Namespace) -> int:
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
     rule = rule_from_args(args)
+    if args.video is not None and args.format != "web":
+        raise InputError("--video is for --format web (the video example.html plays)")
+    if args.format == "cao-csv":
+        return _run_cao_csv(args, rule)
     grf, mitigation = _overlay_from_args(args)  # the same overlay options for both formats
     if args.format == "web":
         return _run_web(args, hfov, vfov, rule, grf, mitigation)
-    if args.video is not None:
-        raise InputError("--video is for --format web (the video example.html plays)")
     res = export_unity(
         args.grid,
         args.output,
@@ -210,5 +223,39 @@ def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation) -> int
         f"{h['opacity']['low_dps']:.3g}, 1 at {h['opacity']['high_dps']:.3g} deg/s; "
         f"{h['grf']['n_grains']} grains, {h['mitigation']}); open example.html over http "
         "(docs/web.md)"
+    )
+    return 0
+
+
+def _run_cao_csv(args: argparse.Namespace, rule) -> int:
+    """``--format cao-csv``: the percentile file from the chosen rule (fixed px/frame for
+    ``--preset cao2021-code``, else the grid's pof_px percentiles; absolute deg/s refused)."""
+    import dataclasses
+
+    import numpy as np
+
+    from simulator.core.errors import InputError
+    from simulator.export.caocsv import export_cao_csv
+    from simulator.media.gridfile import load_grid
+    from simulator.mitigation.cao2021 import CAO_HIGH_PX, CAO_LOW_PX
+
+    g = load_grid(args.grid)
+    if args.preset == "cao2021-code":
+        from simulator.epof.nearest import preset_pof_px
+
+        pct, how = (CAO_LOW_PX, CAO_HIGH_PX), "the authors' fixed scale"
+        g = dataclasses.replace(g, pof_px=preset_pof_px(g))  # their frame-0 row, if measured
+    elif rule.is_absolute:
+        raise InputError(
+            "--format cao-csv writes px/frame thresholds; an absolute deg/s rule has none: "
+            "use --preset cao2021-code or a relative --opacity-rule"
+        )
+    else:
+        lo, hi = np.percentile(np.asarray(g.pof_px, np.float64), [rule.low_pct, rule.high_pct])
+        pct, how = (float(lo), float(hi)), f"pof_px percentiles {rule.low_pct:g}/{rule.high_pct:g}"
+    files = export_cao_csv(g, args.output, percentiles_px=pct)
+    print(
+        f"wrote {args.output}: {len(files) - 3} window CSVs of {g.n_frames} frames, the "
+        f"runtimes VimsimCao2021.cs and vimsim_cao2021.js, and percentileData.csv ({pct[0]:.4g}, {pct[1]:.4g} px/frame: {how})"
     )
     return 0

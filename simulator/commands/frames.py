@@ -56,13 +56,15 @@ def run(args: argparse.Namespace) -> int:
     """Run :func:`simulator.viewing.frames.render_frames`; InputError -> exit 2."""
     from simulator.commands._progress import progress_bar, warnings_to_stderr
     from simulator.commands._source import source_from_args
-    from simulator.commands.render import view_from_args
+    from simulator.commands.headpath import print_warnings
+    from simulator.commands.render import check_trace_span, view_from_args
     from simulator.viewing.frames import render_frames
 
     hp, grid, view, note, layout = view_from_args(args, "frames")
     source = source_from_args(
         args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
     )
+    notes = check_trace_span(args, hp, source)
     with (
         warnings_to_stderr("vimsim frames"),
         progress_bar("frames", enabled=not args.no_progress) as bar,
@@ -79,6 +81,7 @@ def run(args: argparse.Namespace) -> int:
         )
     if note:
         print(f"vimsim frames: note: {note}", file=sys.stderr)
+    print_warnings("vimsim frames", notes)
     n = len({f["time_s"] for f in index["frames"]})
     print(
         f"vimsim frames: {len(index['frames'])} PNGs ({n} moments) -> {args.output}/"

@@ -12,9 +12,9 @@ import sys
 
 from simulator.commands._progress import warnings_to_stderr
 from simulator.commands._types import finite_float, nonneg_int, number, positive_float
-from simulator.core.choices import HEADPATH_FORMATS, SYNTH_KINDS
+from simulator.core.choices import SYNTH_KINDS
 
-__all__ = ["add_column_options", "add_reader_options", "load_columns_args", "load_headpath_args", "register", "run"]
+__all__ = ["add_reader_options", "load_headpath_args", "print_warnings", "register", "run", "trace_options"]
 
 
 _user = number("expected a user number >= 1", "1", integer=True, lo=1)
@@ -24,81 +24,54 @@ def _user_or_all(text: str) -> int | str:
     return "all" if text == "all" else _user(text)
 
 
-def add_column_options(p: argparse.ArgumentParser) -> None:
-    """--columns and the options of a lab log read through it (docs/headpath.md)."""
-    g = p.add_argument_group("a lab's own log (any delimited table or JSON log)")
-    g.add_argument(
-        "--columns",
-        metavar="MAP",
-        help="read any delimited or JSON log through a column map: time=COL,yaw=COL,pitch=COL"
-        "[,roll=COL]; a leading - flips a sign (pitch=-deg_pitch); nested JSON fields by "
-        "dotted names (yaw=rot.y), time=key for a JSON object keyed by timestamps; e.g. a "
-        "Unity log: time=t,yaw=rot_y,pitch=-rot_x,roll=-rot_z",
-    )
-    g.add_argument(
-        "--angles", choices=("deg", "rad"), default="deg", help="--columns: angle unit (deg)"
-    )
-    g.add_argument(
-        "--time-scale",
-        type=positive_float,
-        default=1.0,
-        metavar="F",
-        help="--columns: seconds per time unit (0.001 for milliseconds; default 1)",
-    )
-    g.add_argument(
-        "--time-from-first",
-        action="store_true",
-        help="--columns: count time from the first row (for clock timestamps)",
-    )
-    g.add_argument(
-        "--time-format",
-        default=None,
-        metavar="FMT",
-        help="--columns: the time column is a clock time in this strptime format, e.g. "
-        "%%Y%%m%%dZ-%%H%%M%%S_%%fZ (counted from the first row)",
-    )
-    g.add_argument(
-        "--skip-rows",
-        type=nonneg_int,
-        default=0,
-        metavar="N",
-        help="--columns: drop the first N data rows",
-    )
-    g.add_argument(
-        "--drop-zero-rows",
-        action="store_true",
-        help="--columns: drop rows whose angles are all exactly 0 (Unity's first sample)",
-    )
+def add_reader_options(
+    p: argparse.ArgumentParser, *, allow_all: bool = False, exclude: tuple[str, ...] = ()
+) -> None:
+    """The trace options (:data:`simulator.core.traceopts.TRACE_OPTIONS`, the one table the
+    study manifest's trace keys come from too) as argparse options, for every command that
+    reads a head path (``vimsim headpath``, ``epof``, ``render``, ``frames``); ``allow_all``:
+    ``--user all``; ``exclude``: keys this command has no use for."""
+    from simulator.core.traceopts import TRACE_OPTIONS
+
+    g = p.add_argument_group("head trace (the same keys in a study manifest's [traces] table)")
+    for o in TRACE_OPTIONS:
+        if o.key in exclude:
+            continue
+        kw: dict = {"default": o.default, "help": o.help.replace("%", "%%")}
+        if o.kind == "flag":
+            kw["action"] = "store_true"
+        elif o.kind == "choice":
+            kw["choices"] = o.choices
+        else:
+            kw["metavar"] = o.metavar
+            kw["type"] = _ARG_TYPES[o.kind](o)
+        if o.key == "user" and allow_all:
+            kw.update(type=_user_or_all, metavar="N|all", help=o.help + "; all = every user, "
+                      "one CSV each into the folder -o DIR (the file is read once)")  # fmt: skip
+        g.add_argument(o.flag, **kw)
 
 
-def add_reader_options(p: argparse.ArgumentParser, *, allow_all: bool = False) -> None:
-    """--format, --video, --user and the --columns options (shared with ``vimsim epof``,
-    ``render``, ``frames``); ``allow_all``: ``--user all``."""
-    p.add_argument(
-        "--format",
-        choices=("auto", *HEADPATH_FORMATS),
-        default="auto",
-        help="head path format (default auto: detected from the content); see docs/headpath.md",
-    )
-    p.add_argument(
-        "--video",
-        default=None,
-        metavar="NAME",
-        help="AVTrack360 files hold one trace per video: which one, e.g. 6.mp4",
-    )
-    p.add_argument(
-        "--user",
-        type=_user_or_all if allow_all else _user,
-        default=None,
-        metavar="N|all" if allow_all else "N",
-        help="360VidStr aggregated files hold one trace per user: which one (1-based)"
-        + (
-            "; all = every user, one CSV each into the folder -o DIR (the file is read once)"
-            if allow_all
-            else ""
-        ),
-    )
-    add_column_options(p)
+def _number_type(o):
+    if o.lo is None:
+        return finite_float
+    op = ">" if o.lo_open else ">="
+    return number(f"expected a number {op} {o.lo:g}", "0.001", lo=o.lo, lo_open=o.lo_open)
+
+
+_ARG_TYPES = {
+    "str": lambda o: str,
+    "float": _number_type,
+    "int": lambda o: nonneg_int,
+    "user": lambda o: _user,
+}
+
+
+def trace_options(args: argparse.Namespace):
+    """The :class:`simulator.core.traceopts.TraceOptions` of parsed ``args`` (options a
+    command lacks take their defaults); InputError for a contradictory set."""
+    from simulator.core.traceopts import TraceOptions
+
+    return TraceOptions.from_values(lambda k, d: getattr(args, k, d))
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -222,7 +195,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         metavar="PATH.csv",
         help="output CSV (a folder with --user all)",
     )
-    add_reader_options(c, allow_all=True)
+    add_reader_options(c, allow_all=True, exclude=("hold_last",))
     c.set_defaults(func=run, headpath_command="convert")
 
     w = sub.add_parser(
@@ -232,54 +205,54 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     w.add_argument("input", metavar="PATH.csv")
     w.add_argument("-o", "--output", required=True, metavar="PLOT.png")
-    add_reader_options(w)
+    add_reader_options(w, exclude=("hold_last",))
     w.set_defaults(func=run, headpath_command="show")
 
 
-def load_headpath_args(args: argparse.Namespace, path, prog: str):
-    """Load the head path ``path`` with the options of :func:`add_reader_options` in ``args``
-    (missing ones = defaults), reader warnings printed as ``<prog>: warning: ...`` on stderr.
+def load_headpath_args(args: argparse.Namespace, path, prog: str, video_s: float | None = None,
+                       video: str = "", notes: list | None = None):  # fmt: skip
+    """Load the head path ``path`` with the trace options in ``args`` (missing ones =
+    defaults; :func:`simulator.traces.clock.read_trace`), reader warnings printed as
+    ``<prog>: warning: ...`` on stderr; its span checked against a video of ``video_s``
+    seconds (None: only the one-day limit; :func:`simulator.traces.clock.check_span`), the
+    span warnings appended to ``notes`` (printed by the caller once its work is done; None:
+    printed now). InputError on bad input."""
+    from simulator.traces.clock import check_span, read_trace
 
-    For commands reading a head path (``vimsim epof``, ``vimsim render``): add
-    :func:`add_reader_options` to the parser and call this. InputError on bad input.
-    """
-    from simulator.traces.readers import load_headpath
-
+    _check_columns_without_user(args)  # not silently ignored
+    opts = trace_options(args)
     with warnings_to_stderr(prog):
-        if getattr(args, "columns", None):
-            return load_columns_args(args, path)
-        return load_headpath(
-            path,
-            getattr(args, "format", "auto"),
-            video=getattr(args, "video", None),
-            user=getattr(args, "user", None),
+        hp = read_trace(path, opts)
+        found = check_span(hp, video_s, opts, video=video, warn=notes is None)
+    if notes is not None:
+        notes.extend(found)
+    return hp
+
+
+def _check_columns_without_user(args: argparse.Namespace) -> None:
+    """InputError for ``--columns`` with ``--user``: a column map reads the one trace of a
+    lab log; ``--user`` picks one of a multi-user (360VidStr) file's and would be ignored."""
+    from simulator.core.errors import InputError
+
+    user = getattr(args, "user", None)
+    if getattr(args, "columns", None) and user is not None:
+        raise InputError(
+            f"--columns with --user {user}: a column map reads the one head path of a lab log; "
+            "--user picks a user of a 360VidStr file (use one or the other)"
         )
 
 
-def load_columns_args(args: argparse.Namespace, path):
-    """The head path ``path`` read through ``args.columns`` and the other column options."""
-    from simulator.core.errors import InputError
-    from simulator.traces.readers import load_columns
-
-    if getattr(args, "format", "auto") != "auto":
-        raise InputError("--columns and --format exclude each other: a column map is the format")
-    return load_columns(
-        path,
-        args.columns,
-        angles=args.angles,
-        time_scale=args.time_scale,
-        time_from_first=args.time_from_first,
-        time_format=args.time_format,
-        skip_rows=args.skip_rows,
-        drop_zero_rows=args.drop_zero_rows,
-    )
+def print_warnings(prog: str, notes: list[str]) -> None:
+    """``<prog>: warning: <note>`` on stderr for each of ``notes`` (after the work)."""
+    for n in notes:
+        print(f"{prog}: warning: {n}", file=sys.stderr)
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``headpath synth|convert|show``; 0 on success, InputError -> exit 2."""
     from simulator.core.errors import InputError
     from simulator.traces import path as hp_mod
-    from simulator.traces.readers import load_headpath, load_keyframes
+    from simulator.traces.readers import load_keyframes
 
     with warnings_to_stderr("vimsim headpath"):
         if args.headpath_command == "synth":
@@ -304,11 +277,9 @@ def run(args: argparse.Namespace) -> int:
             print(f"wrote {args.output}: {hp.n} samples, {hp.end_s:.3f} s")
             return 0
         if args.headpath_command == "convert" and args.user == "all":
+            _check_columns_without_user(args)  # not silently ignored
             return _convert_all(args)
-        if args.columns:
-            hp = load_columns_args(args, args.input)
-        else:
-            hp = load_headpath(args.input, args.format, video=args.video, user=args.user)
+        hp = load_headpath_args(args, args.input, "vimsim headpath")
         if args.headpath_command == "convert":
             hp_mod.save_headpath_csv(args.output, hp)
             print(f"wrote {args.output}: {hp.n} samples, {hp.start_s:.3f}..{hp.end_s:.3f} s")
@@ -333,7 +304,16 @@ def _convert_all(args: argparse.Namespace) -> int:
         raise InputError(
             f"{out}: --user all writes one CSV per user into a folder; {out} is a file"
         )
-    users = load_all_users(src, args.format)
+    from simulator.traces.clock import check_span, place
+
+    opts = trace_options(args)
+    if opts.columns:
+        raise InputError("--user all reads a file of many users (360VidStr); a column map "
+                         "reads one trace: drop --user all")  # fmt: skip
+    with warnings_to_stderr("vimsim headpath"):
+        users = {u: place(hp, opts) for u, hp in load_all_users(src, args.format).items()}
+        for hp in users.values():
+            check_span(hp, None, opts)
     width = len(str(max(users)))
     targets = {u: out / f"{src.stem}_user{u:0{width}d}.csv" for u in users}
     for t in targets.values():

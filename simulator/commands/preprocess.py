@@ -47,15 +47,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "--grid",
         choices=GRID_PRESET_NAMES,
         default="default",
-        help="window grid: default (15 deg yaw steps, 264 windows) or paper-198 (20 deg, 198)",
+        help="window grid: default (15 deg yaw steps, 264 windows), paper-198 (20 deg, 198) or "
+        "cao2021 (the authors' code: 15 x 15 deg steps with the poles, 312 windows of 1600 x "
+        "1440 px, 107 deg wide with the linear vertical FOV 96.3 deg; docs/parity.md)",
     )
-    add_fov_arguments(p, what="window", default="107")
+    add_fov_arguments(p, what="window", default="107; cao2021: 107 x 96.3")
     p.add_argument(
         "--window-size",
         type=_window_size,
-        default=256,
+        default=None,
         metavar="N",
-        help="window size N x N pixels (default 256)",
+        help="window size N x N pixels (default 256; cao2021: 1600 x 1440)",
     )
     p.add_argument(
         "--flow",
@@ -150,10 +152,9 @@ def run(args: argparse.Namespace) -> int:
     from simulator.preprocess import PreprocessInterrupted, preprocess_video
     from simulator.sphere.windows import grid_preset
 
-    hfov, vfov = fov_from_args(args, (107.0, 107.0))
-    grid = grid_preset(
-        args.grid, hfov_deg=hfov, vfov_deg=vfov, size=(args.window_size, args.window_size)
-    )
+    hfov, vfov = fov_from_args(args, (None, None))  # None: the preset's window
+    size = None if args.window_size is None else (args.window_size, args.window_size)
+    grid = grid_preset(args.grid, hfov_deg=hfov, vfov_deg=vfov, size=size)
     if args.threads is not None and args.threads < 1:
         raise InputError(f"--threads must be >= 1; got {args.threads}")
     if args.artefacts and args.method != "sphere":

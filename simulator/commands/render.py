@@ -151,11 +151,6 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
         metavar="M",
         help="grain distance, metres, for stereo parallax (default: at infinity, identical for both eyes)",
     )
-    p.add_argument(
-        "--hold-last",
-        action="store_true",
-        help="hold the head path's first/last pose where it does not cover the video",
-    )
 
 
 def view_from_args(args: argparse.Namespace, command: str = "render"):
@@ -180,6 +175,22 @@ def view_from_args(args: argparse.Namespace, command: str = "render"):
     if args.layout is None and layout != "mono":
         note = (note + "; " if note else "") + f"layout {layout}, from the grid's meta"
     return hp, grid, view, note, layout
+
+
+def check_trace_span(args: argparse.Namespace, hp, source) -> list[str]:
+    """The head path's span checked against the source video's duration (a still: not),
+    as every command where a trace meets a video (:func:`simulator.traces.clock.check_span`);
+    returns the span warnings, which the command prints once its work is done."""
+    import os
+
+    from simulator.commands.headpath import trace_options
+    from simulator.traces.clock import check_span
+
+    info = source.info
+    if not info.is_video:
+        return []
+    return check_span(hp, info.n_frames / info.fps, trace_options(args),
+                      video=os.path.basename(source.path), warn=False)  # fmt: skip
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -277,6 +288,7 @@ def run(args: argparse.Namespace) -> int:
     source = source_from_args(
         args, args.video_file, layout=args.layout, layout_default=layout, right=args.right
     )
+    notes = check_trace_span(args, hp, source)
     with (
         warnings_to_stderr("vimsim render"),
         progress_bar("render", enabled=not args.no_progress) as bar,
@@ -297,6 +309,9 @@ def run(args: argparse.Namespace) -> int:
             eyes=args.eyes,
             audio=not args.no_audio,
         )
+    from simulator.commands.headpath import print_warnings
+
+    print_warnings("vimsim render", notes)
     w, h = s["eye_size"]
     files = {"left": ["left.mp4"], "right": ["right.mp4"], "both": ["left.mp4", "right.mp4"]}
     names = files[s["eyes"]] + (s["review"] or [])

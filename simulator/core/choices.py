@@ -20,6 +20,8 @@ __all__ = [
     "HEADSET_NAMES",
     "INTERPS",
     "LAYOUTS",
+    "MAX_CLIP_FPS",
+    "MAX_CLIP_FRAMES",
     "MITIGATIONS",
     "MITIGATION_HELP",
     "OPACITY_RULES",
@@ -31,6 +33,7 @@ __all__ = [
     "STILL_SECONDS",
     "SYNTH_KINDS",
     "SYNTH_LAYOUTS",
+    "SYSTEM_PRESETS",
     "X264_PRESETS",
     "DISPreset",
     "Eye",
@@ -52,6 +55,11 @@ PROJECTIONS: tuple[str, ...] = ("equirect", "eac", "c3x2", "c6x1", "dfisheye", "
 STILL_SECONDS = 10.0
 STILL_FPS = 30.0
 
+#: Upper bounds of a clip vimsim makes (``synth``, ``demo``, a still's ``--seconds`` x
+#: ``--fps``): a typo such as ``--fps 1e9`` or ``--seconds 1e9`` fails at once, not after hours.
+MAX_CLIP_FPS = 240.0
+MAX_CLIP_FRAMES = 100_000
+
 #: Eyes of a stereo source or render.
 Eye = Literal["left", "right"]
 EYES: tuple[str, ...] = get_args(Eye)
@@ -62,13 +70,20 @@ Interp = Literal["cubic", "lagrange", "linear", "nearest"]
 INTERPS: tuple[str, ...] = get_args(Interp)
 
 #: Window-grid presets (:data:`simulator.sphere.windows.GRID_PRESETS`).
-GRID_PRESET_NAMES: tuple[str, ...] = ("default", "paper-198")
+GRID_PRESET_NAMES: tuple[str, ...] = ("default", "paper-198", "cao2021")
 
 #: Preprocessing methods: the paper's windows, or one field per frame on the sphere.
 PREPROCESS_METHODS: tuple[str, ...] = ("paper", "sphere")
 
 #: EPOF methods: ``auto`` = exact (sphere) when the grid holds a field, else paper.
 EPOF_METHODS: tuple[str, ...] = ("auto", "paper", "sphere")
+
+#: Whole-system presets (``--preset``; docs/parity.md): ``vimsim`` = vimsim's own defaults;
+#: ``paper`` = the paper's text (overlap-weighted EPOF, per-video 10th/90th percentiles, 1.5 deg
+#: grains, 36-80 deg soft cutout); ``cao2021-code`` = the authors' Unity code (nearest window
+#: with its list indexing, fixed 0.18..53.73 px/frame scale, 0.5 deg Fibonacci grains, no
+#: cutout; :mod:`simulator.mitigation.cao2021`).
+SYSTEM_PRESETS: tuple[str, ...] = ("vimsim", "paper", "cao2021-code")
 
 #: OpenCV DIS presets (:class:`simulator.flow.dis.DISFlow`).
 DISPreset = Literal["ultrafast", "fast", "medium"]

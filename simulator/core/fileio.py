@@ -7,6 +7,8 @@ when complete, so an interrupted run never leaves a file that looks finished.
 from __future__ import annotations
 
 import contextlib
+import csv
+import io
 import json
 import math
 import os
@@ -20,16 +22,22 @@ __all__ = [
     "OutputFolder",
     "PendingOutput",
     "atomic_output",
+    "before_output",
     "check_input_file",
     "check_not_input",
     "check_output_dir",
     "check_output_file",
     "csv_cell",
+    "csv_row",
+    "csv_text",
+    "csv_uncell",
     "input_scope",
     "json_text",
+    "json_value",
     "known_inputs",
     "register_input",
     "remove_stale_temporaries",
+    "write_csv",
 ]
 
 #: Every file read through :func:`check_input_file` inside :func:`input_scope` (the CLI
@@ -40,6 +48,9 @@ _SCOPES: list[set[Path]] = []
 
 #: The temporary-name pattern of :func:`atomic_output`: ``.<stem>.tmp-<pid><suffix>``.
 _TMP_RE = re.compile(r"^\.(?P<stem>.*)\.tmp-(?P<pid>\d+)(?P<suffix>(\.[^.]*)?)$")
+
+#: Callbacks run once before the first output of a run is created (:func:`before_output`).
+_BEFORE_OUTPUT: list = []
 
 #: The manifest a folder output keeps of the files it wrote (see :class:`OutputFolder`).
 MANIFEST_NAME = ".vimsim-manifest.json"
@@ -59,6 +70,24 @@ def input_scope(inputs: Iterable[str | os.PathLike] = ()) -> Iterator[None]:
     finally:
         _INPUTS.clear()
         _INPUTS.update(_SCOPES.pop())
+
+
+@contextlib.contextmanager
+def before_output(callback) -> Iterator[None]:
+    """Within it, ``callback()`` runs once, just before the first output file or folder is
+    created (:class:`PendingOutput`, :func:`check_output_dir`): the moment a run's checks
+    have passed (the CLI opens its ``--log`` file then). It may raise InputError to refuse."""
+    _BEFORE_OUTPUT.append(callback)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):
+            _BEFORE_OUTPUT.remove(callback)
+
+
+def _run_before_output() -> None:
+    while _BEFORE_OUTPUT:
+        _BEFORE_OUTPUT.pop()()
 
 
 def register_input(path: str | os.PathLike) -> None:
@@ -164,6 +193,7 @@ class PendingOutput:
 
     def __init__(self, path: str | os.PathLike):
         self.target = check_output_file(path)
+        _run_before_output()
         parent = self.target.parent if str(self.target.parent) else Path(".")
         remove_stale_temporaries(self.target)
         self.tmp = parent / f".{self.target.stem}.tmp-{os.getpid()}{self.target.suffix}"
@@ -301,6 +331,7 @@ def check_output_dir(path: str | os.PathLike) -> Path:
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise InputError(f"{p}: output folder is an existing file; expected a folder")
+    _run_before_output()
     try:
         p.mkdir(parents=True, exist_ok=True)
     except OSError as e:
@@ -322,6 +353,57 @@ def csv_cell(value: str) -> str:
     return s
 
 
+def csv_row(line: str, where: str | os.PathLike) -> list[str]:
+    """The fields of one CSV line; a line the csv module refuses (a field over its 128 KiB
+    limit, a NUL) is an InputError naming ``where`` (bad input, not an internal error)."""
+    try:
+        return next(csv.reader([line]), [])
+    except csv.Error as e:
+        raise InputError(f"{where}: not a readable CSV line ({e})") from None
+
+
+def csv_uncell(value: str) -> str:
+    """The text :func:`csv_cell` guarded, as it was (for vimsim reading its own CSVs)."""
+    s = str(value)
+    return s[1:] if s[:1] == "'" and csv_cell(s[1:]) == s else s
+
+
+def _csv_number(v) -> str:
+    """A non-text cell: empty for None and non-finite floats, 10 significant digits."""
+    if v is None:
+        return ""
+    if hasattr(v, "item") and not isinstance(v, (str, bytes)):  # a numpy scalar
+        v = v.item()
+    if isinstance(v, float):
+        return f"{v + 0.0:.10g}" if math.isfinite(v) else ""
+    return str(v)
+
+
+def csv_text(header, rows, *, comments=(), fmt=None) -> str:
+    """CSV text (``#`` comment lines, the header, the rows) as :func:`write_csv` writes it."""
+    fmt = fmt or _csv_number
+    buf = io.StringIO()
+    for c in comments:
+        buf.write(f"# {c}\n")
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([csv_cell(h) for h in header])
+    for r in rows:
+        w.writerow([csv_cell(v) if isinstance(v, str) else fmt(v) for v in r])
+    return buf.getvalue()
+
+
+def write_csv(path: str | os.PathLike, header, rows, *, comments=(), fmt=None) -> Path:
+    """The one CSV writer of every table a command writes (``viewings.csv``, ``DATA.csv``,
+    ``comparison.csv``, screen and study tables): atomic (:func:`atomic_output`), every
+    text cell through :func:`csv_cell` (a participant ``=HYPERLINK(...)`` cannot run as a
+    spreadsheet formula; ``-3.5`` stays a number), other cells through ``fmt`` (default: 10
+    significant digits, empty for None and NaN)."""
+    text = csv_text(header, rows, comments=comments, fmt=fmt)
+    with atomic_output(path) as tmp:
+        Path(tmp).write_text(text, encoding="utf-8")
+    return Path(path)
+
+
 def _json_safe(x):
     """``x`` with NaN/inf floats as None and numpy scalars/arrays as Python values."""
     if isinstance(x, dict):
@@ -341,3 +423,20 @@ def json_text(obj, *, indent: int | None = 2) -> str:
     ``null``; numpy values become numbers or lists; anything else unknown becomes its
     ``str``."""
     return json.dumps(_json_safe(obj), indent=indent, allow_nan=False, default=str)
+
+
+_NO_DEFAULT = object()
+
+
+def json_value(text: str, where: str | os.PathLike, *, default=_NO_DEFAULT):
+    """``json.loads(text)`` (``default`` instead for text that is not JSON, if given); JSON
+    nested too deeply to parse (``RecursionError``: e.g. 200,000 ``[``) is an InputError
+    naming ``where`` (bad input, not an internal error)."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        if default is _NO_DEFAULT:
+            raise
+        return default
+    except RecursionError:
+        raise InputError(f"{where}: holds JSON nested too deeply to read") from None

@@ -25,6 +25,7 @@ part.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -32,13 +33,14 @@ from numpy.typing import NDArray
 from simulator.core.errors import InputError
 from simulator.epof.exact import shared_query
 from simulator.media.gridfile import require_field
-from simulator.media.lazyfield import LazyField, take_rows
+from simulator.media.lazyfield import LazyField, spool, spool_name, take_rows
 from simulator.sphere.cells import CellGrid, Frustum
 from simulator.sphere.geometry import lonlat_to_dir
 
 __all__ = [
     "DEFAULT_WEIGHTS",
     "has_parts",
+    "keep_parts_in",
     "parse_flow_weights",
     "require_parts",
     "rotation_share",
@@ -119,23 +121,45 @@ def rotation_share(
     return share.astype(np.float32, copy=False)
 
 
-#: The rotational part of the last in-memory field (a study worker asks for it once per
-#: viewing of the same grid): ``(id(field), id(trans), array)``.
+#: The rotational part of the last field asked for (a study worker asks for it once per
+#: viewing of the same grid): ``(field, trans, part)``.
 _HELD: list = []
+#: The folder where the rotational part of a lazy field is kept as a raw file (None: it is
+#: computed chunk by chunk at each call): :func:`keep_parts_in`.
+_SPOOL: list = [None]
 
 
-def _held_rot_field(field, trans, omega, cells: CellGrid) -> NDArray[np.float32] | None:
-    """``field * rotation_share`` of fields held in memory (both ndarrays), computed once and
-    kept for the next call on the same arrays; None for a lazy field (read chunk by chunk,
-    memory flat in the video's length)."""
-    if not (isinstance(field, np.ndarray) and isinstance(trans, np.ndarray)):
-        return None
+def keep_parts_in(folder) -> None:
+    """Keep the rotational part of lazy fields (long videos) as raw float32 files in
+    ``folder`` (None: compute it at each call), so that a process serving many viewings
+    of one grid computes it once, memory flat in the video's length."""
+    _SPOOL[0] = None if folder is None else Path(folder)
+
+
+def _held_rot_field(field, trans, omega, cells: CellGrid):
+    """``field * rotation_share``, computed once and kept for the next call on the same
+    fields: in memory for fields held in memory (both ndarrays), in a raw file of the
+    :func:`keep_parts_in` folder for lazy ones (read chunk by chunk); None for lazy fields
+    without that folder (computed chunk by chunk at each call)."""
     if _HELD and _HELD[0][0] is field and _HELD[0][1] is trans:
         return _HELD[0][2]
-    out = np.empty(field.shape, np.float32)
-    for i0 in range(0, len(field), 256):
-        f = np.asarray(field[i0 : i0 + 256], np.float32)
-        out[i0 : i0 + 256] = f * rotation_share(f, trans[i0 : i0 + 256], omega[i0 : i0 + 256], cells)
+    if isinstance(field, np.ndarray) and isinstance(trans, np.ndarray):
+        out = np.empty(field.shape, np.float32)
+        for i0 in range(0, len(field), 256):
+            f = np.asarray(field[i0 : i0 + 256], np.float32)
+            out[i0 : i0 + 256] = f * rotation_share(f, trans[i0 : i0 + 256], omega[i0 : i0 + 256], cells)
+    elif _SPOOL[0] is not None and isinstance(field, LazyField):
+        name = spool_name(field, "rot")
+        if name is None:
+            return None
+
+        def rot(i0: int, f):
+            i1 = i0 + len(f)
+            return f * rotation_share(f, _rows(trans, i0, i1), omega[i0:i1], cells)
+
+        out = spool(field, _SPOOL[0] / name, rot)
+    else:
+        return None
     _HELD[:] = [(field, trans, out)]
     return out
 
@@ -193,7 +217,7 @@ def viewport_parts_total(
         i1 = min(T, i0 + n)
         f = _rows(field, i0, i1)
         if held is not None:
-            part = held[i0:i1]
+            part = _rows(held, i0, i1)
         else:
             part = f * rotation_share(f, _rows(trans, i0, i1), omega[i0:i1], cells)
         sl = slice(i0, i1)  # one integration of the viewport for the EPOF and its part

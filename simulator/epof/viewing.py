@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, check_input_file
+from simulator.core.fileio import atomic_output, check_input_file, json_value
 from simulator.epof.exact import viewport_epof
 from simulator.epof.overlaps import _frames, epof_from_grid, viewport_fov
 from simulator.epof.parts import DEFAULT_WEIGHTS, has_parts, require_parts, viewport_parts_total
@@ -419,10 +419,7 @@ def read_epof_csv(path: str | os.PathLike) -> EpofResult:
         if t.startswith("#"):
             key, sep, val = t[1:].partition(":")
             if sep:
-                try:
-                    settings[key.strip()] = json.loads(val)
-                except ValueError:
-                    settings[key.strip()] = val.strip()
+                settings[key.strip()] = json_value(val, p, default=val.strip())  # not JSON: text
             continue
         lines.append(ln)
     if not lines:

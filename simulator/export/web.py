@@ -178,7 +178,10 @@ def export_web(
           "rule": rule, "grf": grf, "mitigation": mitigation}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as work:
         data_tmp = Path(work) / DATA_FILE  # bad options fail here, before anything is written
-        header = write_epof(g, data_tmp, **kw)
+        try:
+            header = write_epof(g, data_tmp, **kw)
+        except OSError as e:  # a full disk: named as the output file, not the temporary one
+            raise OSError(e.errno, e.strerror or str(e), str(Path(out_dir) / DATA_FILE)) from None
         contents: dict[str, bytes] = {}
         manifest = {"format": "vimsim-web", "version": MANIFEST_VERSION, "data": DATA_FILE,
                     "data_version": VERSION, "mode": header["mode"],
@@ -231,7 +234,7 @@ def read_manifest(path: str | os.PathLike) -> dict:
     p = p / MANIFEST if p.is_dir() else p
     try:
         m = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, RecursionError) as e:
         raise InputError(f"{p}: not a vimsim web export ({e.__class__.__name__})") from None
     if not isinstance(m, dict) or m.get("format") != "vimsim-web":
         raise InputError(f"{p}: not a vimsim web export")

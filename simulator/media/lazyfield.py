@@ -6,11 +6,16 @@ demand from the zip member, a chunk of rows at a time. Old and new grid files bo
 (compressed or stored members; a forward read never restarts the member, a backward one
 reopens it). :func:`field_chunks` walks a field (lazy or an ndarray) in chunks of rows;
 :func:`take_rows` selects rows without reading them. ``np.asarray(lazy)`` reads all of it
-(for callers that need the whole field at once, e.g. the engine export).
+(for callers that need the whole field at once, e.g. the engine export). :func:`spool`
+keeps a float32 copy of a field in a raw file, read lazily too but without decompressing
+(a process serving many viewings of one grid: a study worker).
 """
 
 from __future__ import annotations
 
+import hashlib
+import math
+import os
 import zipfile
 from pathlib import Path
 
@@ -18,8 +23,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
+from simulator.core.fileio import atomic_output
 
-__all__ = ["CHUNK_BYTES", "LazyField", "field_chunks", "take_rows"]
+__all__ = ["CHUNK_BYTES", "LazyField", "field_chunks", "spool", "spool_name", "take_rows"]
 
 #: Bytes of float32 rows read at a time (a chunk is at least one row).
 CHUNK_BYTES = 2 << 20
@@ -66,6 +72,62 @@ class _Member:
             if h is not None:
                 h.close()
         self._zf = self._fh = None
+
+
+class _RawFile:
+    """A raw C-order array file (no header; shape and dtype known): reads at any offset
+    (no decompression, no restart), the store of :func:`spool`."""
+
+    def __init__(self, path: Path, shape: tuple[int, ...], dtype):
+        self.path, self.header = Path(path), (tuple(shape), False, np.dtype(dtype))
+        self._fd: int | None = os.open(self.path, os.O_RDONLY)
+
+    def header_info(self) -> tuple[tuple[int, ...], bool, np.dtype]:
+        return self.header
+
+    def read(self, start: int, nbytes: int) -> bytes:
+        parts = []
+        while nbytes > 0:
+            b = os.pread(self._fd, nbytes, start)
+            if not b:
+                break
+            parts.append(b)
+            start, nbytes = start + len(b), nbytes - len(b)
+        return b"".join(parts)
+
+    def close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
+def spool_name(field: LazyField, what: str) -> str | None:
+    """A file name for a spool of ``field`` (made ``what``-wise) that changes with the
+    grid file it reads (path, size, time, inode, member); None for a row selection."""
+    if field._rows is not None:
+        return None
+    st = field.path.stat()
+    member = getattr(field._src, "name", "raw")
+    key = f"{field.path.resolve()}:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}:{member}:{what}"
+    return hashlib.sha1(key.encode()).hexdigest()[:24] + f".{what}.f32"
+
+
+def spool(field, path: str | Path, transform=None) -> LazyField:
+    """A float32 copy of ``field`` (lazy or in memory) in a raw file at ``path``, made
+    once (written to a temporary name, renamed when complete; an existing file of the
+    right size is reused) and read lazily from then on: chunk reads without the
+    decompression of a grid file's member, memory flat in the video's length.
+    ``transform(i0, block) -> block`` changes each chunk of rows on the way (e.g. a
+    field's rotational part); the caller names ``path`` after everything it depends on."""
+    path = Path(path)
+    shape = (len(field), *tuple(field.shape[1:]))
+    if not (path.is_file() and path.stat().st_size == 4 * math.prod(shape)):
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_output(path) as tmp, open(tmp, "wb") as f:
+            for i0, c in field_chunks(field):
+                c = c if transform is None else transform(i0, c)
+                f.write(np.ascontiguousarray(c, np.float32).tobytes())
+    return LazyField(path, _src=_RawFile(path, shape, np.float32))
 
 
 class LazyField:

@@ -19,7 +19,15 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from numpy.typing import NDArray
 
-from simulator.core.choices import EYES, LAYOUTS, PROJECTIONS, STILL_FPS, STILL_SECONDS
+from simulator.core.choices import (
+    EYES,
+    LAYOUTS,
+    MAX_CLIP_FPS,
+    MAX_CLIP_FRAMES,
+    PROJECTIONS,
+    STILL_FPS,
+    STILL_SECONDS,
+)
 from simulator.core.errors import InputError
 from simulator.media.guard import aspect_refusal, check_not_dual_fisheye
 from simulator.media.spherical import read_spherical, view_angles_deg
@@ -442,6 +450,13 @@ def _still_info(info: MediaInfo, seconds: float | None, fps: float | None) -> Me
         )
     if not (fps > 0 and math.isfinite(fps)):
         raise InputError(f"{info.path}: --fps must be > 0; got {fps:g}")
+    if fps > MAX_CLIP_FPS:
+        raise InputError(f"{info.path}: --fps must be at most {MAX_CLIP_FPS:g}; got {fps:g}")
+    if seconds * fps > MAX_CLIP_FRAMES + 0.5:
+        raise InputError(
+            f"{info.path}: a still as a clip of {seconds:g} s at {fps:g} fps has "
+            f"{seconds * fps:.4g} frames; at most {MAX_CLIP_FRAMES:,} (lower --seconds or --fps)"
+        )
     n = max(1, round(seconds * fps))
     return replace(info, fps=fps, n_frames=n, is_video=True)
 

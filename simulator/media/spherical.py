@@ -48,7 +48,9 @@ _STEREO = {
 }
 #: Matroska stereo modes that store the right eye first (top, or left half).
 _RIGHT_FIRST = ("bottom_top", "right_left")
-_SPH = re.compile(r"spherical(?: mapping)?\s*:\s*([a-z ]+?)\s*(?:\(|,|$)", re.IGNORECASE | re.MULTILINE)
+#: FFmpeg's "Spherical Mapping: NAME [(yaw/pitch/roll)] [[pad N]]" (a cubemap, as YouTube
+#: and 360 cameras tag EAC, ends in "[pad N]").
+_SPH = re.compile(r"spherical(?: mapping)?\s*:\s*([a-z ]+?)\s*(?:\(|\[|,|$)", re.IGNORECASE | re.MULTILINE)
 _ORI = re.compile(r"\(?\s*(-?[\d.]+)\s*/\s*(-?[\d.]+)\s*/\s*(-?[\d.]+)\s*\)?")
 _ST3 = re.compile(r"stereo ?3d\s*:\s*([a-z_ ]+?)\s*(?:,|$)", re.IGNORECASE | re.MULTILINE)
 
@@ -66,7 +68,7 @@ def parse_report(text: str, tags: dict | None = None) -> dict:
         name = m.group(1).strip().lower()
         out["raw"].append(f"spherical: {name}")
         out["projection"] = _PROJECTIONS.get(name)
-        o = _ORI.search(text[m.end() - 1 : m.end() + 80])
+        o = _ORI.search(text[m.end() - 1 : m.end() + 80].split("\n", 1)[0])  # this line only
         if o:
             out["orientation_deg"] = [float(v) for v in o.groups()]  # yaw/pitch/roll
     s = _ST3.search(text)

@@ -139,6 +139,8 @@ def _probe_image(path: Path) -> MediaInfo:
             w, h = im.size
     except (UnidentifiedImageError, OSError) as e:
         raise InputError(f"{path}: not a readable image ({e})") from None
+    except Image.DecompressionBombError as e:  # a header claiming e.g. 30000x15000 px
+        raise InputError(f"{path}: image too large to read ({e})") from None
     return MediaInfo(str(path), w, h, 1.0, 1.0, 1, False, "image")
 
 
@@ -375,6 +377,8 @@ def _read_image(p: Path, fmt: PixelFormat) -> NDArray[np.uint8]:
             return np.asarray(im)
     except (UnidentifiedImageError, OSError) as e:
         raise InputError(f"{p}: not a readable image ({e})") from None
+    except Image.DecompressionBombError as e:
+        raise InputError(f"{p}: image too large to read ({e})") from None
 
 
 def read_frame(

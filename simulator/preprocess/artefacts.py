@@ -497,7 +497,7 @@ def load_artefacts(path) -> Artefacts:
         assert d.get("format") == "vimsim-artefacts"
         kind = tuple(str(k) for k in d["kind"])
         assert all(k in ("", *ARTEFACT_KINDS) for k in kind)
-    except (ValueError, KeyError, AssertionError, TypeError):
+    except (ValueError, KeyError, AssertionError, TypeError, RecursionError):
         raise InputError(f"{p}: not a vimsim artefacts file") from None
     return Artefacts(kind, tuple(d.get("events", ())), d.get("keyframe_period"), d.get("meta", {}))
 

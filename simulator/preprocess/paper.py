@@ -59,6 +59,7 @@ from simulator.flow.rays import RayAngles
 from simulator.media.coverage import coverage_masks, coverage_meta
 from simulator.media.gridfile import content_hash, save_grid
 from simulator.media.source import Source, as_source
+from simulator.preprocess.cao2021 import frame0_defect_meta, is_cao2021_grid
 from simulator.preprocess.common import (
     check_output_dir,
     common_meta,
@@ -381,6 +382,8 @@ def preprocess_video(
     )
     if n_rows != total:
         warnings.warn(f"{src}: expected {total} frames, decoded {n_rows}", stacklevel=2)
+    if is_cao2021_grid(grid):  # their row 0, for --preset cao2021-code only (docs/parity.md)
+        meta["cao"] = frame0_defect_meta(source, grid, backend, start_f)
     save_grid(out, dps_all, px_all, grid, meta)
     ckpt.unlink(missing_ok=True)
     return out

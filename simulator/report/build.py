@@ -21,12 +21,13 @@ import os
 import shutil
 import time
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, json_text
+from simulator.core.fileio import atomic_output, csv_uncell, json_text
 from simulator.core.progress import Counter
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.export.unity import VERSION as DATA_VERSION
@@ -60,7 +61,7 @@ MAX_WEB_SIDE = 4096
 #: 2048 wide (sharper than the screen); a wider or non-H.264 source is scaled to fit.
 BROWSER_WIDTH = 2048
 #: x264 preset of a re-encoded browser copy: the fastest that keeps the replay sharp at the
-#: report's view size (bench/report_speed.py prints the view PSNR of each preset).
+#: report's view size (bench/report_4k.py prints the view PSNR of each preset).
 BROWSER_PRESET = "superfast"
 BROWSER_CRF = 20
 
@@ -88,7 +89,7 @@ def check_study(outdir: str | os.PathLike) -> tuple[Path, dict]:
         raise InputError(
             f"{out}: not a complete vimsim study (no study.json: the study did not finish)"
         ) from None
-    except (OSError, ValueError) as e:
+    except (OSError, ValueError, RecursionError) as e:
         raise InputError(f"{sj}: unreadable study summary ({e.__class__.__name__})") from None
     if not isinstance(s, dict) or s.get("format") != "vimsim-study":
         raise InputError(f"{sj}: not a vimsim study summary")
@@ -106,7 +107,7 @@ def check_report_folder(folder: Path) -> set[str]:
         raise InputError(f"{folder}: exists and is not a folder; refusing to replace it")
     try:
         listed = set(json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["files"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (OSError, ValueError, KeyError, TypeError, RecursionError):
         listed = set()
     for p in sorted(folder.rglob("*")):
         rel = p.relative_to(folder).as_posix()
@@ -123,7 +124,8 @@ def check_report_folder(folder: Path) -> set[str]:
 def _viewings(out: Path) -> list[dict]:
     """viewings.csv rows (columns read by name; extra columns kept)."""
     with open(out / "viewings.csv", newline="", encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
+        rows = [{k: csv_uncell(v) if isinstance(v, str) else v for k, v in r.items()}
+                for r in csv.DictReader(f)]  # fmt: skip -- the text as written, unguarded
     for need in ("viewing", "video", "status"):
         if rows and need not in rows[0]:
             raise InputError(f"{out / 'viewings.csv'}: no {need!r} column")
@@ -234,13 +236,17 @@ def _scaled_copy(src, dst: Path, info, size, times, progress) -> None:
     import av
 
     counter = Counter(progress, info.n_frames)
+    # each frame at its own time (constant rate too): pts in the writer's 1/90000 s
+    times = info.times_s() if times is None else times
     with av.open(str(src)) as ic, VideoWriter(dst, info.fps, size, crf=BROWSER_CRF,
                                               preset=BROWSER_PRESET, times_s=times) as vw:  # fmt: skip
         st = ic.streams.video[0]
         st.thread_type = "AUTO"
         for f in ic.decode(st):
-            vw.encode(f.reformat(width=size[0], height=size[1], format="yuv420p",
-                                 interpolation="AREA"))  # fmt: skip
+            nf = f.reformat(width=size[0], height=size[1], format="yuv420p", interpolation="AREA")
+            nf.time_base = Fraction(1, 90000)
+            vw.encode(nf)
+            vw.n_written += 1
             counter.update()
 
 
@@ -425,6 +431,15 @@ def _write(folder: Path, rel: str, data: bytes | str, written: list[str]) -> Non
     written.append(rel)
 
 
+def _as_output_error(e: OSError, tmp: Path, folder: Path) -> OSError:
+    """``e`` naming the file of ``folder`` that a failed write under ``tmp`` was for."""
+    name = folder
+    if e.filename is not None:
+        with contextlib.suppress(ValueError):
+            name = folder / Path(os.fsdecode(e.filename)).relative_to(tmp)
+    return OSError(e.errno, e.strerror or str(e), str(name))
+
+
 def build_report(
     outdir: str | os.PathLike, *, browser_width: int | None = None, progress=None
 ) -> ReportResult:
@@ -442,7 +457,7 @@ def build_report(
     listed = check_report_folder(folder)
     rows = _viewings(out)
     old_copies = {}
-    with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+    with contextlib.suppress(OSError, ValueError, KeyError, TypeError, RecursionError):
         old_copies = json.loads((folder / MANIFEST).read_text(encoding="utf-8"))["copies"]
     _remove_stale(out)
     tmp = out / f".report-tmp-{os.getpid()}"
@@ -480,6 +495,8 @@ def build_report(
             json_text({"command": "report", "files": sorted(written), "copies": copies}) + "\n"
         )
         _swap(folder, tmp, listed)
+    except OSError as e:  # a full disk: named as the report's file, not the temporary one
+        raise _as_output_error(e, tmp, folder) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     return ReportResult(folder, folder / "index.html", len(written), time.perf_counter() - t0,

@@ -6,20 +6,26 @@ import functools
 import http.server
 import os
 import re
-import sys
 import threading
+import urllib.parse
 from pathlib import Path
 from typing import ClassVar
 
 __all__ = ["ReportServer", "start_server"]
 
 LOOPBACK = "127.0.0.1"
+#: ``Host`` names answered (with no port or the bound one): loopback only, so a page of
+#: another site whose name resolves to 127.0.0.1 (DNS rebinding) is refused (403).
+LOOPBACK_NAMES = frozenset({"localhost", "127.0.0.1", "[::1]"})
 _RANGE = re.compile(r"bytes=(\d*)-(\d*)$")
 
 
 class _Handler(http.server.SimpleHTTPRequestHandler):
     """Static files of one folder; ``Range: bytes=a-b`` answered with 206 (browsers seek
-    in a video by range requests); no directory listings; nothing logged."""
+    in a video by range requests); no directory listings; nothing logged. Only requests
+    whose ``Host`` is a loopback name (with no port or the bound one) are answered (400
+    without one, 403 for another); a path that is not UTF-8 or holds a NUL is 400; a file
+    whose real path (symlinks resolved) lies outside the folder is 404."""
 
     extensions_map: ClassVar[dict[str, str]] = {**http.server.SimpleHTTPRequestHandler.extensions_map,
                       ".js": "text/javascript", ".mjs": "text/javascript", ".mp4": "video/mp4",
@@ -31,7 +37,39 @@ class _Handler(http.server.SimpleHTTPRequestHandler):
     def list_directory(self, path):
         self.send_error(404, "no listing")
 
+    def _refusal(self) -> tuple[int, str] | None:
+        """``(status, reason)`` when the request may not be answered, else None."""
+        host = (self.headers.get("Host") or "").strip().lower()
+        if not host:
+            return 400, "Host header missing"
+        port = str(self.server.server_address[1])
+        name, _, p = host.rpartition(":") if not host.endswith("]") else (host, "", "")
+        if not name or not re.fullmatch(r"\d+", p):
+            name, p = host, ""
+        if name not in LOOPBACK_NAMES or p not in ("", port):
+            return 403, "Host not answered: open the report at the printed 127.0.0.1 address"
+        raw = self.path.split("?", 1)[0].split("#", 1)[0]
+        try:
+            text = urllib.parse.unquote(raw, errors="strict")
+        except UnicodeDecodeError:
+            return 400, "path is not UTF-8"
+        if "\x00" in text or not text.startswith("/"):
+            return 400, "bad path"
+        root = os.path.realpath(self.directory)
+        path = self.translate_path(self.path)
+        if os.path.isdir(path):
+            path = os.path.join(path, "index.html")
+        if os.path.lexists(path):
+            real = os.path.realpath(path)
+            if os.path.commonpath([root, real]) != root:
+                return 404, "File not found"
+        return None
+
     def send_head(self):
+        refused = self._refusal()
+        if refused is not None:
+            self.send_error(*refused)
+            return None
         rng = self.headers.get("Range")
         path = self.translate_path(self.path)
         if rng is None or not os.path.isfile(path):
@@ -85,9 +123,9 @@ class _Server(http.server.ThreadingHTTPServer):
     daemon_threads = True
 
     def handle_error(self, request, client_address):
-        """A browser that drops a connection (seeking a video does) is not an error."""
-        if not isinstance(sys.exc_info()[1], (ConnectionError, TimeoutError)):
-            super().handle_error(request, client_address)
+        """A browser that drops a connection (seeking a video does) is not an error; any
+        other failure of one request closes its connection without a traceback."""
+        return
 
 
 class ReportServer:

@@ -14,7 +14,6 @@ instant merged, each thumbnail captioned), ``summary.png`` (one page). Across vi
 
 from __future__ import annotations
 
-import csv
 import io
 import math
 import warnings
@@ -22,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from simulator.core.fileio import atomic_output
+from simulator.core.fileio import OutputFolder, atomic_output, write_csv
 from simulator.epof.viewing import read_epof_csv
 from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
@@ -41,6 +40,20 @@ SCREEN_COLUMNS: tuple[str, ...] = (
 )  # fmt: skip
 N_MOMENTS = 5
 MOMENT_SEP_S = 2.0
+#: The files of ``OUTDIR/screen/`` and of each ``OUTDIR/screen/<video>/``: each folder keeps
+#: its manifest (:class:`~simulator.core.fileio.OutputFolder`), so a rerun replaces only
+#: the files a screening wrote there.
+SCREEN_FILES = ("comparison.csv", "index.html", "screen.json")
+VIDEO_FILES = ("epof_distribution.csv", "map.csv", "sphere_flow.csv", "moments.csv", "map.png",
+               "summary.png", *(f"moment_{k}.png" for k in range(1, N_MOMENTS + 1)))  # fmt: skip
+
+
+def screen_folders(out: Path, video_ids) -> list[OutputFolder]:
+    """``OUTDIR/screen/`` and its per-video folders as folder outputs (the first is the top);
+    call ``check()`` on each before any work."""
+    top = Path(out) / "screen"
+    return [OutputFolder(top, SCREEN_FILES, "screen"),
+            *(OutputFolder(top / vid, VIDEO_FILES, "screen") for vid in video_ids)]  # fmt: skip
 
 
 def _fmt(v) -> str:
@@ -50,15 +63,7 @@ def _fmt(v) -> str:
 
 
 def _write_csv(path: Path, header, rows, comments=()) -> None:
-    buf = io.StringIO()
-    for c in comments:
-        buf.write(f"# {c}\n")
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    for r in rows:
-        w.writerow([_fmt(v) for v in r])
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    write_csv(path, header, rows, comments=comments, fmt=_fmt)  # the one guarded CSV writer
 
 
 def _write_map(path: Path, frames, t, pitch, yaw, kinds, pof) -> None:
@@ -170,9 +175,9 @@ def _thumbnails(v, g: dict, moments: list[dict], folder: Path, pitch0: float) ->
             mo["thumbnail"] = name
 
 
-def _video_report(v, grid_path: Path, epofs: list, folder: Path, artefacts: bool) -> dict:
+def _video_report(v, grid_path: Path, epofs: list, out: OutputFolder, artefacts: bool) -> dict:
     """Every per-video file; returns the video's row of the comparison table."""
-    folder.mkdir(parents=True, exist_ok=True)
+    folder = out.prepare()
     g = _grid_arrays(grid_path)
     T = g["pof"].shape[0]
     n = min([T, *(len(r.frame) for r in epofs)])
@@ -212,6 +217,7 @@ def _video_report(v, grid_path: Path, epofs: list, folder: Path, artefacts: bool
     row["band_p90"] = band_of(row["epof_p90_dps"])
     _map_png(folder / "map.png", v.id, m, yaw, g["fps"], bad, moments, float(pitch[p0]))
     _summary_png(folder / "summary.png", v.id, t, e, bad, m, yaw, g, moments, row, events, folder)
+    out.complete([*VIDEO_FILES[:6], *(mo["thumbnail"] for mo in moments if mo.get("thumbnail"))])
     return {"row": row, "moments": moments, "artefacts": events, "artefacts_on": artefacts}
 
 
@@ -354,8 +360,8 @@ def _summary_png(path, vid, t, e, bad, m, yaw, g, moments, row, events, folder) 
 def write_screen_outputs(manifest, out: Path, summary: dict, *, artefacts: bool) -> dict:
     """Every screening file under ``out/screen/``; returns what was written per video
     (or its one-line error) and the comparison rows."""
-    folder = out / "screen"
-    folder.mkdir(exist_ok=True)
+    top, *per_video = screen_folders(out, [v.id for v in manifest.videos])
+    folder = top.prepare()  # completed by the caller once screen.json is written
     report: dict = {"videos": {}, "rows": []}
     for v in manifest.videos:
         ids = [w.id for w in manifest.viewings if w.video == v.id]
@@ -365,7 +371,7 @@ def write_screen_outputs(manifest, out: Path, summary: dict, *, artefacts: bool)
             report["videos"][v.id] = {"error": f"video {v.id}: no viewer's EPOF (see viewings.csv)"}
             continue
         grid = Path(summary["videos"][v.id]["grid"])
-        r = _video_report(v, grid, epofs, folder / v.id, artefacts)
+        r = _video_report(v, grid, epofs, per_video[manifest.videos.index(v)], artefacts)
         report["videos"][v.id] = r
         report["rows"].append(r["row"])
     comments = [f"band {b.name}: {b.lo_dps:g} to {b.hi_dps:g} deg/s -- {b.source}" for b in BANDS]

@@ -17,10 +17,10 @@ from pathlib import Path
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
-from simulator.media.gridfile import content_hash
+from simulator.media.gridfile import content_hash, load_grid
 from simulator.media.source import Source
 from simulator.media.video import probe
-from simulator.screen.report import SCREEN_COLUMNS, write_screen_outputs
+from simulator.screen.report import SCREEN_COLUMNS, screen_folders, write_screen_outputs
 from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec, ViewingSpec
 from simulator.study.runner import run_study
 from simulator.study.tasks import write_json
@@ -49,20 +49,14 @@ def _matching_grid(
     video: Path, grids: list[Path], layout: str, projection: str = "equirect"
 ) -> Path | None:
     """The first of ``grids`` made of ``video`` (the content hash its meta records) with
-    ``layout`` and ``projection``."""
-    import json
-
-    import numpy as np
-
+    ``layout`` and ``projection``. Every grid is validated as ``epof`` does
+    (:func:`~simulator.media.gridfile.load_grid`: InputError naming it for pickled or
+    object members, a bad header or meta), matching or not."""
     if not grids:
         return None
     want = content_hash(video)
     for g in grids:
-        try:
-            with np.load(g, allow_pickle=False) as z:
-                meta = json.loads(str(z["meta"]))
-        except (OSError, ValueError, KeyError):
-            raise InputError(f"{g}: not a vimsim grid file") from None
+        meta = load_grid(g).meta
         if (meta.get("video", {}).get("content_hash") == want and meta.get("layout") == layout
                 and (meta.get("projection") or "equirect") == projection):  # fmt: skip
             return g
@@ -127,6 +121,9 @@ def screen_videos(
         for k in range(1, viewers + 1):
             views.append(ViewingSpec(f"{spec.id}-viewer{k:0{width}d}", spec.id, None,
                                      SCRIPTED + kind, seed + k - 1, f"viewer{k:0{width}d}"))  # fmt: skip
+    folders = screen_folders(out, [spec.id for spec in specs])
+    for f in folders:  # a user's file under OUTDIR/screen/: refused before any work
+        f.check()
     opts = _epof_options(epof or {}, artefacts)
     m = Manifest(path=(out / "screen.toml").resolve(), name="screen", videos=tuple(specs),
                  viewings=tuple(views), epof=opts, render=_RENDER, grf={})  # fmt: skip
@@ -141,6 +138,7 @@ def screen_videos(
     summary["screen"]["artefacts"] = artefacts
     write_json(out / "screen" / "screen.json", {"format": "vimsim-screen", "version": 1,
                "study": "study.json", **summary["screen"]})  # fmt: skip
+    folders[0].complete()
     return summary
 
 

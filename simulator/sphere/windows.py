@@ -40,7 +40,10 @@ class WindowGrid:
     (exact FOVs), sampled at ``size`` pixels.
 
     Presets (:data:`GRID_PRESETS`): ``default`` = 15 deg yaw x 7.5 deg pitch steps, pitch
-    -37.5..37.5 (24 x 11 = 264 windows); ``paper-198`` = 20 deg yaw steps (18 x 11).
+    -37.5..37.5 (24 x 11 = 264 windows); ``paper-198`` = 20 deg yaw steps (18 x 11);
+    ``cao2021`` = the authors' code: 15 x 15 deg steps, pitch -90..90 with the poles
+    (24 x 13 = 312), 107 deg wide at 1600 x 1440 px with the *linear* vertical FOV
+    1440 / 1600 x 107 = 96.3 deg (square pixels would give 101.1).
     """
 
     yaw_step_deg: float = 15.0
@@ -124,24 +127,44 @@ GRID_PRESETS: dict[str, dict] = {
         "pitch_min_deg": -37.5,
         "pitch_max_deg": 37.5,
     },
+    # The authors' Unity preprocessing (docs/parity.md): its FOV and window size are the
+    # preset's own defaults (a caller's hfov/vfov/size still win).
+    "cao2021": {
+        "yaw_step_deg": 15.0,
+        "pitch_step_deg": 15.0,
+        "pitch_min_deg": -90.0,
+        "pitch_max_deg": 90.0,
+        "hfov_deg": 107.0,
+        "vfov_deg": 1440.0 / 1600.0 * 107.0,
+        "size": (1600, 1440),
+    },
 }
 
 
 def grid_preset(
     name: str = "default",
     *,
-    hfov_deg: float = 107.0,
+    hfov_deg: float | None = None,
     vfov_deg: float | None = None,
-    size: tuple[int, int] = (256, 256),
+    size: tuple[int, int] | None = None,
 ) -> WindowGrid:
-    """A :class:`WindowGrid` from a preset name (``default`` or ``paper-198``)."""
+    """A :class:`WindowGrid` from a preset name (``default``, ``paper-198``, ``cao2021``).
+
+    ``hfov_deg`` (default the preset's, else 107), ``vfov_deg`` (default ``hfov_deg`` when
+    that is given, else the preset's, else 107) and ``size`` (default the preset's, else
+    256 x 256) override the preset's window."""
     if name not in GRID_PRESETS:
         raise InputError(f"unknown grid preset {name!r}; expected one of {', '.join(GRID_PRESETS)}")
+    steps = dict(GRID_PRESETS[name])
+    h_pre, v_pre = steps.pop("hfov_deg", 107.0), steps.pop("vfov_deg", 107.0)
+    size_pre = steps.pop("size", (256, 256))
+    if vfov_deg is None:
+        vfov_deg = v_pre if hfov_deg is None else hfov_deg
     return WindowGrid(
-        **GRID_PRESETS[name],
-        hfov_deg=hfov_deg,
-        vfov_deg=hfov_deg if vfov_deg is None else vfov_deg,
-        size=size,
+        **steps,
+        hfov_deg=h_pre if hfov_deg is None else hfov_deg,
+        vfov_deg=vfov_deg,
+        size=size_pre if size is None else size,
     )
 
 

@@ -19,11 +19,13 @@ from pathlib import Path
 from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
+from simulator.core.traceopts import TraceOptions
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
 from simulator.study.entry import Entry, user_numbers
+from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
-from simulator.traces.readers import FORMATS, n_users
+from simulator.traces.readers import n_users
 from simulator.viewing.spec import ViewSpec
 
 __all__ = ["SCRIPTED", "VIEWER_KINDS", "Manifest", "VideoSpec", "ViewingSpec", "load_manifest"]
@@ -31,7 +33,7 @@ __all__ = ["SCRIPTED", "VIEWER_KINDS", "Manifest", "VideoSpec", "ViewingSpec", "
 _LAYOUTS = ("mono", "top-bottom", "side-by-side")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
-_TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", "grf")
+_TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", "grf", "traces")
 _STUDY_KEYS = ("name", "cache")
 _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
@@ -41,10 +43,11 @@ _GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
                 "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
                 "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
-#: Render options a viewing may set for itself (over [render] and [grf]); cpus is the study's.
-_VIEWING_RENDER_KEYS = (*(k for k in _RENDER_KEYS if k != "cpus"), *_GRF_KEYS)
-_VIEWING_KEYS = ("id", "video", "trace", "viewers", "format", "user", "participant",
-                 "condition", "render", "plot", *_VIEWING_RENDER_KEYS)  # fmt: skip
+#: Render options a viewing may set for itself (over [render] and [grf]); cpus is the
+#: study's; a viewing's hold_last is a trace key (it reaches the EPOF and the render).
+_VIEWING_RENDER_KEYS = (*(k for k in _RENDER_KEYS if k not in ("cpus", "hold_last")), *_GRF_KEYS)
+_VIEWING_KEYS = ("id", "video", "trace", "viewers", "participant", "condition", "render",
+                 "plot", *_VIEWING_RENDER_KEYS, *VIEWING_TRACE_KEYS)  # fmt: skip
 _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
@@ -110,6 +113,8 @@ class ViewingSpec:
     render_opts: dict | None = None
     #: Also plot this viewing's EPOF (``epof/<id>.png``).
     plot: bool = False
+    #: How its trace is read and placed on the video's clock ([traces] and its own keys).
+    trace_opts: TraceOptions = field(default_factory=lambda: TraceOptions(origin="manifest"))
     #: Its render options whether rendered or not (what its mitigation is, what the
     #: report's replay of it draws).
     own_render: dict | None = None
@@ -144,12 +149,6 @@ class Manifest:
 def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
     width = len(str(n_users)) if n_users > 1 else 1
     return {"stem": trace.stem, "user": "" if user is None else f"{user:0{width}d}"}
-
-
-def _n_users(trace: Path, fmt: str) -> tuple[str, int]:
-    """(format, number of users) of a trace file; counts lines only (no parsing)."""
-    check_input_file(trace, "head path")
-    return n_users(trace, fmt)
 
 
 def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
@@ -195,13 +194,16 @@ def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
     return tuple(out)
 
 
-def _users_of(e: Entry, trace: Path, fmt: str, user) -> tuple[list[int | None], int]:
+def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | None], int]:
     """The users of ``trace`` a viewing entry takes (None: the file's one trace), and the
-    number of users the file holds."""
+    number of users the file holds; ``opts``' AVTrack360 video choice refused elsewhere."""
     try:
-        tfmt, n = _n_users(trace, fmt)
+        tfmt, n = n_users(check_input_file(trace, "head path"), fmt)  # counts lines only
     except InputError as err:
-        e.fail(str(err))
+        e.fail(opts.fix(str(err)))
+    if "trace_video" in e.t and tfmt != "avtrack360":  # (a [traces] default: other files')
+        e.fail(f"{trace}: a {tfmt} trace holds one video; trace_video = {opts.video!r} belongs "
+               "on an AVTrack360 trace")  # fmt: skip
     if user is None:
         return [None], n
     if user == "all":
@@ -227,10 +229,14 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
     return set(chosen)
 
 
-def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict) -> dict:
+def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict, hold=False) -> dict:
     """The study's render options with the viewing's own keys over them, checked as
-    ``[render]`` is (its view by the one builder, :meth:`ViewSpec.from_options`)."""
+    ``[render]`` is (its view by the one builder, :meth:`ViewSpec.from_options`);
+    ``hold``: the viewing's trace option ``hold_last`` (it reaches the render too)."""
     own = {k: e.t[k] for k in _VIEWING_RENDER_KEYS if k in e.t}
+    if hold:
+        opts = _viewing_render_opts(e, m, where, data, render)
+        return {**opts, "hold_last": True, "view": {**opts["view"], "hold_last": True}}
     if not own:
         return render
     table = dict(data.get("render") or {})
@@ -263,7 +269,7 @@ def _viewing_ids(e: Entry, trace: Path, u, n: int, vid: str, condition: str) -> 
 
 
 def _viewings(
-    m: Path, base: Path, tables, videos, data: dict, render: dict
+    m: Path, base: Path, tables, videos, data: dict, render: dict, traces: dict
 ) -> tuple[ViewingSpec, ...]:
     if not isinstance(tables, list) or not tables:
         raise InputError(
@@ -283,20 +289,19 @@ def _viewings(
             ropts, cond = _viewing_render_opts(e, m, where, data, render), e.get("condition", (str,), "")
             r, plot = e.get("render", (bool,), False), e.get("plot", (bool,), False)
             out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot,
-                                ropts)
+                                own_render=ropts)
                     for i, p, s, k in scripted_viewers(e, vid, seen, where, _ID_RE)]  # fmt: skip
+            viewing_trace_options(e, traces, scripted=True)  # its trace keys refused
             continue
         pattern = e.get("trace", (str,), required=True)
-        fmt = e.get("format", (str,), "auto", choices=("auto", *FORMATS))
-        user = e.get("user", (int, str, list))
-        if user is not None and user != "all":
-            user_numbers(e, "user", user)  # a bad spec is named before any file is read
+        topts, user = viewing_trace_options(e, traces, scripted=False)
+        fmt = topts.format
         condition = e.get("condition", (str,), "")
         render_spec = e.get("render", (bool, int, str, list), False)
         plot = e.get("plot", (bool,), False)
-        ropts = _viewing_render_opts(e, m, where, data, render)
+        ropts = _viewing_render_opts(e, m, where, data, render, topts.hold_last)
         for trace in expand_traces(e, pattern, base):
-            users, n = _users_of(e, trace, fmt, user)
+            users, n = ([None], 1) if topts.columns else _users_of(e, trace, fmt, user, topts)
             rendered = _render_users(e, render_spec, users)
             for u in users:
                 vw_id, participant = _viewing_ids(e, trace, u, n, vid, condition)
@@ -308,7 +313,7 @@ def _viewings(
                 seen[vw_id] = where
                 r = u in rendered
                 out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, r,
-                                       ropts if r else None, plot, ropts))  # fmt: skip
+                                       ropts if r else None, plot, topts, own_render=ropts))  # fmt: skip
     return tuple(out)
 
 
@@ -321,8 +326,9 @@ def _questionnaires(m: Path, base: Path, t) -> dict | None:
         check_input_file(path, "questionnaire CSV")
         with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = [r for r in csv.reader(ln for ln in fh if not ln.lstrip().startswith("#"))]
-    except (InputError, UnicodeDecodeError) as err:
-        e.fail(str(err) if isinstance(err, InputError) else f"{path}: not UTF-8 text")
+    except (InputError, UnicodeDecodeError, csv.Error) as err:
+        bad = "not UTF-8 text" if isinstance(err, UnicodeDecodeError) else f"not CSV ({err})"
+        e.fail(str(err) if isinstance(err, InputError) else f"{path}: {bad}")
     header = [c.strip().lower() for c in (rows[0] if rows else [])]
     if "participant" not in header and "id" not in header:
         e.fail(f"{path}: no 'participant' (or 'id') column to key rows by; found {header}")
@@ -491,6 +497,8 @@ def load_manifest(path) -> Manifest:
         raise InputError(f"{m}: not UTF-8 text; expected a TOML study manifest") from None
     except tomllib.TOMLDecodeError as e:
         raise InputError(f"{m}: not valid TOML ({e})") from None
+    except RecursionError:
+        raise InputError(f"{m}: TOML nested too deeply to read") from None
     unknown = [k for k in data if k not in _TOP_KEYS]
     if unknown:
         raise InputError(f"{m}: unknown table {unknown[0]!r}; expected {', '.join(_TOP_KEYS)}")
@@ -499,7 +507,8 @@ def load_manifest(path) -> Manifest:
     videos = _videos(m, base, data.get("videos"))
     render = _render(m, data.get("render"))  # checked first: viewings build on it
     render["view"] = _view(m, data)
-    viewings = _viewings(m, base, data.get("viewings"), videos, data, render)
+    traces = trace_defaults(m, data.get("traces"))  # [traces]: every viewing's trace defaults
+    viewings = _viewings(m, base, data.get("viewings"), videos, data, render, traces)
     epof = _epof(m, data.get("epof"))  # artefacts: detected in the sphere-mode preprocessing
     videos = tuple(replace(v, artefacts=True) for v in videos) if epof["artefacts"] else videos
     return Manifest(

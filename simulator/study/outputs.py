@@ -16,7 +16,6 @@ from __future__ import annotations
 import concurrent.futures
 import csv
 import dataclasses
-import io
 import json
 import math
 import platform
@@ -31,7 +30,7 @@ from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output
+from simulator.core.fileio import atomic_output, write_csv
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.media.source import Source
 from simulator.mitigation.bands import draw_bands
@@ -80,16 +79,13 @@ def write_viewings_csv(path, rows: list[dict], columns) -> None:
     as the row has them (the EPOF task's), else read from the viewing's
     ``epof/<viewing>.csv`` beside ``path``."""
     columns = (*columns, *PART_MEAN_COLUMNS)
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
+    table = []
     for r in rows:
         have = all(c in r for c in PART_MEAN_COLUMNS)  # the task's (or the resumed row's)
         if r.get("viewing") and r.get("status") == "ok" and not have:
             r = {**r, **_part_means(Path(path).parent / "epof" / f"{r['viewing']}.csv")}
-        w.writerow([_cell(r.get(c, "")) for c in columns])
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+        table.append([r.get(c, "") for c in columns])
+    write_csv(path, columns, table, fmt=_cell)  # text cells guarded (csv_cell)
 
 
 def _load_epof(path: Path) -> np.ndarray:
@@ -276,13 +272,8 @@ def _video_outputs(v, grid_path: Path, epofs: dict[str, np.ndarray], folder: Pat
     written.append("provocative.png")
     thumbs.result()  # its error, if any, is this video's
     cols = ("rank", "time_s", "frame", "yaw_deg", "pitch_deg", "pof_dps", "thumbnail")
-    buf = io.StringIO()
-    wr = csv.writer(buf, lineterminator="\n")
-    wr.writerow(cols)
-    for mo in moments:
-        wr.writerow([_cell(mo.get(c, "")) for c in cols])
-    with atomic_output(folder / "moments.csv") as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    write_csv(folder / "moments.csv", cols, [[mo.get(c, "") for c in cols] for mo in moments],
+              fmt=_cell)  # fmt: skip
     written += ["moments.csv", *(mo["thumbnail"] for mo in moments if "thumbnail" in mo)]
     kinds: dict[str, int] = {}
     for k in art.values():
@@ -325,13 +316,8 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
                 float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
             )
         rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["id", "condition", *extra, "flow", "epof_csv"])
-    w.writerows(rows)
     data = folder / "DATA.csv"
-    with atomic_output(data) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv"], rows, fmt=_cell)
     info = {"dir": str(folder), "data": str(data),
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:

@@ -25,10 +25,12 @@ from simulator.core.fileio import OutputFolder, atomic_output
 from simulator.core.mapcache import cache_dir
 from simulator.media.gridfile import VERSION as GRID_VERSION
 from simulator.media.gridfile import cells_from_meta, content_hash, load_grid
+from simulator.media.source import Source
 from simulator.media.video import probe
 from simulator.study.manifest import SCRIPTED, Manifest, VideoSpec, ViewingSpec
+from simulator.traces.clock import check_span, place, read_trace
 from simulator.traces.path import synth
-from simulator.traces.readers import TraceFile, load_headpath
+from simulator.traces.readers import TraceFile
 from simulator.viewing.spec import VIEW_OPTIONS, ViewSpec
 
 #: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).
@@ -82,7 +84,7 @@ def viewing_key(m: Manifest, w: ViewingSpec, grid: Path, memo: dict) -> str:
     """The hash of everything a viewing's outputs depend on (its resume record's key)."""
     return _sha({
         "grid": grid.name, "trace": "" if w.trace is None else _file_sha(w.trace, memo),
-        "format": w.format,
+        "format": w.format, "trace_opts": w.trace_opts,
         "user": w.user, "epof": m.epof, "vimsim": __version__,
         "render": [w.render_opts, m.grf] if w.render else None, "plot": w.plot,
     })  # fmt: skip
@@ -92,7 +94,7 @@ def read_state(p: Path) -> dict | None:
     """A viewing's resume record, or None (missing or unreadable: recomputed)."""
     try:
         d = json.loads(p.read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return d if isinstance(d, dict) else None
 
@@ -155,31 +157,45 @@ def _grid_path(v: VideoSpec, cache: Path) -> Path:
 
 
 def _trace_of(w: ViewingSpec, parsed: dict, length_s: float):
-    """The head path of a viewing, a multi-user file parsed once (``parsed`` memo); a
-    scripted viewer's covers the video (``length_s``), as the EPOF task makes it."""
+    """The head path of a viewing read with its trace options, a multi-user file parsed
+    once (``parsed`` memo); a scripted viewer's covers the video (``length_s``), as the
+    EPOF task makes it."""
     if w.trace is None and w.format.startswith(SCRIPTED):
         return synth(w.format[len(SCRIPTED) :], length_s, seed=int(w.user or 0))
     if w.user is None:
-        return load_headpath(w.trace, w.format)
+        return read_trace(w.trace, w.trace_opts)
     key = (str(w.trace), w.format)
     if key not in parsed:
         parsed[key] = TraceFile(w.trace, w.format)
-    return parsed[key].user(w.user)
+    return place(parsed[key].user(w.user), w.trace_opts)
+
+
+def _open_as_the_run(v: VideoSpec):
+    """The video's MediaInfo, opened as the run opens it (its layout, eye, projection and
+    lens; a still refused as preprocessing refuses it): InputError for the same problems."""
+    src = Source.open(v.path, layout=v.layout, eye=v.eye, projection=v.projection,
+                      lens_fov_deg=v.lens_fov_deg)  # fmt: skip
+    if not src.info.is_video or src.info.n_frames < 2:
+        raise InputError(
+            f"{v.path}: is a still image; preprocess needs a video with at least 2 frames"
+        )
+    return src.info
 
 
 def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
     """What a dry run checks beyond the manifest: each viewing still to compute has a
-    readable trace covering its video (unless ``[epof] hold_last``), and a render range
+    readable trace of a span that fits its video and covering it (unless ``hold_last``,
+    in ``[epof]``, ``[traces]`` or the viewing), and a render range
     inside the video. Returns ``{viewing: [warning lines]}``; problems (one line each,
     naming the viewing) go to ``plan.problems``."""
     videos = {}
     for v in m.videos:
         if any(w.video == v.id for w in plan.todo):
             try:
-                info = probe(v.path)
+                info = _open_as_the_run(v)
                 videos[v.id] = ((info.n_frames - 1) / info.fps, info.n_frames / info.fps)
             except InputError as e:
-                plan.problems.append(f"video {v.id}: {e}")
+                plan.problems.append(f"video {v.id}: {' '.join(str(e).split())}")
     parsed: dict = {}
     found: dict[str, list[str]] = {}
     for w in plan.todo:
@@ -190,14 +206,16 @@ def check_plan(m: Manifest, plan: Plan) -> dict[str, list[str]]:
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 hp = _trace_of(w, parsed, length_s)  # with this viewing's warnings only
+                check_span(hp, length_s, w.trace_opts, video=m.video(w.video).path.name)
             found[w.id] = sorted({" ".join(str(c.message).split()) for c in caught})
-            hp.check_covers(last_s, hold=m.epof["hold_last"], video=str(m.video(w.video).path))
+            hold = m.epof["hold_last"] or w.trace_opts.hold_last
+            hp.check_covers(last_s, hold=hold, video=str(m.video(w.video).path))
             r = w.render_opts or {}
             if r.get("start_s") is not None and r["start_s"] >= length_s:
                 raise InputError(f"render start = {r['start_s']:g} s is beyond the video "
                                  f"({length_s:.3f} s)")  # fmt: skip
-        except InputError as e:
-            plan.problems.append(f"viewing {w.id}: {' '.join(str(e).split())}")
+        except InputError as e:  # the fix in the manifest's terms (hold_last = true)
+            plan.problems.append(f"viewing {w.id}: {' '.join(w.trace_opts.fix(str(e)).split())}")
     return found
 
 

@@ -63,7 +63,7 @@ def _video_dict(v: VideoSpec) -> dict:
 
 def _item(w: ViewingSpec) -> dict:
     return {"id": w.id, "trace": "" if w.trace is None else str(w.trace), "format": w.format,
-            "user": w.user, "plot": w.plot}  # fmt: skip
+            "user": w.user, "plot": w.plot, "trace_opts": asdict(w.trace_opts)}  # fmt: skip
 
 
 #: Runs of a task whose worker process died before it is failed (a task's own errors

@@ -22,6 +22,7 @@ import numpy as np
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
+from simulator.core.traceopts import TraceOptions, translate
 from simulator.epof.exact import shared_query
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
@@ -35,8 +36,9 @@ from simulator.render.gl import create_context
 from simulator.sphere.cells import Frustum
 from simulator.sphere.windows import grid_preset
 from simulator.study.viewers import SCRIPTED
+from simulator.traces.clock import check_span, place, read_trace
 from simulator.traces.path import HeadPath, synth
-from simulator.traces.readers import TraceFile, load_headpath
+from simulator.traces.readers import TraceFile
 from simulator.viewing.job import render_viewing
 from simulator.viewing.spec import ViewSpec
 
@@ -64,9 +66,9 @@ def _source(video: dict) -> Source:
 
 
 def _error_line(e: BaseException) -> str:
-    """One line for a failed step: the InputError's message, an OSError's file and reason
-    (a full disk), or the internal error's type."""
-    text = " ".join(str(e).split())
+    """One line for a failed step: the InputError's message (a trace option named by its
+    manifest key), an OSError's file and reason (a full disk), or the internal error's type."""
+    text = translate(" ".join(str(e).split()), "manifest")  # a study's fix: its manifest keys
     if isinstance(e, OSError) and e.strerror:  # an environment error: a full disk, permissions
         return f"{e.filename}: {e.strerror}" if e.filename else e.strerror
     return text if isinstance(e, InputError) else f"internal error: {type(e).__name__}: {text}"
@@ -105,21 +107,40 @@ def _artefacts(path: str, grid: GridFile) -> Artefacts:
     return _ARTEFACTS[key]
 
 
-def _trace(path: str, fmt: str, user: int | None, grid: GridFile | None = None) -> HeadPath:
-    """The head path of one viewing, with its own warnings (the file's and its user's
-    sampling): a multi-user file is parsed once per worker. A scripted viewer (``fmt``
-    ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+def _trace(item: dict, grid: GridFile | None = None) -> HeadPath:
+    """The head path of one viewing (``item``: ``trace``, ``format``, ``user``,
+    ``trace_opts``), read with its trace options and its own warnings (the file's and its
+    user's sampling): a multi-user file is parsed once per worker. A scripted viewer
+    (``format`` ``synth:<kind>``, ``user`` its seed) covers the grid's video."""
+    path, fmt, user = item["trace"], item["format"], item["user"]
     if fmt.startswith(SCRIPTED):
         end = (int(grid.meta.get("start_frame", 0)) + grid.n_frames + 1) / grid.fps
         return synth(fmt[len(SCRIPTED) :], end, seed=int(user or 0))
+    opts = _trace_opts(item)
     if user is None:
-        return load_headpath(path, fmt)
+        return read_trace(path, opts)
     key = (*_file_key(path), fmt)
     if key not in _TRACES:
         if len(_TRACES) > 8:
             _TRACES.clear()
         _TRACES[key] = TraceFile(path, fmt)
-    return _TRACES[key].user(user)
+    return place(_TRACES[key].user(user), opts)
+
+
+def _check_span(item: dict, hp: HeadPath, grid: GridFile) -> None:
+    """A viewing's trace span checked against its grid's whole video (a scripted viewer's
+    covers it): :func:`simulator.traces.clock.check_span`, in the manifest's terms."""
+    if not item["format"].startswith(SCRIPTED):
+        vid = grid.meta.get("video") if isinstance(grid.meta.get("video"), dict) else {}
+        n_video = int(vid.get("n_frames") or grid.n_frames)
+        name = Path(str(vid.get("path", ""))).name
+        check_span(hp, n_video / grid.fps, _trace_opts(item), video=name)
+
+
+def _trace_opts(item: dict) -> TraceOptions:
+    """A viewing's trace options (the manifest's: errors name its keys)."""
+    given = {k: v for k, v in (item.get("trace_opts") or {}).items() if k != "origin"}
+    return TraceOptions(**given, origin="manifest")
 
 
 def preprocess_task(video: dict, output: str, threads: int) -> dict:
@@ -236,7 +257,8 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 try:
-                    hp = _trace(it["trace"], it["format"], it["user"], grid)
+                    hp, topts = _trace(it, grid), _trace_opts(it)
+                    _check_span(it, hp, grid)
                     res = compute_epof(
                         grid,
                         hp,
@@ -245,7 +267,7 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                         frustum=frustum,
                         top_k=opts["top_k"],
                         rule=rule,
-                        hold=opts["hold_last"],
+                        hold=opts["hold_last"] or topts.hold_last,
                         method=opts["method"],
                         artefacts=art,
                     )
@@ -288,7 +310,8 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             grid = _grid(grid_path)
-            hp = _trace(item["trace"], item["format"], item["user"], grid)
+            hp = _trace(item, grid)
+            _check_span(item, hp, grid)  # as the EPOF task: an implausible span is refused
         s = render_viewing(
             dataclasses.replace(_source(video), eye="left"),
             hp,

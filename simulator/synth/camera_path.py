@@ -18,7 +18,6 @@ Camera CSV: ``time_s,x_m,y_m,z_m,yaw_deg,pitch_deg,roll_deg`` (:func:`load_camer
 
 from __future__ import annotations
 
-import csv
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +30,7 @@ from scipy.spatial.transform import Rotation, Slerp
 
 from simulator.core.choices import CAMERA_INTERPS
 from simulator.core.errors import InputError
-from simulator.core.fileio import atomic_output, check_input_file
+from simulator.core.fileio import atomic_output, check_input_file, csv_row
 from simulator.sphere.geometry import head_angles_deg, head_rotation
 
 __all__ = [
@@ -188,7 +187,7 @@ def _parse_csv(p: Path) -> tuple[list[str], NDArray[np.float64], list[int]]:
     ]
     if not rows:
         raise InputError(f"{p}: camera file is empty; expected a header {','.join(CAMERA_COLUMNS)}")
-    cols = [c.strip() for c in next(csv.reader([rows[0][1]]))]
+    cols = [c.strip() for c in csv_row(rows[0][1], p)]
     missing = [c for c in CAMERA_COLUMNS if c not in cols]
     unknown = [c for c in cols if c not in CAMERA_COLUMNS]
     if missing or unknown or len(set(cols)) != len(cols):
@@ -199,7 +198,7 @@ def _parse_csv(p: Path) -> tuple[list[str], NDArray[np.float64], list[int]]:
         )
     data = np.empty((len(rows) - 1, len(cols)))
     for k, (ln, text) in enumerate(rows[1:]):
-        vals = next(csv.reader([text]))
+        vals = csv_row(text, f"{p}: line {ln}")
         if len(vals) != len(cols):
             raise InputError(f"{p}: line {ln} has {len(vals)} fields; the header has {len(cols)}")
         try:

@@ -54,7 +54,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
-from simulator.core.choices import SCENES, SYNTH_LAYOUTS
+from simulator.core.choices import MAX_CLIP_FPS, MAX_CLIP_FRAMES, SCENES, SYNTH_LAYOUTS
 from simulator.core.errors import InputError
 from simulator.sphere.geometry import (
     check_equirect_aspect,
@@ -78,11 +78,10 @@ __all__ = [
 ]
 
 
-#: Upper bounds of a clip (a typo such as ``--fps 1e9`` fails at once, not after hours).
-MAX_FPS = 240.0
-
-
-MAX_FRAMES = 100_000
+#: Upper bounds of a clip (a typo such as ``--fps 1e9`` fails at once, not after hours);
+#: shared with a still's clip (:mod:`simulator.core.choices`).
+MAX_FPS = MAX_CLIP_FPS
+MAX_FRAMES = MAX_CLIP_FRAMES
 
 
 _G = 9.81  # m/s^2, for the coaster's banking

@@ -38,7 +38,7 @@ def load_texture(path: str | os.PathLike | None = None) -> tuple[NDArray[np.uint
         with Image.open(p) as im:
             im.load()
             rgb = np.asarray(im.convert("RGB"))
-    except (UnidentifiedImageError, OSError, ValueError) as e:
+    except (UnidentifiedImageError, OSError, ValueError, Image.DecompressionBombError) as e:
         raise InputError(
             f"{p}: texture is not a readable image ({type(e).__name__}: {e})"
         ) from None

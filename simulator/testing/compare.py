@@ -98,7 +98,7 @@ OPACITY_TOL = 1e-6
 def _index(folder: Path) -> dict | None:
     try:
         d = json.loads((folder / FRAMES_JSON).read_text())
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
     return d if isinstance(d, dict) and isinstance(d.get("frames"), list) else None
 
@@ -185,7 +185,7 @@ def _read_png(p: Path) -> NDArray[np.uint8]:
             if im.format != "PNG":
                 raise InputError(f"{p}: not a PNG (a {im.format} image)")
             return np.asarray(im.convert("RGB"))
-    except (UnidentifiedImageError, OSError) as e:
+    except (UnidentifiedImageError, OSError, Image.DecompressionBombError) as e:
         raise InputError(f"{p}: not a readable PNG ({e})") from None
 
 
@@ -338,7 +338,7 @@ def update_goldens(new_dir, golden_dir) -> tuple[list[str], Path | None]:
     if gj.is_file():
         try:
             listed = {f["file"] for f in json.loads(gj.read_text())["frames"]}
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, RecursionError):
             raise InputError(f"{gj}: not a frames.json written by vimsim frames") from None
     stale = [n for n in gold if n not in new]
     unknown = [n for n in stale if n not in listed]

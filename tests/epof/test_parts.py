@@ -110,6 +110,40 @@ def test_parts_of_a_field_in_memory_beside_a_lazy_one(tmp_path):
     assert np.allclose(got[0], want[0], rtol=1e-9) and np.allclose(got[1], want[1], rtol=1e-9)
 
 
+def test_parts_of_lazy_fields_kept_in_a_folder(tmp_path):
+    """keep_parts_in(folder): the rotational part of lazy fields (a long video in a study
+    worker) is computed once into a raw file and read from it; the same parts as computed
+    chunk by chunk; a changed grid file gets a new file."""
+    import os
+
+    from simulator.epof.parts import keep_parts_in
+    from simulator.media.lazyfield import spool
+
+    path, _, _ = _grid(tmp_path / "g.npz")
+    yaw, pitch, roll = np.linspace(-90, 90, T), np.linspace(-30, 30, T), np.zeros(T)
+    want = viewport_parts(load_grid(path), yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+    keep = tmp_path / "parts"
+    keep_parts_in(keep)
+    try:
+        g = load_grid(path)
+        g.field_dps.chunk_rows = g.field_trans_dps.chunk_rows = 2
+        got = viewport_parts(g, yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+        (f,) = keep.iterdir()
+        assert f.name.endswith(".rot.f32") and f.stat().st_size == 4 * T * np.prod(CellGrid(CELL).shape)
+        os.utime(f, ns=(0, 0))
+        again = viewport_parts(g, yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+        assert f.stat().st_mtime_ns == 0  # made once, read since
+        for a in (got, again):
+            assert np.allclose(a[0], want[0], rtol=1e-6) and np.allclose(a[1], want[1], rtol=1e-5)
+        _grid(path, trans_scale=0.5)  # the grid file changes: another part file
+        viewport_parts(load_grid(path), yaw, pitch, roll, hfov_deg=100, vfov_deg=90)
+        assert len(list(keep.iterdir())) == 2
+    finally:
+        keep_parts_in(None)
+    raw = spool(load_grid(path).field_dps, tmp_path / "f.f32")  # a field's raw copy
+    assert np.array_equal(np.asarray(raw), np.asarray(load_grid(path).field_dps, np.float32))
+
+
 def _path(tmp_path):
     p = tmp_path / "p.csv"
     p.write_text("time_s,yaw_deg,pitch_deg,roll_deg\n0,0,0,0\n1,30,10,0\n")

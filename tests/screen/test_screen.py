@@ -249,7 +249,8 @@ def test_screen_page_is_self_contained(screened):
     cut = text[text.index('id="v-cut"'):]
     assert "<td>cut</td><td>10-10</td>" in cut  # the cut listed, frame 10
     assert "#1: " in cut and "deg/s" in cut  # a moment's caption
-    assert not list(folder.glob("*.tmp*")) and not list(folder.glob(".*"))  # nothing half-written
+    assert not list(folder.glob("*.tmp*"))  # nothing half-written; the folder's manifest only
+    assert [p.name for p in folder.glob(".*")] == [".vimsim-manifest.json"]
 
 
 @pytest.mark.browser

@@ -250,7 +250,7 @@ def test_cli_convert_and_show(real_dir, tmp_path, capsys):
 BAD = {
     "empty.csv": ("", "empty"),
     "header.csv": ("time_s,yaw_deg,pitch_deg,roll_deg\n", "no data rows"),
-    "cols.csv": ("t,yaw,pitch\n0,1,2\n", "expected a CSV with header time_s,yaw_deg,pitch_deg"),
+    "cols.csv": ("t,yaw,pitch\n0,1,2\n", "expected a CSV with header time_s,yaw_deg,pitch_deg.* e.g. --columns time=t,yaw=yaw,pitch=pitch "),
     "miss.csv": ("time_s,yaw_deg\n0,1\n", r"expected time_s,yaw_deg,pitch_deg,roll_deg \(missing"),
     "extra.csv": ("time_s,yaw_deg,pitch_deg,roll_deg,foo\n0,1,2,3,4\n", "unknown"),
     "nan.csv": (

@@ -95,3 +95,62 @@ def test_cli_convert_and_epof_take_the_column_map(tmp_path, capsys):
                                        if cmd == "frames" else [cmd, "v.mp4", str(p), "-o", "d",
                                                                 *args])  # fmt: skip
         assert view_from_args(ns, cmd)[0].n == 39
+
+
+def real_sit_log(path, n=40):
+    """The real SIT-VR Unity log's shape: one wrapper key over time-keyed samples of flat
+    Unity fields (Ex, Ey, Ez Euler degrees; Rx.. and Px.. other channels)."""
+    log = {}
+    for k in range(n):
+        ms = 686 + 50 * k
+        key = f"20210510Z-2004{ms // 1000:02d}_{ms % 1000:03d}Z"
+        e = (360.0 - 2.0 * k) % 360.0 if k else 0.0, (3.0 * k) % 360.0 if k else 0.0, 0.0
+        log[key] = {"Ex": e[0], "Ey": e[1], "Ez": e[2], "Rx": 0.1, "Ry": 0.2, "Rz": 0.3,
+                    "Px": 0.0, "Py": 1.6, "Pz": 0.0}  # fmt: skip
+    path.write_text(json.dumps({"1-SubheadPosition": log}))
+    return path
+
+
+REAL_SIT_MAP = "time=key,yaw=Ey,pitch=-Ex,roll=-Ez"
+
+
+def test_real_sit_shape_descends_the_wrapper_key(tmp_path, capsys):
+    p = real_sit_log(tmp_path / "sit.json")
+    out = tmp_path / "path.csv"
+    args = ["--columns", REAL_SIT_MAP, "--time-format", SIT_FORMAT, "--drop-zero-rows"]
+    assert main(["headpath", "convert", str(p), "-o", str(out), *args]) == 0
+    hp = load_columns(p, REAL_SIT_MAP, time_format=SIT_FORMAT, drop_zero_rows=True)
+    y, pitch, _ = hp.angles_deg()
+    assert hp.n == 39 and hp.times_s[-1] == pytest.approx(1.9)
+    assert y[-1] == pytest.approx(3.0 * 39) and pitch[-1] == pytest.approx(2.0 * 39)
+    # a single sample (its values are not objects) is not a wrapper: nothing descended
+    one = tmp_path / "one.json"
+    one.write_text(json.dumps({"20210510Z-200400_686Z": {"Ex": 1.0, "Ey": 2.0, "Ez": 0.0}}))
+    assert load_columns(one, REAL_SIT_MAP, time_format=SIT_FORMAT).n == 1
+
+
+def test_unknown_column_lists_the_closest_fields_of_one_sample(tmp_path):
+    p = real_sit_log(tmp_path / "sit.json")
+    with pytest.raises(InputError) as e:
+        load_columns(p, "time=key,yaw=EY,pitch=-Ex", time_format=SIT_FORMAT)
+    msg = str(e.value)
+    assert "no column 'EY'" in msg and "closest fields of one sample" in msg
+    assert "'Ey'" in msg and "13357" not in msg and len(msg.splitlines()) == 1
+    with pytest.raises(InputError, match=r"none of the 10 fields of one sample \(entry 1\) is close$"):
+        load_columns(p, "time=key,yaw=qqqqqq,pitch=-Ex", time_format=SIT_FORMAT)  # names kept
+
+
+def test_every_auto_detect_failure_shows_a_columns_example(tmp_path, capsys):
+    sit = real_sit_log(tmp_path / "sit.json")
+    txt = tmp_path / "log.txt"
+    txt.write_text("stamp;head_yaw;head_pitch;head_roll\n0;1;2;3\n1;2;3;4\n")
+    expect = {sit: "--columns time=key,yaw=Ey,pitch=Ex,roll=Ez --time-format FMT",
+              txt: "--columns time=stamp,yaw=head_yaw,pitch=head_pitch,roll=head_roll"}  # fmt: skip
+    for src, example in expect.items():
+        assert main(["headpath", "convert", str(src), "-o", str(tmp_path / "o.csv")]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and example in err, err
+        assert not (tmp_path / "o.csv").exists()
+    # the example, copied with its signs and time format filled in, reads the file
+    assert main(["headpath", "convert", str(sit), "-o", str(tmp_path / "o.csv"), "--columns",
+                 REAL_SIT_MAP, "--time-format", SIT_FORMAT, "--drop-zero-rows"]) == 0  # fmt: skip

@@ -156,7 +156,7 @@ def _parse(p: Path, b: bytes) -> tuple[dict, str, tuple[int, ...], int]:
         shape = tuple(int(s) for s in d["shape"])
         dt = {"float16": "<f2", "float32": "<f4"}[d["dtype"]]
         off = int(d["offset"])
-    except (ValueError, KeyError, TypeError, UnicodeDecodeError) as e:
+    except (ValueError, KeyError, TypeError, UnicodeDecodeError, RecursionError) as e:
         raise InputError(f"{p}: export header is malformed ({e})") from None
     return header, dt, shape, off
 

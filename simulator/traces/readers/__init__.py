@@ -16,7 +16,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import CANONICAL_COLUMNS, HeadPath
 from simulator.traces.readers import avtrack360, canonical, corbillon, salient360, vidstr360
-from simulator.traces.readers.columns import load_columns, parse_column_map
+from simulator.traces.readers.columns import columns_example, load_columns, parse_column_map
 from simulator.traces.readers.common import _first_line, _warn_if_coarse
 from simulator.traces.readers.formats import Sniff, TraceFormat
 
@@ -52,10 +52,14 @@ def detect_format(path: str | os.PathLike) -> str:
         if f.sniff(sniff):
             return f.name
     n = len(head.replace(",", " ").split())
+    what = "a JSON log of no known dataset" if sniff.is_json else (
+        f"its first line has {n} fields, not a known header")  # fmt: skip
     raise InputError(  # the line itself is not quoted: messages never echo file content
-        f"{p}: cannot tell the head path format from its first line ({n} fields, not a "
-        f"known header); expected a "
-        f"CSV with header {','.join(CANONICAL_COLUMNS)} (or pass --format, one of {', '.join(FORMATS)})"
+        f"{p}: cannot tell the head path format ({what}); expected a CSV with header "
+        f"{','.join(CANONICAL_COLUMNS)}, or --format (one of {', '.join(FORMATS)}), or a lab's "
+        f"own log through a column map, e.g. --columns "
+        f"{columns_example(p) or 'time=t,yaw=yaw,pitch=pitch'} (check signs and units: "
+        "docs/headpath.md)"
     )
 
 
@@ -88,9 +92,20 @@ def load_headpath(
         raise InputError(
             f"{p}: unknown head path format {format!r}; expected auto or one of {', '.join(REGISTRY)}"
         )
-    hp = REGISTRY[fmt].read(p, video=video, user=user)
+    try:
+        hp = REGISTRY[fmt].read(p, video=video, user=user)
+    except InputError as e:
+        if format != "auto":
+            raise
+        raise InputError(f"{e} (read as {fmt}, detected){_columns_hint(p)}") from None
     _warn_if_coarse(hp)
     return hp
+
+
+def _columns_hint(p) -> str:
+    """``"; a lab's own log? --columns ..."`` built from the file's fields, else ``""``."""
+    ex = columns_example(p)
+    return f"; a lab's own log? read it through a column map, e.g. --columns {ex}" if ex else ""
 
 
 def load_keyframes(path: str | os.PathLike) -> HeadPath:

@@ -14,9 +14,11 @@ data rows, ``drop_zero_rows`` the rows whose mapped angles are all exactly 0 (Un
 first sample before the headset reports). Times that look like clock timestamps (over
 1e8 s) without ``time_from_first`` give a :class:`ClockTimeWarning`.
 
-A JSON log is an object keyed by timestamps (``{"20210510Z-200400_686Z": {"rot": {"x":
-..}}, ..}``, the SIT-VR shape) or a list of objects; ``time=key`` names the object's key,
-nested fields go by dotted names (``yaw=rot.y``).
+A JSON log is an object keyed by timestamps or a list of objects, below any single wrapper
+key, which is descended: the real SIT-VR Unity log is ``{"1-SubheadPosition":
+{"20210510Z-200400_686Z": {"Ex": .., "Ey": .., "Ez": .., "Rx": .., ..}, ..}}``, read with
+``time=key,yaw=Ey,pitch=-Ex,roll=-Ez``; ``time=key`` names the object's key, nested fields
+go by dotted names (``yaw=rot.y``).
 
 A Unity-style log (left-handed, x right, y up, z forward; Euler degrees in [0, 360);
 pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
@@ -24,6 +26,7 @@ pitch + looks down, roll + left ear down) needs only ``yaw=Y,pitch=-X,roll=-Z``.
 
 from __future__ import annotations
 
+import difflib
 import json
 import math
 import os
@@ -35,9 +38,9 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import HeadPath
-from simulator.traces.readers.common import _check_increasing, _dedupe_times, _hint, _value
+from simulator.traces.readers.common import _check_increasing, _dedupe_times, _value
 
-__all__ = ["COLUMN_KEYS", "ClockTimeWarning", "load_columns", "parse_column_map"]
+__all__ = ["COLUMN_KEYS", "ClockTimeWarning", "columns_example", "load_columns", "parse_column_map"]
 
 #: Times beyond this many seconds (about 3 years) look like clock timestamps.
 CLOCK_TIME_S = 1e8
@@ -100,6 +103,25 @@ def _flatten(obj, prefix: str, out: dict) -> dict:
     return out
 
 
+def _is_samples(v) -> bool:
+    """Whether ``v`` is a container of samples: a non-empty object or list whose members
+    are all objects (one sample's members are values)."""
+    members = list(v.values()) if isinstance(v, dict) else v if isinstance(v, list) else []
+    return bool(members) and all(isinstance(x, dict) for x in members)
+
+
+def _descend(obj) -> tuple[object, list[str]]:
+    """Below every single wrapper key (``{"1-SubheadPosition": {time: sample, ..}}``, the
+    real SIT-VR log): the samples, and the keys descended."""
+    path: list[str] = []
+    while isinstance(obj, dict) and len(obj) == 1:
+        (k, v), = obj.items()
+        if not _is_samples(v):
+            break
+        obj, path = v, [*path, str(k)]
+    return obj, path
+
+
 def _json_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
     """Columns and rows (label, {column: value}) of a JSON log (see the module doc)."""
     try:
@@ -108,6 +130,7 @@ def _json_table(p, text: str) -> tuple[list[str], list[tuple[str, dict]]]:
         raise InputError(f"{p}: JSON nested too deeply") from None
     except json.JSONDecodeError as e:
         raise InputError(f"{p}: not valid JSON (line {e.lineno}: {e.msg})") from None
+    obj, _ = _descend(obj)
     if isinstance(obj, dict):
         entries = [(f"entry {i + 1}", {"key": k}, v) for i, (k, v) in enumerate(obj.items())]
     elif isinstance(obj, list):
@@ -143,6 +166,60 @@ def _read_table(p) -> tuple[list[str], list[tuple[str, dict]]]:
     if text.lstrip().startswith(("{", "[")):
         return _json_table(p, text)
     return _text_table(p, text)
+
+
+def _unknown_message(p, unknown: list[str], rows) -> str:
+    """One line: the unknown columns and the closest field names of one sample (difflib,
+    at most 5, each cut to 30 characters); none close, only how many fields it has (a
+    header is never listed: docs/reliability.md)."""
+    label, sample = rows[0] if rows else ("", {})
+    names = [str(c) for c in sample]
+    close = difflib.get_close_matches(unknown[0], names, n=5, cutoff=0.5)
+    miss = f"{p}: no column {', '.join(map(repr, unknown))}"
+    if not close:
+        return f"{miss}; none of the {len(names)} fields of one sample ({label}) is close"
+    return f"{miss}; closest fields of one sample ({label}): {', '.join(_value(n) for n in close)}"
+
+
+#: Field names that look like each quantity: exact (lower case), then name endings.
+_GUESS = {
+    "time": (("key", "time", "t", "timestamp", "time_s", "sec", "seconds", "ms", "stamp"),
+             ("time", "stamp", "_t", "_ms", "_s")),
+    "yaw": (("yaw", "ey", "ry", "heading"), ("rot.y", "yaw", ".ey")),
+    "pitch": (("pitch", "ex", "rx"), ("rot.x", "pitch", ".ex")),
+    "roll": (("roll", "ez", "rz"), ("rot.z", "roll", ".ez")),
+}  # fmt: skip
+
+
+def columns_example(path: str | os.PathLike) -> str:
+    """A ``--columns`` map of the file's own fields that look like each quantity (``COL``
+    for a quantity none looks like; ``--time-format FMT`` after it when the time field is
+    not a number), for messages: only names that match a known pattern are quoted (a
+    header is never listed: docs/reliability.md); ``""`` if the file is no table of at
+    least three fields or none looks like an angle. Signs and units need the user's check."""
+    try:
+        cols, rows = _read_table(path)
+    except (InputError, OSError, ValueError):
+        return ""
+    free = [str(c) for c in (rows[0][1] if rows else cols)]
+    if len(free) < 3:
+        return ""
+    out = {}
+    for key, (exact, ends) in _GUESS.items():
+        hit = next((n for n in free if n.lower() in exact), None)
+        hit = hit or next((n for n in free if n.lower().endswith(ends)), None)
+        if hit is not None:
+            out[key] = hit[:30]
+            free.remove(hit)
+    if not out.keys() & {"yaw", "pitch"}:
+        return ""
+    text = ",".join(f"{k}={out.get(k, 'COL')}" for k in COLUMN_KEYS if k in out or k != "roll")
+    t0 = rows[0][1].get(out["time"]) if rows and "time" in out else 0.0
+    try:
+        float(t0)
+    except (TypeError, ValueError):  # a clock time such as 20210510Z-200400_686Z
+        return text + " --time-format FMT"
+    return text
 
 
 def _clock_seconds(p, label: str, value, fmt: str) -> float:
@@ -207,10 +284,7 @@ def load_columns(
     cols, rows = _read_table(p)
     unknown = [c for c, _ in cmap.values() if c not in cols]
     if unknown:
-        raise InputError(
-            f"{p}: no column {', '.join(map(repr, unknown))} among its {len(cols)} columns"
-            f"{_hint(unknown[0], cols)}"
-        )
+        raise InputError(_unknown_message(p, unknown, rows))
     rows = rows[skip_rows:]
     if not rows:
         raise InputError(f"{p}: head path file has no data rows" + (

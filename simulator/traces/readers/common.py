@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 import difflib
 import math
 import warnings
@@ -13,6 +12,7 @@ from numpy.typing import NDArray
 from scipy.spatial.transform import Rotation
 
 from simulator.core.errors import InputError
+from simulator.core.fileio import csv_row
 from simulator.traces.path import (
     COARSE_STEP_DEG,
     CoarseSamplingWarning,
@@ -78,7 +78,7 @@ def _parse_table(
     ]
     if not rows:
         raise InputError(f"{p}: {what} file is empty")
-    split = (lambda s: next(csv.reader([s]))) if sep == "," else (lambda s: s.split())
+    split = (lambda s: csv_row(s, p)) if sep == "," else (lambda s: s.split())
     cols = [c.strip() for c in split(rows[0][1])]
     if len(rows) < 2:
         raise InputError(f"{p}: {what} file has a header but no data rows")

@@ -1,0 +1,108 @@
+"""The cao2021-code rule in the exported C# (Mono) and JS (node) runtimes equals the Python rule
+to 1e-7 (frames 0, 1, 2, past the end; the +-165..180 yaw wraps; the poles), read from the
+folder ``vimsim export --format cao-csv`` writes."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from simulator.cli import main
+from simulator.export.caocsv import window_file_name
+from simulator.media.gridfile import load_grid
+from simulator.mitigation.cao2021 import FixedPxRule, nearest_flow
+
+REPO = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again."""
+    d = tmp_path_factory.mktemp("cao")
+    src = d / "src"
+    src.mkdir()
+    rng = np.random.default_rng(7)
+    for p in range(-90, 91, 15):
+        for y in range(-180, 180, 15):
+            v = rng.uniform(0, 70, 12).astype(np.float32)
+            rows = "".join(f"{t},{float(x)!r}\n" for t, x in enumerate(v))
+            (src / window_file_name(y, p)).write_text(",0\n" + rows)
+    assert main(["grid", "import", str(src), "-o", str(d / "g.npz"), "--fps", "30"]) == 0
+    assert main(["export", str(d / "g.npz"), "--format", "cao-csv", "--preset", "cao2021-code",
+                 "-o", str(d / "out")]) == 0  # fmt: skip
+    return load_grid(d / "g.npz"), d / "out"
+
+
+def _queries(n=2000, seed=3):
+    rng = np.random.default_rng(seed)
+    k = rng.integers(-1, 16, n)
+    yaw = rng.uniform(-400, 400, n)
+    pitch = rng.uniform(-90, 90, n)
+    edge = np.array([165, 170, 179.999, 180, -180, -165, -170, -179.999, 7.5, -7.5, 352.5])
+    yaw[: edge.size], k[: edge.size] = edge, 2
+    pitch[edge.size : edge.size + 4] = [90, -90, 89.9, -89.9]
+    k[-5:] = [0, 1, 2, 13, 14]  # 12 rows: frame 13 is the last row, 14 is past the list
+    return k, yaw, pitch
+
+
+def _python(grid, k, yaw, pitch):
+    flow = nearest_flow(grid.pof_px, k, yaw, pitch, grid.yaw_deg, grid.pitch_deg)
+    return flow, FixedPxRule()(flow)
+
+
+def test_csharp_runtime_equals_python(exported, tmp_path):
+    mcs, mono = shutil.which("mcs"), shutil.which("mono")
+    if mcs is None or mono is None:
+        pytest.skip("Mono (mcs, mono) not found; `make sysdeps` installs it")
+    grid, out = exported
+    exe = tmp_path / "cao.exe"
+    r = subprocess.run([mcs, "-warnaserror+", f"-out:{exe}", str(out / "VimsimCao2021.cs"),
+                        str(REPO / "tests/export/cs/Cao2021Harness.cs")],
+                       capture_output=True, text=True, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    k, yaw, pitch = _queries()
+    q = tmp_path / "q.txt"
+    q.write_text("".join(f"{a} {b!r} {c!r}\n" for a, b, c in zip(k, yaw.tolist(), pitch.tolist())))
+    r = subprocess.run([mono, str(exe), str(out), str(q), str(tmp_path / "r.txt")],
+                       capture_output=True, text=True, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    got = np.loadtxt(tmp_path / "r.txt")
+    flow, op = _python(grid, k, yaw, pitch)
+    np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)
+    assert np.all(got[k < 2, 0] == 0) and np.all(got[k > 13, 0] == 0)
+
+
+_NODE = """
+import { readFileSync, readdirSync } from "node:fs";
+const [dir, qpath] = process.argv.slice(1);
+const mod = await import(dir + "/vimsim_cao2021.js");
+const files = {};
+for (const n of readdirSync(dir)) if (n.endsWith(".csv")) files[n] = readFileSync(dir + "/" + n, "utf8");
+const rt = new mod.Cao2021Runtime(files);
+const q = JSON.parse(readFileSync(qpath, "utf8"));
+const out = q.map(([k, y, p]) => [rt.flow(k, y, p), rt.opacity(k, y, p)]);
+process.stdout.write(JSON.stringify(out));
+"""
+
+
+def test_js_runtime_equals_python(exported, tmp_path):
+    node = shutil.which("node")
+    if node is None:
+        pytest.skip("node not found")
+    grid, out = exported
+    k, yaw, pitch = _queries(seed=4)
+    q = tmp_path / "q.json"
+    q.write_text(json.dumps([[int(a), float(b), float(c)] for a, b, c in zip(k, yaw, pitch)]))
+    r = subprocess.run([node, "--input-type=module", "-e", _NODE, str(out.resolve()), str(q)],
+                       capture_output=True, text=True, check=False)  # fmt: skip
+    assert r.returncode == 0, r.stdout + r.stderr
+    got = np.asarray(json.loads(r.stdout))
+    flow, op = _python(grid, k, yaw, pitch)
+    np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)
