@@ -59,6 +59,8 @@ def _commands(d) -> list[tuple[tuple[str, ...], list[str]]]:
         (("compare",), ["compare", str(d / "f"), str(d / "golden")]),
         (("analyze",), ["analyze", str(_analysis_data(d / "data.csv")), "-o", str(d / "an")]),
         (("export",), ["export", g, "-o", str(d / "unity")]),
+        (("grid", "import"), ["grid", "import", str(d / "cao"), "-o", str(d / "cao.npz"),
+                              "--fps", "10"]),
         (("study",), ["study", str(d / "study.toml"), "-o", str(d / "st"), "--cache-dir",
                       str(d / "cache"), "--no-progress", "--no-report"]),
         (("report",), ["report", str(d / "st")]),
@@ -75,6 +77,12 @@ def test_every_command_prints_its_result_line_on_stdout(tmp_path, capsys):
     for leaf, argv in cmds:
         if leaf == ("compare",):  # goldens: the frames, as a reviewed copy
             shutil.copytree(tmp_path / "f", tmp_path / "golden")
+        if leaf == ("grid", "import"):  # the authors' layout, from vimsim's own export
+            paper = str(tmp_path / "paper.npz")
+            assert main(["preprocess", str(tmp_path / "v.mp4"), "-o", paper, "--method", "paper",
+                         "--window-size", "32", "--no-progress"]) == 0  # fmt: skip
+            assert main(["export", paper, "-o", str(tmp_path / "cao"), "--format", "cao-csv"]) == 0
+            capsys.readouterr()
         rc = main(argv)
         cap = capsys.readouterr()
         assert rc == 0, (leaf, cap.err)

@@ -108,16 +108,13 @@ class ViewingSpec:
     participant: str = ""
     condition: str = ""
     render: bool = False
-    #: The render options of this viewing ([render] with the viewing's own keys over it),
-    #: None when it is not rendered.
+    #: Its render options ([render] with its own keys over it); None when not rendered.
     render_opts: dict | None = None
     #: Also plot this viewing's EPOF (``epof/<id>.png``).
     plot: bool = False
     #: How its trace is read and placed on the video's clock ([traces] and its own keys).
     trace_opts: TraceOptions = field(default_factory=lambda: TraceOptions(origin="manifest"))
-    #: Its render options whether rendered or not (what its mitigation is, what the
-    #: report's replay of it draws).
-    own_render: dict | None = None
+    own_render: dict | None = None  # its render options, rendered or not (mitigation, replay)
 
 
 @dataclass(frozen=True)
@@ -288,8 +285,7 @@ def _viewings(
         if "viewers" in e.t:  # scripted viewers (simulator.study.viewers): no trace file
             ropts, cond = _viewing_render_opts(e, m, where, data, render), e.get("condition", (str,), "")
             r, plot = e.get("render", (bool,), False), e.get("plot", (bool,), False)
-            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot,
-                                own_render=ropts)
+            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot, own_render=ropts)
                     for i, p, s, k in scripted_viewers(e, vid, seen, where, _ID_RE)]  # fmt: skip
             viewing_trace_options(e, traces, scripted=True)  # its trace keys refused
             continue

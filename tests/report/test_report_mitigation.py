@@ -14,7 +14,7 @@ import pytest
 from PIL import Image
 
 from simulator.cli import main
-from simulator.report.build import replay_settings
+from simulator.report.replay import replay_settings
 from simulator.traces.path import save_headpath_csv, synth
 
 EYE = (160, 120)
