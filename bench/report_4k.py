@@ -42,8 +42,8 @@ def _clip(seconds: float) -> Path:
     p = OUT / f"petra_4k_{seconds:g}s.mkv"
     if not p.is_file():
         # a slow pan (10 deg/s) of the panorama at 3840x1920, HEVC 8-bit
-        vf = (f"scale=3840:1920:flags=bicubic,loop=loop=-1:size=1,"
-              f"scroll=horizontal=0.000926,format=yuv420p")  # fmt: skip
+        vf = ("scale=3840:1920:flags=bicubic,loop=loop=-1:size=1,"
+              "scroll=horizontal=0.000926,format=yuv420p")  # fmt: skip
         subprocess.run([ffmpeg_exe(), "-y", "-v", "error", "-i", str(PETRA), "-vf", vf,
                         "-r", "30", "-t", str(seconds), "-c:v", "libx265", "-preset",
                         "ultrafast", "-x265-params", "log-level=error", str(p)],

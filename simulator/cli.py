@@ -36,6 +36,7 @@ COMMANDS: dict[str, str] = {
     "synth": "synth",
     "demo": "demo",
     "analyze": "analyze",
+    "calibrate": "calibrate",
     "export": "export",
     "study": "study",
     "report": "report",

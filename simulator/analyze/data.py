@@ -1,4 +1,4 @@
-"""Reading study data (DATA.csv): one participant a row, bad rows collected as one line each."""
+"""Reading study data (DATA.csv): one participant session a row, bad rows collected as one line each."""
 
 from __future__ import annotations
 
@@ -44,6 +44,9 @@ class Participant:
     ssq_source: str  # "items" or "subscores"
     mssq_source: str  # "answers" or "score"
     flow_source: str  # "flow" or the EPOF CSV path
+    video: str = ""  # the ``video`` cell (several videos per participant: a mixed design)
+    session: str = ""  # the ``session`` cell
+    pre: SSQScores | None = None  # SSQ before exposure (``pre_`` columns): change scores
 
 
 @dataclass(frozen=True)
@@ -59,6 +62,8 @@ class Study:
     conditions : tuple of str
         Condition labels of every row with one, in order of first appearance.
     flow_stat : str
+    columns : tuple of str
+        The header's column names (normalised), for the checks of a design.
     """
 
     path: Path
@@ -66,10 +71,15 @@ class Study:
     problems: tuple[str, ...]
     conditions: tuple[str, ...]
     flow_stat: str = "mean"
+    columns: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         if self.flow_stat not in FLOW_STATS:
             raise InputError(f"flow statistic must be one of {FLOW_STATS}; got {self.flow_stat!r}")
+
+
+#: Prefix of the pre-exposure SSQ columns (``pre_ssq_nausea`` .. or ``pre_ssq_n`` ..).
+_PRE = "pre_"
 
 
 def _norm_col(name: str) -> str:
@@ -112,8 +122,9 @@ def _missing_message(missing: Sequence[str], unknown: Sequence[str]) -> str:
 def _check_columns(path: Path, header: Sequence[str]) -> dict[str, bool]:
     """Which alternatives the header offers; InputError naming every missing column."""
     cols = set(header)
-    known = {"id", "condition", "flow", "epof_csv", "mssq", "ssq_total"}
+    known = {"id", "condition", "flow", "epof_csv", "mssq", "ssq_total", "video", "session"}
     known |= set(SSQ_ITEMS) | set(_SSQ_SUBSCORE_COLUMNS) | set(_MSSQ_CHILD) | set(_MSSQ_ADULT)
+    known |= {_PRE + c for c in (*SSQ_ITEMS, *_SSQ_SUBSCORE_COLUMNS, "ssq_total")}
     unknown = [c for c in header if c not in known]
     problems = []
     for c in ("id", "condition"):
@@ -144,12 +155,22 @@ def _check_columns(path: Path, header: Sequence[str]) -> dict[str, bool]:
         )
     if "flow" not in cols and "epof_csv" not in cols:
         problems.append("no flow column: expected 'flow' (a number) or 'epof_csv' (a path)")
+    pre_items = [c for c in SSQ_ITEMS if _PRE + c in cols]
+    pre_sub = all(_PRE + c in cols for c in _SSQ_SUBSCORE_COLUMNS)
+    if pre_items and len(pre_items) < len(SSQ_ITEMS):
+        miss = [_PRE + c for c in SSQ_ITEMS if _PRE + c not in cols]
+        problems.append(f"pre-exposure SSQ item columns missing: {_missing_message(miss, unknown)}")
+    elif not pre_items and not pre_sub and any(c.startswith(_PRE + "ssq") for c in cols):
+        miss = [_PRE + c for c in _SSQ_SUBSCORE_COLUMNS if _PRE + c not in cols]
+        problems.append(f"pre-exposure SSQ subscore columns missing: {', '.join(miss)}")
     if problems:
         raise InputError(f"{path}: {'; '.join(problems)}; found {list(header)}")
     return {
         "items": all(c in cols for c in SSQ_ITEMS),
         "subscores": have_sub,
         "answers": all(c in cols for c in mssq_cols),
+        "pre_items": len(pre_items) == len(SSQ_ITEMS),
+        "pre_subscores": pre_sub,
     }
 
 
@@ -238,6 +259,19 @@ def _row_ssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[SSQScore
     return ssq, ssq_src
 
 
+def _row_pre(cell: Callable[[str], str], has: dict[str, bool], errs: list[str]) -> SSQScores | None:
+    """A row's pre-exposure SSQ (``pre_`` columns; None where the file has none); a problem
+    is appended to ``errs``."""
+    if not (has["pre_items"] or has["pre_subscores"]):
+        return None
+    try:
+        pre_has = {"items": has["pre_items"], "subscores": has["pre_subscores"]}
+        return _row_ssq(lambda c: cell(_PRE + c), pre_has)[0]
+    except InputError as e:
+        errs.append(f"pre-exposure {e}")
+        return None
+
+
 def _row_mssq(cell: Callable[[str], str], has: dict[str, bool]) -> tuple[MSSQScore, str]:
     """A row's MSSQ-short score and its source (``answers`` or ``score``); InputError names
     the problem."""
@@ -296,9 +330,11 @@ def _row_flow(
 
 
 def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
-    """Read and score DATA.csv (one row per participant; see docs/analyze.md).
+    """Read and score DATA.csv (one row per participant, or per participant and session in a
+    repeated design: the same id in several rows; see docs/analyze.md).
 
-    Lines starting with ``#`` are comments. Column names are case-insensitive. Per row,
+    Lines starting with ``#`` are comments. Optional ``video`` and ``session`` cells and the
+    pre-exposure SSQ (``pre_`` columns) are carried on each :class:`Participant`. Column names are case-insensitive. Per row,
     SSQ item ratings take precedence over subscores, MSSQ answers over ``mssq``, and
     ``flow`` over ``epof_csv`` (a path relative to DATA.csv's folder); a blank cell falls
     back to the alternative where the file has it.
@@ -319,7 +355,7 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
     participants: list[Participant] = []
     problems: list[str] = []
     conditions: dict[str, None] = {}
-    seen: dict[str, int] = {}
+    seen: dict[tuple[str, str, str, str], int] = {}
     flow_cache: dict[Path, float] = {}
 
     for r, (line, cells) in enumerate(rows, start=1):
@@ -335,12 +371,13 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
         errs: list[str] = []
         if len(cells) > len(header):
             errs.append(f"{len(cells)} cells but the header has {len(header)} columns")
+        key = (pid, cond, cell("video"), cell("session"))
         if not pid:
             errs.append("id is blank")
-        elif pid in seen:
-            errs.append(f"id repeats row {seen[pid]}")
+        elif key in seen:
+            errs.append(f"id repeats row {seen[key]} (same condition, video and session)")
         else:
-            seen[pid] = r
+            seen[key] = r
         if not cond:
             errs.append("condition is blank")
 
@@ -354,6 +391,7 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
             ms, ms_src = _row_mssq(cell, has)
         except InputError as e:
             errs.append(str(e))
+        pre = _row_pre(cell, has, errs)
         flow = flow_src = None
         try:
             flow, flow_src = _row_flow(cell, "epof_csv" in idx, p.parent, flow_stat, flow_cache)
@@ -377,8 +415,13 @@ def read_study(path: str | Path, *, flow_stat: str = "mean") -> Study:
                 ssq_source=str(ssq_src),
                 mssq_source=str(ms_src),
                 flow_source=str(flow_src),
+                video=cell("video"),
+                session=cell("session"),
+                pre=pre,
             )
         )
     if not rows:
         raise InputError(f"{p}: no data rows after the header; expected one row per participant")
-    return Study(p, tuple(participants), tuple(problems), tuple(conditions), flow_stat)
+    return Study(
+        p, tuple(participants), tuple(problems), tuple(conditions), flow_stat, tuple(header)
+    )

@@ -1,4 +1,4 @@
-"""The study analysis (exclusion, K_OF, Shapiro-Wilk, Mann-Whitney) and its report files."""
+"""The study analysis (exclusion, K_OF, Shapiro-Wilk, Mann-Whitney, the design's statistics) and its report files."""
 
 from __future__ import annotations
 
@@ -12,9 +12,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from simulator.analyze.data import Participant, Study
+from simulator.analyze.design import design_table
 from simulator.analyze.scores import K_OF_TEXT, k_of
+from simulator.analyze.stats import Statistics, StatsOptions, study_statistics
+from simulator.analyze.summary import STATS_FILES, p_text, write_statistics
+from simulator.analyze.summary import write_csv as _write_csv
 from simulator.core.errors import InputError
-from simulator.core.fileio import OutputFolder, atomic_output, write_csv
+from simulator.core.fileio import OutputFolder, atomic_output
 
 __all__ = ["Analysis", "analyze_study", "p_text", "write_report"]
 
@@ -51,6 +55,9 @@ class Analysis:
         Mann-Whitney rows: measure, the two conditions, n, means, medians, U, p, note.
     notes : tuple of str
         One line each: tests not possible, undefined scores.
+    statistics : Statistics or None
+        The design's tests, model and power (:mod:`simulator.analyze.stats`); None when
+        :func:`analyze_study` was given no ``stats`` options.
     """
 
     study: Study
@@ -63,6 +70,8 @@ class Analysis:
     notes: tuple[str, ...]
     exclude_below: float | None = None
     k_of_formula: str = "invariant"
+    statistics: Statistics | None = None
+    excluded_rows: dict[int, str] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
         if len(self.conditions) != 2 or self.conditions[0] == self.conditions[1]:
@@ -199,6 +208,7 @@ def analyze_study(
     conditions: Sequence[str] | None = None,
     k_of_formula: str = "invariant",
     notes: Sequence[str] = (),
+    stats: StatsOptions | None = None,
 ) -> Analysis:
     """Exclude low-flow sessions, compute K_OF (N, O, D, K) and run the paper's tests.
 
@@ -215,17 +225,26 @@ def analyze_study(
     k_of_formula : ``"invariant"`` (default: independent of group size) or ``"paper"``
         (:func:`simulator.analyze.scores.k_of`).
     notes : lines the caller adds to the report's notes (e.g. a study's confounds).
+    stats : StatsOptions, optional
+        Also run the design's statistics (tests with effect sizes, mixed model, power).
 
     Raises
     ------
     InputError
-        Not exactly two conditions, or no usable participant (nothing can be computed).
+        Not exactly two conditions, or no usable participant (nothing can be computed); with
+        ``stats``, data that do not fit the design (:func:`~simulator.analyze.design.design_table`).
     """
     conds = _pick_conditions(study, conditions)
     if not study.participants:
         raise InputError(f"{study.path}: no usable participant row (every row has a problem)")
 
     included, excluded = _split_participants(study, conds, exclude_below)
+    inc_rows = {q.row for q in included}
+    ex_rows = {q.row: why for q, (_pid, why) in
+               zip([q for q in study.participants if q.row not in inc_rows], excluded)}  # fmt: skip
+    statistics = None
+    if stats is not None:
+        statistics = study_statistics(design_table(study, included, conds, stats.design), stats)
 
     notes = list(notes)
     groups = [q.condition for q in included]
@@ -259,6 +278,12 @@ def analyze_study(
             f"after exclusion; Mann-Whitney U and per-condition Shapiro-Wilk need >= "
             f"{_MIN_PER_GROUP} per group (scores are still written)"
         )
+    if statistics is not None:
+        notes += list(statistics.notes)
+        if statistics.design.name != "between":
+            notes.append(f"{statistics.design.name} design: the paper's Mann-Whitney U "
+                         "(table.csv) treats every row as another participant; tests.csv has "
+                         "the design's test")  # fmt: skip
     return Analysis(
         study=study,
         conditions=conds,
@@ -270,6 +295,8 @@ def analyze_study(
         notes=tuple(notes),
         exclude_below=exclude_below,
         k_of_formula=k_of_formula,
+        statistics=statistics,
+        excluded_rows=ex_rows,
     )
 
 
@@ -286,26 +313,6 @@ def _group_size_notes(groups: list[str], conds: tuple[str, str], formula: str) -
         "which would scale with 1 / group size)"
     )
     return [f"WARNING: unequal groups, {n_a} {conds[0]} vs. {n_b} {conds[1]}: {what}"]
-
-
-def _fmt(v: object, digits: int = 10) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, float):
-        return "" if math.isnan(v) else f"{v:.{digits}g}"
-    return str(v)
-
-
-def _write_csv(path: Path, header: Sequence[str], rows: Sequence[Sequence[object]]) -> None:
-    # text cells (ids, labels, reasons) cannot start a spreadsheet formula
-    write_csv(path, header, rows, fmt=_fmt)
-
-
-def p_text(p: float) -> str:
-    """A p value as a report prints it: 3 decimals, ``< 0.001`` below that, ``n/a``."""
-    if math.isnan(p):
-        return "n/a"
-    return "< 0.001" if p < 0.001 else f"{p:.3f}"
 
 
 def _table_markdown(an: Analysis) -> str:
@@ -389,6 +396,12 @@ def _report_lines(an: Analysis, table_md: str) -> list[str]:
         lines.append(
             f"| {r['measure']} | {r['group']} | {r['n']} | {w} | {p_text(r['p'])} | {r['note']} |"
         )
+    if an.statistics is not None:
+        d = an.statistics.design
+        lines += ["", "## The design's statistics", "",
+                  (f"Design {d.name} ({d.why}): the tests with effect sizes (`tests.csv`), the "
+                   "mixed model (`model.csv`) and, with `--power`, `power.csv`; explained in "
+                   "plain words in `analysis.md`.")]  # fmt: skip
     lines += ["", "## Excluded", ""]
     lines += [f"- {pid}: {why}" for pid, why in an.excluded] or ["- none"]
     lines += ["", "## Rows with problems (not used)", ""]
@@ -399,7 +412,8 @@ def _report_lines(an: Analysis, table_md: str) -> list[str]:
 
 
 #: What :func:`write_report` writes, in this order; ``report.md`` (the completion marker) last.
-REPORT_FILES = ("scores.csv", "table.csv", "normality.csv", "table.md", "boxplots.png", "report.md")
+REPORT_FILES = ("scores.csv", "table.csv", "normality.csv", "table.md", "boxplots.png",
+                *STATS_FILES, "report.md")  # fmt: skip
 
 
 def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
@@ -417,9 +431,9 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     out = folder.prepare(inputs=[an.study.path])
     written: list[Path] = []
 
-    reasons = dict(an.excluded)
-    of_by_id = {
-        q.id: {col: float(an.of_scores[col][i]) for col, _l, _a in _OF_MEASURES}
+    reasons = an.excluded_rows
+    of_by_row = {
+        q.row: {col: float(an.of_scores[col][i]) for col, _l, _a in _OF_MEASURES}
         for i, q in enumerate(an.included)
     }
     header = [
@@ -430,11 +444,11 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     ]  # fmt: skip
     rows = []
     for q in an.study.participants:
-        of = of_by_id.get(q.id, {})
+        of = of_by_row.get(q.row, {})
         rows.append(
             [
-                q.id, q.condition, q.row, "yes" if q.id in of_by_id else "no",
-                reasons.get(q.id, ""), q.flow, q.flow_source,
+                q.id, q.condition, q.row, "yes" if q.row in of_by_row else "no",
+                reasons.get(q.row, ""), q.flow, q.flow_source,
                 q.ssq.nausea, q.ssq.oculomotor, q.ssq.disorientation, q.ssq.total, q.ssq_source,
                 q.mssq.total, q.mssq.child, q.mssq.adult, q.mssq_source,
                 *(of.get(col, math.nan) for col, _l, _a in _OF_MEASURES),
@@ -460,8 +474,11 @@ def write_report(an: Analysis, out_dir: str | Path) -> list[Path]:
     _boxplot(an, out / "boxplots.png")
     written.append(out / "boxplots.png")
 
+    if an.statistics is not None:
+        written += write_statistics(an.statistics, out)
     lines = _report_lines(an, table_md)
-    folder.complete()  # the manifest, then the completion marker
+    # the manifest, then the completion marker
+    folder.complete([p.name for p in written] + ["report.md"])
     with atomic_output(out / "report.md") as tmp:
         tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")
     written.append(out / "report.md")

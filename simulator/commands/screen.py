@@ -32,6 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--viewers", type=int, default=30, metavar="N",
                    help="scripted viewers per video (default 30)")  # fmt: skip
+    p.add_argument("--force", action="store_true",
+                   help="run a screening whose --viewers make it estimated to take over half "
+                   "an hour of CPU (refused otherwise)")  # fmt: skip
     p.add_argument("--viewer-kind", default="look-around", metavar="KIND",
                    help="scripted head path of each viewer: look-around (default), sine, "
                    "sweep or static (vimsim headpath synth)")  # fmt: skip
@@ -51,6 +54,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="parallel tasks (default: CPU count)")  # fmt: skip
     p.add_argument("--cache-dir", default=None, metavar="DIR", help="grid cache (as vimsim study)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--model", default=None, metavar="MODEL.json",
+                   help="a discomfort model (vimsim calibrate): adds predicted_discomfort, "
+                   "predicted_low, predicted_high (held-out 95%% band) and predicted_extrapolated "
+                   "to comparison.csv and the page, beside the model's held-out SROCC and RMSE")  # fmt: skip
     add_opacity_arguments(p)
     p.set_defaults(func=run)
 
@@ -66,6 +73,11 @@ def run(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise InputError(f"--workers must be an integer >= 1; got {args.workers}")
     parse_executor(args.executor)
+    model = None
+    if args.model is not None:  # checked (schema, features version) before any work
+        from simulator.discomfort.model import load_model
+
+        model = load_model(args.model)
     rule = rule_from_args(args)  # bad --low-dps/--high-dps: one line before any work
     epof = {"low_pct": rule.low_pct, "high_pct": rule.high_pct, "opacity_source": rule.source,
             "smooth_s": rule.smoothing_s, "ease_in_s": rule.ease_in_s, "ease_out_s": rule.ease_out_s,
@@ -76,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                           seed=args.seed, epof=epof, artefacts=not args.no_artefacts,
                           grids=args.grid, layout=args.layout, projection=args.projection,
                           lens_fov_deg=args.lens_fov, executor=args.executor, workers=args.workers,
-                          cache_dir=args.cache_dir,
+                          cache_dir=args.cache_dir, model=model, force=args.force,
                           progress=None if bar is None else (lambda d, f, t: bar(d, t, f)))  # fmt: skip
     for f in s["failures"]:
         print(f"vimsim screen: failed {f['viewing']}: {f['status']}", file=sys.stderr)
@@ -89,8 +101,15 @@ def run(args: argparse.Namespace) -> int:
         print(f"vimsim screen: note: {g} is of none of the videos (content or layout): not used",
               file=sys.stderr)  # fmt: skip
     for r in s["screen"]["rows"]:
+        pred = ("" if model is None else f", predicted discomfort {r['predicted_discomfort']:.3g} "
+                f"[{r['predicted_low']:.3g}, {r['predicted_high']:.3g}]"
+                + (" (extrapolated)" if r["predicted_extrapolated"] else ""))  # fmt: skip
         print(f"{r['video']}: mean {r['epof_mean_dps']:.2f} deg/s, p90 {r['epof_p90_dps']:.2f} "
-              f"({r['band_p90']}), artefact frames {r['artefact_frames']}")  # fmt: skip
+              f"({r['band_p90']}), artefact frames {r['artefact_frames']}{pred}")  # fmt: skip
+    if model is not None:
+        from simulator.discomfort.predict import model_note
+
+        print(f"vimsim screen: {model_note(model)}")
     print(f"vimsim screen: {len(s['screen']['rows'])} video(s), {s['timings_s']['total']:.1f} s "
           f"-> {args.output}/screen/comparison.csv, index.html")  # fmt: skip
     return 3 if s["counts"]["failed"] else 0

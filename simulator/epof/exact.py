@@ -228,7 +228,6 @@ class ViewportQuery:
             np.all(np.isfinite(yaw)) and np.all(np.isfinite(pitch)) and np.all(np.isfinite(roll))
         ):
             raise InputError("head orientation has non-finite values")
-        n_lon = self._n_lon
         out = np.empty(len(yaw))
         if f.ndim == 2:
             d = self.doubled(f)

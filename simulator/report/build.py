@@ -40,10 +40,10 @@ from simulator.report.replay import replay_settings, viewing_render
 from simulator.study.tasks import _rule as study_rule
 
 __all__ = [
+    "BROWSER_WIDTH",
     "MANIFEST",
     "MAX_WEB_SIDE",
     "ReportResult",
-    "BROWSER_WIDTH",
     "browser_copy",
     "build_report",
     "check_browser_width",

@@ -129,6 +129,8 @@ class Site:
         filters += ' <span id="shown"></span>'
         text = ("<p>Click a column header to sort; the filters keep matching rows. "
                 f"{len(self.rows)} viewings.</p>")  # fmt: skip
+        if (self.s.get("model") or {}).get("note"):  # [model]: the predictions' accuracy
+            text += f'<p class="model">{_e(self.s["model"]["note"])}</p>'
         return _page("Viewings", text + f'<p class="filters">{filters}</p>'
                      + _table(cols, body, "viewings sortable"))  # fmt: skip
 
@@ -204,7 +206,10 @@ mitigation <b id="mitigation">-</b></p>
         if an.get("error"):
             return _page("Analysis", f"<p>The analysis was not made: {_e(an['error'])}</p>")
         parts = []
-        for name, title in (("table.csv", "Means per condition and Mann-Whitney tests"),
+        for name, title in (("tests.csv", "Tests of the design (effect sizes, 95 % intervals, Holm)"),
+                            ("model.csv", "Mixed model: ssq_total ~ condition + flow + mssq"),
+                            ("power.csv", "Power (participants needed)"),
+                            ("table.csv", "The paper's table: K_OF means per condition, Mann-Whitney"),
                             ("normality.csv", "Normality (Shapiro-Wilk)"), ("scores.csv", "Scores")):  # fmt: skip
             p = folder / name
             if p.is_file():
@@ -220,6 +225,9 @@ mitigation <b id="mitigation">-</b></p>
                 "<h2>Boxplots</h2>",
                 '<img class="plot" src="media/analysis/boxplots.png" alt="boxplots">',
             ]
+        if (folder / "analysis.md").is_file():
+            parts += ["<h2>In plain words: which test, why, what the effect means</h2>",
+                      f"<pre>{_e((folder / 'analysis.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip
         if (folder / "report.md").is_file():
             parts += ["<h2>Report (formula used, exclusions)</h2>",
                       f"<pre>{_e((folder / 'report.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip

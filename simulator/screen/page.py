@@ -105,6 +105,7 @@ def write_screen_page(folder: Path, report: dict, columns) -> Path:
             '<a href="comparison.csv">comparison.csv</a>, <a href="screen.json">screen.json</a>.</p>'
         ),
         _table(columns, rows),
+        *([f'<p class="model">{_e(report["model"]["note"])}</p>'] if report.get("model") else []),
         "<h2>Flow bands (deg/s) and their sources</h2>",
         _table(["band", "from", "to", "source"], bands),
         *(_video_section(vid, r) for vid, r in report["videos"].items()),

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from simulator.core.fileio import OutputFolder, atomic_output, write_csv
+from simulator.discomfort.predict import MODEL_COLUMNS, model_note, model_summary, predict_columns
 from simulator.epof.viewing import read_epof_csv
 from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
@@ -357,9 +358,13 @@ def _summary_png(path, vid, t, e, bad, m, yaw, g, moments, row, events, folder) 
     plt.close(fig)
 
 
-def write_screen_outputs(manifest, out: Path, summary: dict, *, artefacts: bool) -> dict:
+def write_screen_outputs(
+    manifest, out: Path, summary: dict, *, artefacts: bool, model=None
+) -> dict:
     """Every screening file under ``out/screen/``; returns what was written per video
-    (or its one-line error) and the comparison rows."""
+    (or its one-line error) and the comparison rows. ``model``: a
+    :class:`simulator.discomfort.model.Model` whose predictions join each row
+    (:data:`simulator.discomfort.predict.MODEL_COLUMNS`)."""
     top, *per_video = screen_folders(out, [v.id for v in manifest.videos])
     folder = top.prepare()  # completed by the caller once screen.json is written
     report: dict = {"videos": {}, "rows": []}
@@ -372,11 +377,17 @@ def write_screen_outputs(manifest, out: Path, summary: dict, *, artefacts: bool)
             continue
         grid = Path(summary["videos"][v.id]["grid"])
         r = _video_report(v, grid, epofs, per_video[manifest.videos.index(v)], artefacts)
+        if model is not None:
+            r["row"].update(predict_columns(model, grid))
         report["videos"][v.id] = r
         report["rows"].append(r["row"])
     comments = [f"band {b.name}: {b.lo_dps:g} to {b.hi_dps:g} deg/s -- {b.source}" for b in BANDS]
     comments.append("EPOF statistics over all viewers and frames, artefact frames left out")
-    _write_csv(folder / "comparison.csv", SCREEN_COLUMNS,
-               [[r[c] for c in SCREEN_COLUMNS] for r in report["rows"]], comments)  # fmt: skip
-    write_screen_page(folder, report, SCREEN_COLUMNS)  # index.html, last
+    cols = SCREEN_COLUMNS + (MODEL_COLUMNS if model is not None else ())
+    if model is not None:
+        comments.append(model_note(model))
+        report["model"] = {**model_summary(model), "note": model_note(model)}
+    _write_csv(folder / "comparison.csv", cols,
+               [[r[c] for c in cols] for r in report["rows"]], comments)  # fmt: skip
+    write_screen_page(folder, report, cols)  # index.html, last
     return report

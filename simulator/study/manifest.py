@@ -20,9 +20,10 @@ from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.core.traceopts import TraceOptions
+from simulator.discomfort.predict import study_model
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.study.entry import Entry, user_numbers
+from simulator.study.entry import Entry, short_spec, stem_fields, user_numbers, user_spans
 from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import n_users
@@ -33,7 +34,7 @@ __all__ = ["SCRIPTED", "VIEWER_KINDS", "Manifest", "VideoSpec", "ViewingSpec", "
 _LAYOUTS = ("mono", "top-bottom", "side-by-side")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
-_TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", "grf", "traces")
+_TOP_KEYS = ("study", "videos", "viewings", "questionnaires", "epof", "render", "grf", "traces", "model")  # fmt: skip
 _STUDY_KEYS = ("name", "cache")
 _VIDEO_KEYS = (
     "id", "path", "layout", "eye", "method", "grid", "fov", "hfov", "vfov", "headset",
@@ -130,6 +131,7 @@ class Manifest:
     grf: dict = field(default_factory=dict)
     questionnaires: dict | None = None
     cache: Path | None = None
+    model: Path | None = None  # [model] path: simulator.discomfort.predict.study_model
 
     def video(self, vid: str) -> VideoSpec:
         return next(v for v in self.videos if v.id == vid)
@@ -140,12 +142,7 @@ class Manifest:
         files += [w.trace for w in self.viewings if w.trace is not None]
         if self.questionnaires:
             files.append(self.questionnaires["path"])
-        return files
-
-
-def _stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
-    width = len(str(n_users)) if n_users > 1 else 1
-    return {"stem": trace.stem, "user": "" if user is None else f"{user:0{width}d}"}
+        return files + ([self.model] if self.model is not None else [])
 
 
 def _videos(m: Path, base: Path, tables) -> tuple[VideoSpec, ...]:
@@ -205,11 +202,7 @@ def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | N
         return [None], n
     if user == "all":
         return (list(range(1, n + 1)) if n > 1 or tfmt == "360vidstr" else [None]), n
-    users = user_numbers(e, "user", user)
-    bad = [u for u in users if u > n]
-    if bad:
-        e.fail(f"{trace}: no user {bad[0]} (user = {user!r}); the file holds {n}")
-    return list(users), n
+    return list(user_numbers(e, "user", user, n_users=n, where=f"{trace}: ")), n
 
 
 def _render_users(e: Entry, render, users: list[int | None]) -> set:
@@ -219,10 +212,13 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
         return set(users) if render else set()
     if users == [None]:
         e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
-    chosen = user_numbers(e, "render", render)
-    missing = [u for u in chosen if u not in users]
+    top = max(users)  # checked against the entry's users before the spec is expanded
+    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
+    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
+    taken = set(users)
+    missing = beyond or [u for u in chosen if u not in taken]
     if missing:
-        e.fail(f"render = {render!r}: user {missing[0]} is not among this entry's users")
+        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
     return set(chosen)
 
 
@@ -248,7 +244,7 @@ def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict
 
 def _viewing_ids(e: Entry, trace: Path, u, n: int, vid: str, condition: str) -> tuple[str, str]:
     """(viewing id, participant) of one user of a trace, from the entry's templates."""
-    f = _stem_fields(trace, u, n)
+    f = stem_fields(trace, u, n)
     default_p = f["stem"] + (f"_user{f['user']}" if u is not None else "")
     participant_t, id_t = e.get("participant", (str,)), e.get("id", (str,))
     try:
@@ -517,4 +513,5 @@ def load_manifest(path) -> Manifest:
         grf=_grf(m, data.get("grf")),
         questionnaires=_questionnaires(m, base, data.get("questionnaires")),
         cache=st.path("cache", base, required=False),
+        model=study_model(m, base, data.get("model"), [(v.id, v.method) for v in videos]),
     )

@@ -29,15 +29,20 @@ import scipy
 from simulator import __version__
 from simulator.analyze.data import read_study
 from simulator.analyze.report import analyze_study, write_report
+from simulator.analyze.stats import StatsOptions
 from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, write_csv
+from simulator.discomfort.model import load_model
+from simulator.discomfort.predict import predict_columns
 from simulator.epof.viewing import EPOF_COLUMNS, read_epof_csv
 from simulator.media.source import Source
 from simulator.mitigation.bands import draw_bands
 from simulator.sphere.geometry import extract_view
 from simulator.study.tasks import PART_MEAN_COLUMNS
+from simulator.traces.path import HeadPath
 
 __all__ = [
+    "add_predictions",
     "artefact_frames",
     "confound_notes",
     "provocative_moments",
@@ -86,6 +91,31 @@ def write_viewings_csv(path, rows: list[dict], columns) -> None:
             r = {**r, **_part_means(Path(path).parent / "epof" / f"{r['viewing']}.csv")}
         table.append([r.get(c, "") for c in columns])
     write_csv(path, columns, table, fmt=_cell)  # text cells guarded (csv_cell)
+
+
+def add_predictions(model_path: Path, out: Path, grids: dict, table: list[dict]) -> dict:
+    """``[model]``: each finished viewing's row of ``table`` gets the model's
+    :data:`~simulator.discomfort.predict.MODEL_COLUMNS` (a per-viewing model: from the head
+    pose of each frame in ``epof/<viewing>.csv``; else the video's prediction). Returns
+    ``{viewing: reason}`` of those whose prediction could not be made (left empty)."""
+    model = load_model(model_path)
+    per_video: dict[str, dict] = {}
+    failed: dict[str, str] = {}
+    for r in table:
+        if r.get("status") != "ok":
+            continue
+        try:
+            if model.data["ratings"].get("per_viewing"):
+                e = read_epof_csv(out / "epof" / f"{r['viewing']}.csv")
+                hp = HeadPath.from_angles_deg(e.time_s, e.yaw_deg, e.pitch_deg, e.roll_deg)
+                r.update(predict_columns(model, grids[r["video"]], hp))
+            else:
+                if r["video"] not in per_video:
+                    per_video[r["video"]] = predict_columns(model, grids[r["video"]])
+                r.update(per_video[r["video"]])
+        except (InputError, OSError) as err:
+            failed[r["viewing"]] = f"no predicted discomfort: {err}"
+    return failed
 
 
 def _load_epof(path: Path) -> np.ndarray:
@@ -315,16 +345,23 @@ def _analysis(manifest, out: Path, table: list[dict]) -> dict:
             flow = _cell(
                 float({"mean": np.mean, "median": np.median, "sum": np.sum}[q["flow_stat"]](e))
             )
-        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv])
+        video = [] if "video" in header else [vs[0]["video"] if len({x["video"] for x in vs}) == 1 else ""]
+        rows.append([pid, cond, *(rec.get(c, "") for c in extra), flow, epof_csv, *video])
     data = folder / "DATA.csv"
-    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv"], rows, fmt=_cell)
+    # the video column lets the analysis give per-video tables and warn on pooled flows
+    vcol = [] if "video" in header else ["video"]
+    write_csv(data, ["id", "condition", *extra, "flow", "epof_csv", *vcol], rows, fmt=_cell)
     info = {"dir": str(folder), "data": str(data),
             "no_questionnaire": sorted(p for p in ok if p not in seen)}  # fmt: skip
     try:
         study = read_study(data, flow_stat=q["flow_stat"])
-        an = analyze_study(study, exclude_below=q["exclude_below"], conditions=q["conditions"],
-                           k_of_formula=q.get("k_of", "invariant"),
-                           notes=confound_notes(table))  # fmt: skip
+        kw = {"exclude_below": q["exclude_below"], "conditions": q["conditions"],
+              "k_of_formula": q.get("k_of", "invariant")}  # fmt: skip
+        try:  # the design's statistics (tests.csv, model.csv, analysis.md) where the data allow
+            an = analyze_study(study, notes=confound_notes(table), stats=StatsOptions(), **kw)
+        except InputError as e:  # too few for them: the paper's analysis alone, and why
+            an = analyze_study(study, notes=[*confound_notes(table), f"no design statistics: {e}"],
+                               **kw)  # fmt: skip
         info["files"] = [p.name for p in write_report(an, folder)]
         info["problems"] = list(study.problems)
         info["excluded"] = [f"{pid}: {why}" for pid, why in an.excluded]

@@ -255,9 +255,9 @@ def cache_problem(path: Path, v: VideoSpec, *, remember: bool = False) -> str | 
         return f"not a valid grid file ({' '.join(str(e).split())[:120]})"
     problem = _cache_mismatch(g, v)
     if problem is None and remember and not known:
-        with contextlib.suppress(OSError):  # a read-only cache: checked again next time
-            with atomic_output(mark) as tmp:
-                Path(tmp).write_text(stamp, encoding="ascii")
+        # a read-only cache: checked again next time
+        with contextlib.suppress(OSError), atomic_output(mark) as tmp:
+            Path(tmp).write_text(stamp, encoding="ascii")
     return problem
 
 

@@ -24,6 +24,8 @@ from pathlib import Path
 
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder
+from simulator.discomfort.model import load_model
+from simulator.discomfort.predict import MODEL_COLUMNS, model_note, model_summary
 from simulator.study import outputs, tasks
 from simulator.study.executors import make_executor
 from simulator.study.manifest import Manifest, VideoSpec, ViewingSpec
@@ -151,6 +153,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
 
     t0 = time.perf_counter()
     sched = _Scheduler(manifest, out, ex, plan, rows, progress)
+    sched.spool_dir = str(cache / "fields")  # long videos' fields, decompressed once
     sched.run()
     timings["tasks"] = time.perf_counter() - t0
     ex_info = ex.info()
@@ -158,7 +161,15 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
 
     t0 = time.perf_counter()
     table = [rows[w.id] for w in manifest.viewings]
-    outputs.write_viewings_csv(out / "viewings.csv", table, VIEWING_COLUMNS)
+    cols = VIEWING_COLUMNS
+    if manifest.model is not None:  # [model]: each viewing's predicted discomfort
+        cols = (*cols, *MODEL_COLUMNS)
+        failed = outputs.add_predictions(manifest.model, out, plan.grids, table)
+        for r in table:
+            if r["viewing"] in failed:
+                notes = (r.get("warnings"), failed[r["viewing"]])
+                r["warnings"] = WARNING_SEP.join(x for x in notes if x)
+    outputs.write_viewings_csv(out / "viewings.csv", table, cols)
     report = (
         outputs.write_study_outputs(manifest, out, plan.grids, table)
         if video_outputs
@@ -172,6 +183,9 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
     timings["cpu_driver"] = time.process_time() - c_start
     timings["cpu_tasks"] = sched.cpu_tasks
     summary = _summary(manifest, out, cache, ex_info, sched.video_info, table, report)
+    if manifest.model is not None:
+        m = load_model(manifest.model)
+        summary["model"] = {**model_summary(m), "note": model_note(m)}
     summary["timings_s"] = timings
     folder.complete()
     tasks.write_json(out / "study.json", summary)  # last: the study is complete
@@ -261,7 +275,8 @@ class _Scheduler:
         mine = [w for w in self.plan.todo if w.video == v.id]
         for chunk in _chunks([_item(w) for w in mine], self.ex.workers):
             self.submit(("epof", v.id, chunk),
-                        (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof")), 1)  # fmt: skip
+                        (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof"),
+                         self.spool_dir), 1)  # fmt: skip
         for w in mine:
             if w.render:
                 self.submit(("render", v.id, w.id),

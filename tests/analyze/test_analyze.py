@@ -284,7 +284,8 @@ def test_cli_missing_columns_named(tmp_path: Path, capsys: pytest.CaptureFixture
 
 
 def test_cli_out_of_range_rows_reported(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    rows = [_items_row(f"p{i}", "GR" if i < 4 else "NR", [1] * 16) for i in range(8)]
+    # p8 keeps NR at two participants: one would be refused (a condition with one participant)
+    rows = [_items_row(f"p{i}", "GR" if i < 4 else "NR", [1] * 16) for i in range(9)]
     rows[1][2 + 1] = 4  # p1: ssq_fatigue = 4
     rows[5][2 + 16] = "x"  # p5: mssq_child_cars = x
     rows[6][2 + 16 + 9 : 2 + 16 + 18] = ["t"] * 9  # p6: adult section all 't'
@@ -303,8 +304,8 @@ def test_cli_out_of_range_rows_reported(tmp_path: Path, capsys: pytest.CaptureFi
     assert "id 'p7'" in warn[3] and "ssq_eyestrain" in warn[3]
     with open(out / "scores.csv") as fh:
         ids = [r["id"] for r in csv.DictReader(fh)]
-    assert ids == ["p0", "p2", "p3", "p4"]
-    # 3 GR but 1 NR left: the test is not possible, scores still written
+    assert ids == ["p0", "p2", "p3", "p4", "p8"]
+    # 3 GR but 2 NR left: the paper's test is not possible, scores still written
     assert any("not possible" in ln for ln in err)
 
 
