@@ -155,12 +155,13 @@ def export_web(
     mitigation: Mitigation | None = None,
     example: bool = True,
     video: str | os.PathLike | None = None,
+    preset: dict | None = None,
 ) -> WebExport:
     """Write the web runtime for a grid into ``out_dir`` (see the module docstring).
 
     ``method``, ``dtype``, ``hfov_deg``, ``vfov_deg``, ``rule``, ``grf`` (the grains: default
     ``GrfConfig()``, the paper's), ``mitigation`` (what the overlay draws and the vignette's
-    settings: default ``grf``): as :func:`simulator.export.unity.export_unity`, whose
+    settings: default ``grf``), ``preset``: as :func:`simulator.export.unity.export_unity`, whose
     ``vimsim_epof.bin`` this writes; ``example``: write ``example.html``; ``video``: the
     grid's source video (checked against the grid: mono equirect), copied in as
     ``video.<ext>`` for ``example.html`` to play (the manifest's ``video``). Files of these
@@ -175,7 +176,7 @@ def export_web(
         inputs.append(video)
     OutputFolder(out_dir, names, "export --format web").check(inputs)
     kw = {"method": method, "dtype": dtype, "hfov_deg": hfov_deg, "vfov_deg": vfov_deg,
-          "rule": rule, "grf": grf, "mitigation": mitigation}  # fmt: skip
+          "rule": rule, "grf": grf, "mitigation": mitigation, "preset": preset}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as work:
         data_tmp = Path(work) / DATA_FILE  # bad options fail here, before anything is written
         try:

@@ -16,7 +16,8 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
+from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS, SYSTEM_PRESETS
+from simulator.core.choices import X264_PRESETS as _PRESETS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.core.traceopts import TraceOptions
@@ -42,7 +43,7 @@ _VIDEO_KEYS = (
 )  # fmt: skip
 _GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
-                "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
+                "x264_preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
                 "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
 #: Render options a viewing may set for itself (over [render] and [grf]); cpus is the
 #: study's; a viewing's hold_last is a trace key (it reaches the EPOF and the render).
@@ -53,9 +54,8 @@ _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule", "low_dps", "high_dps",
-    "artefacts",
+    "artefacts", "preset",
 )  # fmt: skip
-_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
 
 @dataclass(frozen=True)
@@ -348,6 +348,10 @@ def _epof(m: Path, t) -> dict:
     high = e.number("high_pct", 90.0, lo=0.0, hi=100.0)
     if not low < high:
         e.fail(f"low_pct ({low}) must be below high_pct ({high})")
+    preset = e.get("preset", (str,), "vimsim", choices=SYSTEM_PRESETS)
+    bad = [k for k in ("top_k", "artefacts", "fov", "hfov", "vfov", "headset") if k in e.t]
+    if preset == "cao2021-code" and bad:  # the nearest window: no FOV, no top-k
+        e.fail(f"preset = 'cao2021-code' cannot be combined with {bad[0]}")
     return {
         "hfov_deg": h,
         "vfov_deg": v,
@@ -368,6 +372,7 @@ def _epof(m: Path, t) -> dict:
         "high_dps": dps[1],
         # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
         "artefacts": e.get("artefacts", (bool,), False),
+        "preset": preset,  # as --preset (docs/parity.md); the render's too, checked by _view
     }
 
 
@@ -397,7 +402,7 @@ def _render(m: Path, t, where: str = "[render]") -> dict:
         "grf": e.get("grf", (str,), "on", choices=("on", "off")),
         "opacity": opacity if isinstance(opacity, str) else float(opacity),
         "hold_last": e.get("hold_last", (bool,), False),
-        "preset": e.get("preset", (str,), "veryfast", choices=_PRESETS),
+        "x264_preset": e.get("x264_preset", (str,), "veryfast", choices=_PRESETS),
         "crf": e.number("crf", 18, lo=0, hi=51, integer=True),
         "cpus": e.number("cpus", 1, lo=1, hi=256, integer=True),
         # As vimsim render --mitigation (docs/mitigation.md); checked when the task builds it.
@@ -415,21 +420,16 @@ def _render_range(e: Entry) -> dict:
     end = e.number("end", None, lo=0.0, lo_open=True)
     if start is not None and end is not None and not start < end:
         e.fail(f"start = {start:g} is not before end = {end:g}")
-    return {
-        "start_s": start,
-        "end_s": end,
-        "review": e.get("review", (bool,), False),
-        "eyes": e.get("eyes", (str,), None, choices=("left", "right", "both")),
-        "audio": e.get("audio", (bool,), True),
-    }
+    return {"start_s": start, "end_s": end, "review": e.get("review", (bool,), False),
+            "eyes": e.get("eyes", (str,), None, choices=("left", "right", "both")),
+            "audio": e.get("audio", (bool,), True)}  # fmt: skip
 
 
 def _grf(m: Path, t) -> dict:
     e = Entry(m, "[grf]", t or {}, _GRF_KEYS)
     cut = e.get("cutout", (list,), [18.0, 40.0])
-    if len(cut) != 2 or not all(
-        isinstance(c, (int, float)) and not isinstance(c, bool) for c in cut
-    ):
+    if len(cut) != 2 or not all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                for c in cut):  # fmt: skip
         e.fail(f"cutout = {cut!r}: expected [INNER, OUTER] degrees, e.g. [18, 40]")
     return {
         "grain_deg": e.number("grain_size", 1.5, lo=0.0, lo_open=True),
@@ -450,7 +450,7 @@ _VIEW_KEYS = {
                "mitigation", "aperture_min", "feather", "vignette_color"),
     "grf": _GRF_KEYS,
     "epof": ("method", "low_pct", "high_pct", "opacity_source", "smooth", "ease_in",
-             "ease_out", "opacity_rule", "low_dps", "high_dps"),
+             "ease_out", "opacity_rule", "low_dps", "high_dps", "preset"),
 }  # fmt: skip
 
 

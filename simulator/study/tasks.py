@@ -25,6 +25,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.core.traceopts import TraceOptions, translate
 from simulator.epof.exact import shared_query
+from simulator.epof.nearest import FLOW_PX_COLUMN, nearest_epof
 from simulator.epof.overlaps import viewport_fov
 from simulator.epof.parts import keep_parts_in
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
@@ -252,10 +253,33 @@ def _rule(opts: dict) -> OpacityRule:
     names = {"smooth": "smooth_s", "ease_in": "ease_in_s", "ease_out": "ease_out_s"}
 
     def get(k):
+        if k == "opacity_rule" and opts.get("preset") == "paper":
+            return "paper"  # --preset paper: the paper's rule
         v = opts.get(names.get(k, k))
         return None if k == "smooth" and not v else v  # the table's default 0: not given
 
     return rule_from_options(get, lambda k: f"[epof] {k}")
+
+
+def _viewing_epof(grid, hp, opts: dict, frustum, rule, art, topts):
+    """One viewing's EPOF as ``vimsim epof`` computes it with the ``[epof]`` options (the
+    authors' nearest-window rule with ``preset = "cao2021-code"``)."""
+    hold = opts["hold_last"] or topts.hold_last
+    if opts.get("preset") == "cao2021-code":
+        return nearest_epof(grid, hp, hold=hold)  # the grid's imported scale, if any
+    method = "paper" if opts.get("preset") == "paper" else opts["method"]
+    return compute_epof(
+        grid,
+        hp,
+        hfov_deg=None if frustum else opts["hfov_deg"],
+        vfov_deg=None if frustum else opts["vfov_deg"],
+        frustum=frustum,
+        top_k=opts["top_k"],
+        rule=rule,
+        hold=hold,
+        method=method,
+        artefacts=art,
+    )
 
 
 def epof_task(
@@ -297,21 +321,12 @@ def epof_task(
                 try:
                     hp, topts = _trace(it, grid), _trace_opts(it)
                     _check_span(it, hp, grid)
-                    res = compute_epof(
-                        grid,
-                        hp,
-                        hfov_deg=None if frustum else opts["hfov_deg"],
-                        vfov_deg=None if frustum else opts["vfov_deg"],
-                        frustum=frustum,
-                        top_k=opts["top_k"],
-                        rule=rule,
-                        hold=opts["hold_last"] or topts.hold_last,
-                        method=opts["method"],
-                        artefacts=art,
-                    )
+                    res = _viewing_epof(grid, hp, opts, frustum, rule, art, topts)
                 finally:  # a failed viewing keeps the warnings of its input too
                     rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
-            write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
+            px = res.meta.get("flow_px")  # --preset cao2021-code: the px/frame of its opacity
+            extra = None if px is None else {FLOW_PX_COLUMN: px}
+            write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res, extra=extra)
             if it.get("plot"):
                 plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
             parts = (res.epof_rot_dps, res.epof_trans_dps)
@@ -356,7 +371,7 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             outdir,
             grid=grid,
             view=view,
-            preset=opts["preset"],
+            x264_preset=opts["x264_preset"],
             crf=opts["crf"],
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,
