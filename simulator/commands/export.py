@@ -4,6 +4,7 @@ for a game engine or a web player, with its runtime (Unity: ``VimsimEpof.cs``; w
 from __future__ import annotations
 
 import argparse
+import sys
 
 from simulator.commands._opacity import add_opacity_arguments, add_preset_argument, rule_from_args
 from simulator.commands._types import (
@@ -13,6 +14,7 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
 )
+from simulator.core.errors import InputError
 
 __all__ = ["register", "run"]
 
@@ -56,6 +58,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     )
     add_preset_argument(p)  # cao-csv: cao2021-code = their fixed scale in percentileData.csv;
     # unity / web: the header records it; cao2021-code adds their rule (DIR/cao2021/)
+    p.add_argument(
+        "--video",
+        default=None,
+        metavar="VIDEO",
+        help="web: the grid's source video (mono equirect), copied in for example.html to "
+        "play (default: the grid's own video when it is still at its recorded path)",
+    )
     p.add_argument(
         "--method",
         choices=_METHODS,
@@ -136,6 +145,8 @@ def run(args: argparse.Namespace) -> int:
         args.method = "paper" if args.method == "auto" else args.method
         args.opacity_rule = "paper" if args.opacity_rule == "comfort" else args.opacity_rule
     rule = rule_from_args(args)
+    if args.video is not None and args.format != "web":
+        raise InputError("--video is for --format web (the video example.html plays)")
     if args.format == "cao-csv":
         return _run_cao_csv(args, rule)
     grf, mitigation = _overlay_from_args(args)  # the same overlay options for both formats
@@ -229,12 +240,40 @@ def _write_cao_rule(args: argparse.Namespace) -> int:
     return 0
 
 
+def _web_video(args: argparse.Namespace):
+    """``(video for example.html or None, a note when the grid's own is not used)``:
+    ``--video``, else the grid's source video when it is still there and mono equirect."""
+    if args.video is not None:
+        return args.video, None
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    try:
+        with np.load(args.grid, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+    except (OSError, ValueError, KeyError):
+        return None, None  # the export itself names a bad grid
+    path = Path(str((meta.get("video") or {}).get("path") or ""))
+    if not path.is_absolute():
+        path = Path(args.grid).resolve().parent / path
+    mono = (meta.get("layout") or "mono") == "mono" and (meta.get("projection") or "equirect") == "equirect"
+    if path.is_file() and mono:
+        return str(path), None
+    why = "is not mono equirect" if path.is_file() else f"({path}) is not there"
+    return None, f"the grid's video {why}: example.html shows no video (give --video VIDEO)"
+
+
 def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation, preset=None) -> int:
     from simulator.export.web import export_web
 
+    video, note = _web_video(args)
     res = export_web(args.grid, args.output, method=args.method, dtype=args.dtype,
                      hfov_deg=hfov, vfov_deg=vfov, rule=rule, grf=grf,
-                     mitigation=mitigation, preset=preset)  # fmt: skip
+                     mitigation=mitigation, video=video, preset=preset)  # fmt: skip
+    if note:
+        print(f"vimsim export: note: {note}", file=sys.stderr)
     h = res.header
     print(
         f"wrote {res.out_dir}: {', '.join(f.name for f in res.files)} ({res.mode} mode; viewport "

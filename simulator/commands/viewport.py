@@ -116,6 +116,10 @@ def run(args: argparse.Namespace) -> int:
         view = _equirect_view(source, args, hfov, vfov, (w, h))
     with atomic_output(args.output) as tmp:
         Image.fromarray(view).save(tmp, format="PNG")
+    what = f"frame {args.frame}" if info.is_video else "still"
+    print(f"vimsim viewport: {view.shape[1]}x{view.shape[0]} view ({hfov:g} x {vfov:g} deg) at "
+          f"yaw {args.yaw:g}, pitch {args.pitch:g}, roll {args.roll:g} deg of {what} -> "
+          f"{args.output}")  # fmt: skip
     return 0
 
 

@@ -19,7 +19,10 @@
                             (numpy's PCG64 ported), and its coverage mask
 ``vimsim_gl.js``            the WebGL2 eye renderer and overlay shader (video on the sphere,
                             grains, cutout, vignette) as vimsim's renderer draws them
-``example.html``            a minimal page: drag to look around, live EPOF and opacity
+``example.html``            a minimal page: the video (when exported with it) on the sphere,
+                            drag to look around, play or seek, live EPOF and opacity
+``video.<ext>``             the grid's source video (``--video``; default the grid's own
+                            when it is there), for ``example.html``
 ==========================  ==============================================================
 
 ``docs/web.md`` shows the calls and how to use them with three.js or A-Frame.
@@ -46,6 +49,7 @@ from simulator.export.unity.binary import grain_layout_bytes, pack_head
 from simulator.export.unity.header import set_data_shape
 from simulator.media.gridfile import GridFile, load_grid
 from simulator.media.lazyfield import field_chunks, take_rows
+from simulator.media.video import probe
 from simulator.mitigation.grf import GrfConfig, OpacityRule
 from simulator.mitigation.kinds import Mitigation
 from simulator.sphere.windows import WindowGrid
@@ -150,6 +154,7 @@ def export_web(
     grf: GrfConfig | None = None,
     mitigation: Mitigation | None = None,
     example: bool = True,
+    video: str | os.PathLike | None = None,
     preset: dict | None = None,
 ) -> WebExport:
     """Write the web runtime for a grid into ``out_dir`` (see the module docstring).
@@ -157,12 +162,18 @@ def export_web(
     ``method``, ``dtype``, ``hfov_deg``, ``vfov_deg``, ``rule``, ``grf`` (the grains: default
     ``GrfConfig()``, the paper's), ``mitigation`` (what the overlay draws and the vignette's
     settings: default ``grf``), ``preset``: as :func:`simulator.export.unity.export_unity`, whose
-    ``vimsim_epof.bin`` this writes; ``example``: write ``example.html``. Files of these
+    ``vimsim_epof.bin`` this writes; ``example``: write ``example.html``; ``video``: the
+    grid's source video (checked against the grid: mono equirect), copied in as
+    ``video.<ext>`` for ``example.html`` to play (the manifest's ``video``). Files of these
     names that an earlier web export did not write are refused (InputError, nothing written).
     """
     g = grid if isinstance(grid, GridFile) else load_grid(grid)
     names = [MANIFEST, DATA_FILE, *JS_FILES] + ([EXAMPLE] if example else [])
     inputs = [g.path] if g.path else []
+    video_name = _check_video(g, video) if video is not None else None
+    if video_name:
+        names.append(video_name)
+        inputs.append(video)
     OutputFolder(out_dir, names, "export --format web").check(inputs)
     kw = {"method": method, "dtype": dtype, "hfov_deg": hfov_deg, "vfov_deg": vfov_deg,
           "rule": rule, "grf": grf, "mitigation": mitigation, "preset": preset}  # fmt: skip
@@ -176,6 +187,8 @@ def export_web(
         manifest = {"format": "vimsim-web", "version": MANIFEST_VERSION, "data": DATA_FILE,
                     "data_version": VERSION, "mode": header["mode"],
                     "grains": "in the data file: header grf, section grains"}  # fmt: skip
+        if video_name:
+            manifest["video"] = video_name  # the source video, as stored (its own clock)
         if header["mode"] == "paper":
             vp = header["viewport"]
             contents[OVERLAPS], manifest["overlaps"] = overlap_bytes(
@@ -194,10 +207,26 @@ def export_web(
             with atomic_output(out / name) as t:
                 if name == DATA_FILE:
                     shutil.move(data_tmp, t)
+                elif name == video_name:  # a copy: a link would be the input itself
+                    shutil.copyfile(video, t)
                 else:
                     Path(t).write_bytes(contents[name])
         folder.complete()
     return WebExport(out, tuple(out / n for n in names), header["mode"], manifest, header)
+
+
+def _check_video(g: GridFile, video) -> str:
+    """The name the source video gets in the export (``video.<ext>``), once checked: the
+    grid's video (size, rate, content), read as mono equirect (what the example draws)."""
+    info = probe(video)
+    g.check_video(info, source=g.path)
+    layout, projection = g.meta.get("layout") or "mono", g.meta.get("projection") or "equirect"
+    if layout != "mono" or projection != "equirect" or not info.is_video:
+        raise InputError(
+            f"{video}: example.html plays a mono equirect video; the grid's is {layout} "
+            f"{projection} (export without --video)"
+        )
+    return "video" + Path(video).suffix.lower()
 
 
 def read_manifest(path: str | os.PathLike) -> dict:

@@ -29,6 +29,7 @@ from simulator.core.choices import (
     STILL_SECONDS,
 )
 from simulator.core.errors import InputError
+from simulator.media.guard import aspect_refusal, check_not_dual_fisheye
 from simulator.media.spherical import read_spherical, view_angles_deg
 from simulator.media.video import MediaInfo, PixelFormat, iter_frames, probe, read_frame
 from simulator.sphere.geometry import split_eye
@@ -110,6 +111,7 @@ class Source:
         info = probe(path)
         md = read_spherical(path) if info.is_video else {}
         notes: list[str] = []
+        given = projection
         projection = _resolve(path, "projection", projection, md.get("projection"), notes)
         layout = _resolve(path, "layout", layout, md.get("layout"), notes) or layout_default
         projection = projection or "equirect"
@@ -139,7 +141,13 @@ class Source:
                   orientation_deg=pose, right_first=right_first)  # fmt: skip
         object.__setattr__(src, "metadata", md or None)
         object.__setattr__(src, "notes", tuple(notes))
-        src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
+        try:
+            src.eye_size  # noqa: B018 - checks the eye's size fits the projection (InputError)
+        except InputError as e:
+            raise InputError(aspect_refusal(path, e, src.stored_eye_size, info.sar)) from None
+        if given is None and projection == "equirect":  # a dual fisheye read as equirect?
+            key = (path, info.width, info.height, info.n_frames, layout, eye, os.stat(path).st_mtime_ns)
+            check_not_dual_fisheye(path, lambda i: src.read(i, fmt="gray"), info.n_frames, key)
         if right is not None:
             right = check_local_path(right)
             _check_right_eye(info, right, layout, projection)

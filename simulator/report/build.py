@@ -37,6 +37,7 @@ from simulator.media.video import VideoWriter, probe
 from simulator.mitigation.cao2021 import cao_grf_config
 from simulator.mitigation.grf import GrfConfig
 from simulator.report import pages
+from simulator.report.replay import replay_settings, viewing_render
 from simulator.study.tasks import _rule as study_rule
 
 __all__ = [
@@ -375,9 +376,9 @@ def _viewing_data(out: Path, row: dict, s: dict) -> dict | None:
         return None
     cols = {c: base64.b64encode(np.ascontiguousarray(v, "<f4").tobytes()).decode()
             for c, v in _epof_columns(p).items()}  # fmt: skip
-    rs = s["settings"].get("render") or {}
+    rs = viewing_render(s, row["viewing"])
     return {"viewing": row["viewing"], "video": row["video"], "columns": cols,
-            "render": rs, "grf": s["settings"].get("grf"),
+            "render": {k: v for k, v in rs.items() if k != "view"}, "replay": replay_settings(rs),
             "rendered": (out / "render" / row["viewing"] / "summary.json").is_file()}  # fmt: skip
 
 

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import csv
+import functools
 import html
 import json
+import math
 import re
 from pathlib import Path
 
@@ -91,6 +94,7 @@ class Site:
             [f'<a href="{video_href(v)}">{_e(v)}</a>', _e((d.get("export") or {}).get("mode", "none")),
              _e(Path((s.get("videos") or {}).get(v, {}).get("path", "")).name),
              _e(_copy_text(d.get("copy")))] for v, d in self.videos.items()])]  # fmt: skip
+        parts.append(_render("conditions.html", cells=condition_video(self.rows)))
         parts += ["<h2>Settings</h2>", f"<pre>{_e(json.dumps(s.get('settings'), indent=1))}</pre>"]
         t = {
             k: (f"{v:.2f} s" if isinstance(v, float) else v)
@@ -122,7 +126,7 @@ class Site:
             f'<label>{_e(c)} <select data-filter="{_e(c)}"><option value="">all</option>'
             + "".join(f"<option>{_e(v)}</option>" for v in sorted({r.get(c) or "" for r in self.rows}))
             + "</select></label> "
-            for c in ("condition", "video", "status") if c in cols
+            for c in ("condition", "video", "mitigation", "status") if c in cols
         )  # fmt: skip
         if "warnings" in cols:
             filters += (
@@ -190,7 +194,9 @@ class Site:
 <p><button id="play">play</button> <button id="freelook">free look: off</button>
 <button id="xr" hidden>enter VR</button>
 time <b id="t">0</b> s, frame <b id="frame">0</b>, yaw/pitch/roll <b id="pose">-</b> deg,
-EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></span></p>
+EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></span>,
+mitigation <b id="mitigation">-</b></p>
+<p id="replay-caveat" class="note"></p>
 <canvas id="eye"></canvas>
 <video id="video" muted playsinline preload="auto" hidden></video>
 </div>
@@ -232,6 +238,53 @@ EPOF <b id="epof">-</b> deg/s, opacity <b id="opacity">-</b> <span id="mode"></s
             parts += ["<h2>Report (formula used, exclusions)</h2>",
                       f"<pre>{_e((folder / 'report.md').read_text(encoding='utf-8'))}</pre>"]  # fmt: skip
         return _page("Analysis", "\n".join(parts) or "<p>No analysis files.</p>")
+
+
+@functools.lru_cache(maxsize=1)
+def _jinja():
+    import jinja2
+
+    return jinja2.Environment(loader=jinja2.PackageLoader("simulator.report", "templates"),
+                              autoescape=True, undefined=jinja2.StrictUndefined)  # fmt: skip
+
+
+def _render(template: str, **context) -> str:
+    """A page fragment from ``report/templates/`` (Jinja2, autoescaped)."""
+    return _jinja().get_template(template).render(**context)
+
+
+def condition_video(rows: list[dict]) -> list[dict]:
+    """One cell per (condition, video) of viewings.csv rows, in first-seen order: counts,
+    the mitigations and opacity rules met, and the means (deg/s; opacity 0..1) over the ok
+    viewings (visible flow over the rendered ones; ``-`` when none)."""
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r.get("condition") or "", r.get("video") or ""), []).append(r)
+    cells = []
+    for (cond, vid), rs in groups.items():
+        ok = [r for r in rs if r.get("status") == "ok"]
+        cells.append({
+            "condition": cond, "video": vid, "href": video_href(vid), "n": len(rs),
+            "ok": len(ok), "mitigation": _distinct(rs, "mitigation"),
+            "opacity_rule": _distinct(rs, "opacity_rule"),
+            "epof": _mean_text(ok, "epof_mean_dps"), "opacity": _mean_text(ok, "opacity_mean"),
+            "visible": _mean_text(ok, "visible_flow_mean_dps"),
+        })  # fmt: skip
+    return cells
+
+
+def _distinct(rows: list[dict], col: str) -> str:
+    return ", ".join(dict.fromkeys(r.get(col) or "-" for r in rows))
+
+
+def _mean_text(rows: list[dict], col: str) -> str:
+    vals = []
+    for r in rows:
+        with contextlib.suppress(TypeError, ValueError):
+            v = float(r.get(col) or "nan")
+            if math.isfinite(v):
+                vals.append(v)
+    return f"{sum(vals) / len(vals):.3g}" if vals else "-"
 
 
 def _short_number(v: str) -> str:

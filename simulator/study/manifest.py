@@ -110,13 +110,13 @@ class ViewingSpec:
     participant: str = ""
     condition: str = ""
     render: bool = False
-    #: The render options of this viewing ([render] with the viewing's own keys over it),
-    #: None when it is not rendered.
+    #: Its render options ([render] with its own keys over it); None when not rendered.
     render_opts: dict | None = None
     #: Also plot this viewing's EPOF (``epof/<id>.png``).
     plot: bool = False
     #: How its trace is read and placed on the video's clock ([traces] and its own keys).
     trace_opts: TraceOptions = field(default_factory=lambda: TraceOptions(origin="manifest"))
+    own_render: dict | None = None  # its render options, rendered or not (mitigation, replay)
 
 
 @dataclass(frozen=True)
@@ -282,7 +282,7 @@ def _viewings(
         if "viewers" in e.t:  # scripted viewers (simulator.study.viewers): no trace file
             ropts, cond = _viewing_render_opts(e, m, where, data, render), e.get("condition", (str,), "")
             r, plot = e.get("render", (bool,), False), e.get("plot", (bool,), False)
-            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot)
+            out += [ViewingSpec(i, vid, None, SCRIPTED + k, s, p, cond, r, ropts if r else None, plot, own_render=ropts)
                     for i, p, s, k in scripted_viewers(e, vid, seen, where, _ID_RE)]  # fmt: skip
             viewing_trace_options(e, traces, scripted=True)  # its trace keys refused
             continue
@@ -306,7 +306,7 @@ def _viewings(
                 seen[vw_id] = where
                 r = u in rendered
                 out.append(ViewingSpec(vw_id, vid, trace, fmt, u, participant, condition, r,
-                                       ropts if r else None, plot, topts))  # fmt: skip
+                                       ropts if r else None, plot, topts, own_render=ropts))  # fmt: skip
     return tuple(out)
 
 

@@ -11,6 +11,7 @@ checked against its video's, and each render range against the video's length.
 from __future__ import annotations
 
 import contextlib
+import functools
 import hashlib
 import json
 import time
@@ -30,6 +31,7 @@ from simulator.study.manifest import SCRIPTED, Manifest, VideoSpec, ViewingSpec
 from simulator.traces.clock import check_span, place, read_trace
 from simulator.traces.path import synth
 from simulator.traces.readers import TraceFile
+from simulator.viewing.spec import VIEW_OPTIONS, ViewSpec
 
 #: The files at the top of OUTDIR (the folder manifest lists them; the rest are in folders).
 STUDY_FILES = ("viewings.csv", "study.json")
@@ -46,6 +48,7 @@ __all__ = [
     "dry_run",
     "plan_study",
     "study_folders",
+    "view_cells",
     "viewing_key",
 ]
 
@@ -348,4 +351,32 @@ def base_row(w: ViewingSpec) -> dict:
         "video": w.video,
         "trace": "" if w.trace is None else str(w.trace),
         "user": "" if w.user is None else w.user,
+        **view_cells(w.own_render),
     }
+
+
+def view_cells(render_opts: dict | None) -> dict:
+    """``mitigation`` and ``opacity_rule`` cells of a viewing's row: what its view draws
+    (``none`` when nothing: ``grf = "off"`` or ``mitigation = "none"``) and how the
+    opacity is set (the rule's name, with its deg/s for ``absolute``; ``fixed X`` for
+    a constant ``opacity``)."""
+    if not render_opts or "view" not in render_opts:
+        return {"mitigation": "", "opacity_rule": ""}
+    return _view_cells(json.dumps(render_opts["view"], sort_keys=True, default=str))
+
+
+@functools.lru_cache(maxsize=64)
+def _view_cells(view_json: str) -> dict:
+    opts = json.loads(view_json)
+    view = ViewSpec.from_options(opts, video=False)
+    m = view.mitigation
+    kind = m.kind if view.grains is not None else ("vignette" if m.vignette else "none")
+    if isinstance(view.opacity, float):
+        rule = f"fixed {view.opacity:g}"
+    elif view.opacity != "auto":
+        rule = f"from {Path(view.opacity).name}"
+    else:
+        rule = str(opts.get("opacity_rule") or VIEW_OPTIONS["opacity_rule"])
+        if view.rule.is_absolute:
+            rule += f" {view.rule.low_dps:g}-{view.rule.high_dps:g} deg/s"
+    return {"mitigation": kind, "opacity_rule": rule}

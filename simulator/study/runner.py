@@ -44,11 +44,15 @@ from simulator.study.plan import (
 __all__ = ["VIEWING_COLUMNS", "default_cache_dir", "dry_run", "run_study"]
 
 VIEWING_COLUMNS = (
-    "viewing", "participant", "condition", "video", "trace", "user", "frames",
-    "epof_mean_dps", "epof_median_dps", "epof_p90_dps", "epof_max_dps", "opacity_mean",
-    "share_opacity_ge_0_5", "opacity_rule", "status", "warnings",
+    "viewing", "participant", "condition", "video", "trace", "user", "mitigation",
+    "opacity_rule", "frames", "epof_mean_dps", "epof_median_dps", "epof_p90_dps",
+    "epof_max_dps", "opacity_mean", "share_opacity_ge_0_5", "visible_flow_mean_dps",
+    "status", "warnings",
 )  # fmt: skip
-_STAT_COLUMNS = VIEWING_COLUMNS[6:13]
+_STAT_COLUMNS = VIEWING_COLUMNS[8:15]
+#: From the viewing's render (empty when not rendered): the mean flow its mitigation lets
+#: through to the eye (deg/s, vimsim render's ``visible_flow_dps``).
+_RENDER_COLUMNS = ("visible_flow_mean_dps",)
 #: Warnings of one viewing in its ``warnings`` cell are joined by this.
 WARNING_SEP = " | "
 
@@ -141,7 +145,8 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
     for w in manifest.viewings:
         if w.id in plan.unchanged:
             prev = plan.unchanged[w.id]
-            rows[w.id] = {**base_row(w), **{c: prev.get(c, "") for c in _STAT_COLUMNS},
+            rows[w.id] = {**base_row(w),
+                          **{c: prev.get(c, "") for c in (*_STAT_COLUMNS, *_RENDER_COLUMNS)},
                           **{c: prev[c] for c in tasks.PART_MEAN_COLUMNS if c in prev},
                           "status": "ok", "warnings": prev.get("warnings", ""),
                           "resumed": True}  # fmt: skip
@@ -156,8 +161,12 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
     ex.close(wait=False)  # Ray's runtime stops while the outputs are written
 
     t0 = time.perf_counter()
-    rule = rule_text(manifest.epof)  # one [epof] table: the same rule in every row
-    table = [{**rows[w.id], "opacity_rule": rule} for w in manifest.viewings]
+    rule = rule_text(manifest.epof)  # one [epof] table: the same rule in every row ...
+    if manifest.epof.get("preset") == "cao2021-code":
+        rule = "cao2021-code px/frame scale"
+    # ... but for a viewing whose own view fixes its opacity (plan.view_cells)
+    table = [{**rows[w.id], "opacity_rule": own if own.startswith(("fixed", "from")) else rule}
+             for w in manifest.viewings for own in [rows[w.id].get("opacity_rule") or ""]]  # fmt: skip
     cols = VIEWING_COLUMNS
     if manifest.model is not None:  # [model]: each viewing's predicted discomfort
         cols = (*cols, *MODEL_COLUMNS)
@@ -213,6 +222,9 @@ def _summary(manifest, out, cache, ex_info, video_info, table, report) -> dict:
             "render": manifest.render,
             "grf": manifest.grf,
             "questionnaires": manifest.questionnaires,
+            # the render options of each viewing with its own keys (the rest: "render")
+            "viewings": {w.id: w.own_render for w in manifest.viewings
+                         if w.own_render is not None and w.own_render != manifest.render},
         },
         "videos": video_info,
         "counts": {
@@ -350,6 +362,8 @@ class _Scheduler:
         r = self.results[w.id]
         row = {**base_row(w), **{c: r.get(c, "") for c in _STAT_COLUMNS},
                **{c: r[c] for c in tasks.PART_MEAN_COLUMNS if c in r}}  # fmt: skip
+        if w.render:
+            row.update({c: self.renders[w.id].get(c, "") for c in _RENDER_COLUMNS})
         status = r["status"]
         if status == "ok" and w.render and self.renders[w.id]["status"] != "ok":
             status = f"render: {self.renders[w.id]['status']}"

@@ -383,6 +383,8 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             audio=opts.get("audio", True),
         )
         rec["frames_per_s"] = s.get("frames_per_s")
+        vis = (s.get("visible_flow") or {}).get("visible_flow_dps_mean")
+        rec["visible_flow_mean_dps"] = "" if vis is None else float(vis)
     except Exception as e:  # noqa: BLE001
         rec["status"] = _error_line(e)
     rec["seconds"] = time.perf_counter() - t0

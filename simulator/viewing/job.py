@@ -28,7 +28,7 @@ from simulator.render.gl import create_context
 from simulator.render.video import VideoRenderResult, render_video
 from simulator.traces.path import HeadPath
 from simulator.viewing.plan import ViewingPlan, plan_viewing
-from simulator.viewing.review import ReviewWriter
+from simulator.viewing.review import STILL_NO_FLOW, ReviewWriter
 from simulator.viewing.spec import ViewSpec
 from simulator.viewing.summary import REVIEW_FILES, epof_settings, viewing_summary
 
@@ -168,6 +168,7 @@ def draw(job: ViewingJob, ctx, out: Path, *, x264_preset="veryfast", crf=18, thr
             opacity_used=not job.view.mitigation.local,
             # a variable-rate source's timing, as the eye videos keep it
             video_times_s=plan.times_s if plan.info.variable_rate else None,
+            no_flow=STILL_NO_FLOW if job.source.still else "no flow (no grid)",
         )
     try:
         result = render_video(

@@ -24,7 +24,7 @@ from simulator.core.fileio import atomic_output
 from simulator.media.video import VideoWriter
 from simulator.sphere.geometry import dir_to_lonlat, head_rotation, lonlat_to_equirect_xy
 
-__all__ = ["ReviewWriter", "frustum_outline_xy"]
+__all__ = ["STILL_NO_FLOW", "ReviewWriter", "frustum_outline_xy"]
 
 _WHITE = (255, 255, 255)
 _EPOF_RGB = (80, 160, 255)
@@ -79,6 +79,10 @@ def _fit(img: NDArray[np.uint8], w: int, h: int, area: bool = False) -> NDArray[
     return cv2.resize(img, (w, h), interpolation=cv2.INTER_AREA if area else cv2.INTER_LINEAR)
 
 
+#: What a still image's review shows for its EPOF (one image repeated: nothing moves).
+STILL_NO_FLOW = "still image: no flow"
+
+
 class ReviewWriter:
     """Writes ``review.mp4`` and ``sheet.png`` from a render's frames (see the module doc).
 
@@ -97,6 +101,8 @@ class ReviewWriter:
         each cell's own flow drives it): the strip and sheet then show no opacity
     video_times_s : None (frame ``i`` at ``i / fps``), or each frame's time in seconds (a
         variable-rate source's timestamps: the review video keeps its timing)
+    no_flow : what a frame without an EPOF shows instead of a number (a still image:
+        ``"still image: no flow"``)
     """
 
     def __init__(
@@ -121,6 +127,7 @@ class ReviewWriter:
         thresholds_dps=None,
         opacity_used: bool = True,
         video_times_s=None,
+        no_flow: str = "no flow (no grid)",
     ):
         self.t = np.asarray(times_s, float)
         self.yaw, self.pitch = np.asarray(yaw_deg, float), np.asarray(pitch_deg, float)
@@ -130,6 +137,7 @@ class ReviewWriter:
         th = [float(v) for v in (thresholds_dps or ())]
         self.thresholds = th if len(th) == 2 and all(np.isfinite(th)) else None
         self.opacity_used = bool(opacity_used)
+        self.no_flow = str(no_flow)
         self.ph = int(height) // 2 * 2
         self.pw = 2 * self.ph
         self.strip_h = max(60, self.ph // 3) // 2 * 2
@@ -185,8 +193,11 @@ class ReviewWriter:
         return img
 
     def _numbers(self, j: int) -> str:
-        """EPOF (and opacity, where the render uses it) of frame ``j``, with units."""
-        op = f"  opacity {self.op[j]:.2f}" if self.opacity_used else ""
+        """EPOF (and opacity, where the render uses it) of frame ``j``, with units; where
+        there is no flow (a still, no grid), why."""
+        op = f"  opacity {self.op[j]:.2f}" if self.opacity_used and np.isfinite(self.op[j]) else ""
+        if not np.isfinite(self.epof[j]):
+            return f"{self.no_flow}{op}"
         return f"EPOF {self.epof[j]:.1f} deg/s{op}"
 
     # ------------------------------------------------------------------ frames

@@ -175,7 +175,7 @@ def _targets(g: GridFile, out_dir, rot: bool = False) -> tuple[Path, list[Path]]
     if grid_path is not None and out.resolve() == grid_path:
         raise InputError(f"{out}: output folder is the input grid file; choose another -o")
     out = check_output_dir(out)
-    rels = [DATA_FILE, *ASSET_FILES, *meta_files(), *([ROT_FILE] if rot else [])]
+    rels = [DATA_FILE, *ASSET_FILES, *meta_files(rot=rot), *([ROT_FILE] if rot else [])]
     targets = [out / r for r in rels]
     for t in targets:
         if grid_path is not None and t.resolve() == grid_path:
@@ -185,6 +185,17 @@ def _targets(g: GridFile, out_dir, rot: bool = False) -> tuple[Path, list[Path]]
         if t.exists() and not is_ours(t):
             raise InputError(f"{t}: exists and was not written by vimsim export; move it or choose another -o")
     return out, targets
+
+
+def video_key(g: GridFile) -> str:
+    """The video's content hash (grid meta), the key of its data files' GUIDs; a grid
+    without one: the hash of its flow values."""
+    key = ((g.meta or {}).get("video") or {}).get("content_hash")
+    if key:
+        return str(key)
+    import hashlib
+
+    return hashlib.sha256(np.ascontiguousarray(g.pof_dps).tobytes()).hexdigest()
 
 
 def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation,
@@ -205,7 +216,7 @@ def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation,
     blob = pack(header, data, grains)
     rot = sphere and has_parts(g)
     out, targets = _targets(g, out_dir, rot)
-    metas = meta_files()
+    metas = meta_files(video_key(g), rot)
     contents = [blob, *(asset_bytes(r) for r in ASSET_FILES), *metas.values()]
     if rot:
         contents.append(_rot_blob(g, header, data.dtype, grains))

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from simulator.export.unity.binary import DATA_FILE, MAGIC, ROT_FILE
 
-__all__ = ["ASSET_FILES", "CS_FILES", "asset_bytes", "guid", "is_ours", "meta_files"]
+__all__ = ["ASSET_FILES", "CS_FILES", "asset_bytes", "data_guid", "guid", "is_ours", "meta_files"]
 
 #: The C# runtime (core, no UnityEngine) and the optional MonoBehaviour.
 CS_FILES: tuple[str, ...] = ("VimsimEpof.cs", "VimsimEpofBehaviour.cs", "VimsimEpofAsset.cs")
@@ -26,6 +26,7 @@ ASSET_FILES: tuple[str, ...] = (
     "Editor/VimsimEpofImporter.cs",
     "SAMPLE.md",
 )
+_DATA_FILES = (DATA_FILE, ROT_FILE)
 _MARK = b"vimsim export"  # in the first 4 KB of every text file vimsim writes
 
 _COMMON = "  externalObjects: {}\n  userData: \n  assetBundleName: \n  assetBundleVariant: \n"
@@ -68,22 +69,33 @@ def asset_bytes(rel: str) -> bytes:
     return _substitute(raw.decode()).encode() if b"{{guid:" in raw else raw
 
 
-def _meta(rel: str) -> bytes:
-    if rel == DATA_FILE:  # imported by Editor/VimsimEpofImporter.cs
+def data_guid(rel: str, video_key: str) -> str:
+    """The GUID of a per-video data file (``vimsim_epof.bin``, ``vimsim_epof_rot.bin``):
+    from the video's content hash, so the data of two videos never share one (two exports
+    import into one project) and a re-export of the same video keeps it (references to it
+    in scenes survive)."""
+    return hashlib.md5(f"vimsim-unity-data:{video_key}:{rel}".encode()).hexdigest()
+
+
+def _meta(rel: str, video_key: str) -> bytes:
+    if rel in _DATA_FILES:  # imported by Editor/VimsimEpofImporter.cs
         body = ("ScriptedImporter:\n  internalIDToNameTable: []\n  externalObjects: {}\n"
                 "  serializedVersion: 2\n  userData: \n  assetBundleName: \n  assetBundleVariant: \n"
                 f"  script: {{fileID: 11500000, guid: {guid('Editor/VimsimEpofImporter.cs')}, type: 3}}\n")  # fmt: skip
-    elif "." not in rel.rsplit("/", 1)[-1]:  # a folder
+        return f"fileFormatVersion: 2\nguid: {data_guid(rel, video_key)}\n{body}".encode()
+    if "." not in rel.rsplit("/", 1)[-1]:  # a folder
         body = "folderAsset: yes\nDefaultImporter:\n" + _COMMON
     else:
         body = _IMPORTERS.get(Path(rel).suffix, "DefaultImporter:\n" + _COMMON)
     return f"fileFormatVersion: 2\nguid: {guid(rel)}\n{body}".encode()
 
 
-def meta_files() -> dict[str, bytes]:
-    """``REL.meta`` -> contents for the data, every package file and the ``Editor`` folder."""
-    rels = (DATA_FILE, *ASSET_FILES, "Editor")
-    return {f"{r}.meta": _meta(r) for r in rels}
+def meta_files(video_key: str = "", rot: bool = False) -> dict[str, bytes]:
+    """``REL.meta`` -> contents for every package file, the ``Editor`` folder (fixed GUIDs:
+    the runtime package is the same in every export) and the data files (``rot``: also
+    :data:`ROT_FILE`; GUIDs from ``video_key``, the video's content hash: :func:`data_guid`)."""
+    rels = (DATA_FILE, *([ROT_FILE] if rot else []), *ASSET_FILES, "Editor")
+    return {f"{r}.meta": _meta(r, video_key) for r in rels}
 
 
 def is_ours(path: Path) -> bool:
@@ -95,6 +107,8 @@ def is_ours(path: Path) -> bool:
         return False
     if path.name in (DATA_FILE, ROT_FILE):
         return head.startswith(MAGIC)
+    if path.name[:-5] in _DATA_FILES:  # a data file's: it selects vimsim's importer
+        return path.suffix == ".meta" and guid("Editor/VimsimEpofImporter.cs").encode() in head
     if path.suffix == ".meta":  # ours: it holds the GUID vimsim gives that file
         return f"guid: {guid(path.name[:-5])}".encode() in head or any(
             f"guid: {guid(r)}".encode() in head for r in (*ASSET_FILES, DATA_FILE, "Editor")

@@ -6,7 +6,7 @@
 // then computed live from the grid (vimsim.js). WebXR where the browser offers it.
 // window.vimsimReplay: seek(t) (resolves when that frame is drawn), state, measure(n).
 
-import { anglesFromQuaternion, loadExport } from "./vimsim.js";
+import { GrainLayout, anglesFromQuaternion, loadExport } from "./vimsim.js";
 import { EyeRenderer } from "./vimsim_gl.js";
 
 const $ = (id) => document.getElementById(id);
@@ -41,11 +41,18 @@ async function main() {
   canvas.width = w; canvas.height = h;
   const gl = canvas.getContext("webgl2", { preserveDrawingBuffer: true, antialias: false });
   if (!gl) { note.textContent = "This browser has no WebGL2: no replay."; return; }
-  const mitigation = { kind: r.grf === "off" ? "none" : (r.mitigation || "grf"),
-    apertureMinDeg: r.aperture_min_deg ?? 60, featherDeg: r.feather_deg ?? 10, color: parseColor(r.vignette_color) };
-  if (r.mitigation === "vignette" || r.mitigation === "none") mitigation.kind = r.mitigation;
+  // This viewing's own mitigation, opacity and grains (build.py replay_settings), not the study's.
+  const p = data.replay || {};
+  const mitigation = p.kind ? { kind: p.kind, apertureMinDeg: p.apertureMinDeg, featherDeg: p.featherDeg, color: p.color }
+    : { kind: r.grf === "off" ? "none" : (r.mitigation || "grf"), apertureMinDeg: r.aperture_min_deg ?? 60,
+      featherDeg: r.feather_deg ?? 10, color: parseColor(r.vignette_color) };
+  const same = (a, b) => ["grain_deg", "density", "inner_deg", "outer_deg", "seed"].every((k) => a[k] === b[k]);
+  const grains = !p.grf || same(p.grf, rt.grains.config) ? rt.grains : GrainLayout.fromSeed(p.grf);
+  const fixed = typeof p.opacity === "number" ? p.opacity : null;
+  if (p.note) $("replay-caveat").textContent = "Note: " + p.note + ".";
+  $("mitigation").textContent = mitigation.kind + (fixed === null ? "" : `, fixed opacity ${fixed}`);
   const eye = new EyeRenderer(gl, { width: w, height: h, hfovDeg: r.hfov_deg ?? rt.hfovDeg,
-    vfovDeg: r.vfov_deg ?? rt.vfovDeg, grains: rt.grains, mitigation });
+    vfovDeg: r.vfov_deg ?? rt.vfovDeg, grains, mitigation });
   const video = $("video");
   video.src = data.media;
   await new Promise((ok, bad) => {
@@ -62,11 +69,11 @@ async function main() {
     state.t = t;
     if (!state.free) {
       state.yaw = c.yaw_deg[i]; state.pitch = c.pitch_deg[i]; state.roll = c.roll_deg[i];
-      state.epof = c.epof_dps[i]; state.opacity = c.opacity[i];
+      state.epof = c.epof_dps[i]; state.opacity = fixed ?? c.opacity[i];
     } else {
       state.epof = rt.epof(t, state.yaw, state.pitch, state.roll);
       const o = rt.opacity(state.epof);
-      state.opacity = dt > 0 ? easing.update(o, dt) : o;
+      state.opacity = fixed ?? (dt > 0 ? easing.update(o, dt) : o);
     }
     eye.upload(video);
     eye.render(...rt.viewAngles(state.yaw, state.pitch, state.roll), state.opacity);
@@ -135,7 +142,7 @@ async function main() {
     state.pitch = Math.max(-90, Math.min(90, drag[3] + (e.clientY - drag[1]) * k));
     if (video.paused) draw(state.t, 0);
   });
-  setupXR(rt, mitigation, video, state, mediaStart);
+  setupXR(rt, mitigation, grains, fixed, video, state, mediaStart);
 
   /** Upload (optional) + draw + a 1-pixel read, n times at the current frame: frames per second. */
   function measure(count, upload = true) {
@@ -153,7 +160,7 @@ async function main() {
   window.vimsimReplay.ready = true; // the first frame drawn: a caller's seek is not raced by it
 }
 
-async function setupXR(rt, mitigation, video, state, mediaStart) {
+async function setupXR(rt, mitigation, grains, fixed, video, state, mediaStart) {
   if (!navigator.xr || !(await navigator.xr.isSessionSupported("immersive-vr").catch(() => false))) return;
   const btn = $("xr");
   btn.hidden = false;
@@ -176,13 +183,13 @@ async function setupXR(rt, mitigation, video, state, mediaStart) {
           const deg = (x) => (Math.atan(x) * 180) / Math.PI;
           const frustum = { left: deg((1 - P[8]) / P[0]), right: deg((1 + P[8]) / P[0]),
             down: deg((1 - P[9]) / P[5]), up: deg((1 + P[9]) / P[5]) };
-          e = new EyeRenderer(xc, { width: vp.width, height: vp.height, frustum, grains: rt.grains, mitigation });
+          e = new EyeRenderer(xc, { width: vp.width, height: vp.height, frustum, grains, mitigation });
           eyes.set(view.eye, e);
         }
         const [yaw, pitch, roll] = anglesFromQuaternion(view.transform.orientation); // XR: -z forward
         const t = video.currentTime + mediaStart, ep = rt.epof(t, yaw, pitch, roll);
         e.upload(video);
-        e.render(...rt.viewAngles(yaw, pitch, roll), rt.opacity(ep), [vp.x, vp.y]);
+        e.render(...rt.viewAngles(yaw, pitch, roll), fixed ?? rt.opacity(ep), [vp.x, vp.y]);
         state.epof = ep;
       }
     };
