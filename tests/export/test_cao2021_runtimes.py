@@ -25,6 +25,16 @@ REPO = Path(__file__).resolve().parents[2]
 def exported(tmp_path_factory, request):
     """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again
     (cao-csv: the folder itself; unity / web: the package's cao2021/ folder)."""
+    return _export(tmp_path_factory, request.param)
+
+
+@pytest.fixture(scope="module")
+def web_exported(tmp_path_factory):
+    """:func:`exported` of the web export alone (its page serves the rule)."""
+    return _export(tmp_path_factory, "web")
+
+
+def _export(tmp_path_factory, fmt: str):
     d = tmp_path_factory.mktemp("cao")
     src = d / "src"
     src.mkdir()
@@ -35,9 +45,9 @@ def exported(tmp_path_factory, request):
             rows = "".join(f"{t},{float(x)!r}\n" for t, x in enumerate(v))
             (src / window_file_name(y, p)).write_text(",0\n" + rows)
     assert main(["grid", "import", str(src), "-o", str(d / "g.npz"), "--fps", "30"]) == 0
-    assert main(["export", str(d / "g.npz"), "--format", request.param, "--preset",
+    assert main(["export", str(d / "g.npz"), "--format", fmt, "--preset",
                  "cao2021-code", "-o", str(d / "out")]) == 0  # fmt: skip
-    if request.param == "cao-csv":
+    if fmt == "cao-csv":
         return load_grid(d / "g.npz"), d / "out"
     from simulator.export.unity import read_export
 
@@ -103,8 +113,7 @@ process.stdout.write(JSON.stringify(out));
 
 def test_js_runtime_equals_python(exported, tmp_path):
     node = shutil.which("node")
-    if node is None:
-        pytest.skip("node not found")
+    assert node is not None, "node not found (Debian's nodejs)"
     grid, out = exported
     k, yaw, pitch = _queries(seed=4)
     q = tmp_path / "q.json"
@@ -129,11 +138,10 @@ return q.map(([k, y, p]) => [rt.flow(k, y, p), rt.opacity(k, y, p)]);
 
 
 @pytest.mark.browser
-def test_web_export_rule_in_chromium_equals_python(browser, exported, tmp_path):
+def test_web_export_rule_in_chromium_equals_python(browser, web_exported, tmp_path):
     """The web export's cao2021/ rule in Chromium, served beside example.html."""
-    grid, folder = exported
-    if folder.name != "cao2021" or not (folder.parent / "example.html").is_file():
-        pytest.skip("the web export's folder only")
+    grid, folder = web_exported
+    assert folder.name == "cao2021" and (folder.parent / "example.html").is_file()
     k, yaw, pitch = _queries(n=500, seed=5)
     names = sorted(n.name for n in folder.glob("*.csv"))
     q = [[int(a), float(b), float(c)] for a, b, c in zip(k, yaw, pitch)]
