@@ -154,10 +154,16 @@ def check_not_dual_fisheye(path: str, read, n_frames: int, key: tuple) -> None:
     fisheye in the first frame that tells (:func:`looks_dual_fisheye`). ``read(index)``:
     the stored eye frame ``index``; ``key``: identifies the file's contents (a verdict is
     kept per key)."""
+    if n_frames < 1:  # nothing to look at: the command names the empty stream itself
+        return
     if key not in _verdicts:
         verdict = False
-        for i in sorted({min(int(f * n_frames), max(n_frames - 1, 0)) for f in _AT}):
-            v = looks_dual_fisheye(read(i))
+        for i in sorted({min(int(f * n_frames), n_frames - 1) for f in _AT}):
+            try:
+                frame = read(i)
+            except InputError:  # a frame the stream does not hold: its reader says so later
+                break
+            v = looks_dual_fisheye(frame)
             if v is not None:
                 verdict = v
                 break
