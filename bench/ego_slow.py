@@ -74,7 +74,9 @@ def run_tree(tree: Path, clips: dict[str, str]) -> dict:
 def table(label: str, res: dict) -> None:
     import math
 
-    print(f"\n{label}: error of the mean rate about the turning axis, % (field: mean speed / truth)")
+    print(
+        f"\n{label}: error of the mean rate about the turning axis, % (field: mean speed / truth)"
+    )
     print("   axis   " + "".join(f"{s:>8g}" for s in SPEEDS) + "   other axes max (deg/s)")
     for k, axis in enumerate(AXES):
         errs, fld, cross = [], [], []
