@@ -104,7 +104,7 @@ def main() -> None:
         t_ren = None
         if not a.no_render:
             t_ren = _timed(lambda: render_viewing(src, hp, d / f"r_{name}", config=rcfg,
-                                                  opacity=0.5, preset="ultrafast", audio=False,
+                                                  opacity=0.5, x264_preset="ultrafast", audio=False,
                                                   progress=False))  # fmt: skip
             t_ren += _timed(lambda: sum(1 for _ in src.frames(convert=False)))  # decode alone
         return load_grid(g), t_pre, t_ren

@@ -350,9 +350,9 @@ CASES: list[tuple] = [
     ("an-semicolon", _text("B.csv", "id;condition\nP1;GR\n"), ["analyze", "{d}/B.csv", "-o", "{d}/o"], 2, "';'", ()),
     ("an-missing", None, ["analyze", "{d}/nope.csv", "-o", "{d}/o"], 2, "not found", ()),
     ("an-formula-ids", _formula_ids, ["analyze", "{d}/B.csv", "-o", "{d}/o"], 0, "wrote",
-     ("o/scores.csv", "o/table.csv", "o/table.md", "o/normality.csv", "o/boxplots.png", "o/report.md", "o/.vimsim-manifest.json")),
+     ("o/scores.csv", "o/table.csv", "o/table.md", "o/normality.csv", "o/boxplots.png", "o/report.md", "o/tests.csv", "o/model.csv", "o/analysis.md", "o/.vimsim-manifest.json")),
     ("an-epof-relative", _epof_data, ["analyze", "{d}/sub/B.csv", "-o", "{d}/o"], 0, "wrote",
-     ("o/scores.csv", "o/table.csv", "o/table.md", "o/normality.csv", "o/boxplots.png", "o/report.md", "o/.vimsim-manifest.json")),
+     ("o/scores.csv", "o/table.csv", "o/table.md", "o/normality.csv", "o/boxplots.png", "o/report.md", "o/tests.csv", "o/model.csv", "o/analysis.md", "o/.vimsim-manifest.json")),
     # --- stale temporaries of dead processes are removed, live ones kept
     ("view-stale-tmp", _stale_tmp, [*VIEW, "-o", "{d}/o.png"], 0, "", ("o.png", "-.o.tmp-999999999.png")),
     # --- video inputs

@@ -1,13 +1,42 @@
-"""The GRF opacity options shared by ``vimsim epof`` and ``vimsim render`` (argparse only)."""
+"""The GRF opacity options and the system ``--preset`` shared by ``vimsim epof``, ``render`` and ``frames`` (argparse only)."""
 
 from __future__ import annotations
 
 import argparse
 
 from simulator.commands._types import nonneg_float, percentile, seconds
-from simulator.core.choices import OPACITY_SOURCES
+from simulator.core.choices import OPACITY_SOURCES, SYSTEM_PRESETS, X264_PRESETS
 
-__all__ = ["add_opacity_arguments", "rule_from_args"]
+__all__ = ["add_opacity_arguments", "add_preset_argument", "rule_from_args", "system_preset"]
+
+#: ``--preset``'s help, one text for every command that takes it (docs/parity.md).
+PRESET_HELP = (
+    "the system whose rules run: vimsim (default): the options as given; paper: the paper's "
+    "text (overlap-weighted EPOF, --method paper --opacity-rule paper, 1.5 deg grains, 36-80 "
+    "deg cutout); cao2021-code: the authors' Unity code (the nearest window's flow with their "
+    "CSV list indexing, row k-2 at frame k, opacity on the fixed 0.18..53.73 px/frame scale "
+    "or an imported grid's, black 0.5 deg grains on their Fibonacci layout, no cutout; "
+    "docs/parity.md)"
+)
+
+
+def system_preset(text: str) -> str:
+    """argparse type of ``--preset``: one of :data:`SYSTEM_PRESETS`; an x264 preset name
+    is refused with the option that takes it (``--x264-preset``)."""
+    if text in SYSTEM_PRESETS:
+        return text
+    if text in X264_PRESETS:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is an x264 preset: give it as --x264-preset {text}; --preset takes "
+            f"{', '.join(SYSTEM_PRESETS)}"
+        )
+    raise argparse.ArgumentTypeError(f"expected one of {', '.join(SYSTEM_PRESETS)}; got {text!r}")
+
+
+def add_preset_argument(p: argparse.ArgumentParser) -> None:
+    """``--preset vimsim|paper|cao2021-code``: the whole system's rules (declared once)."""
+    p.add_argument("--preset", type=system_preset, default="vimsim",
+                   metavar="|".join(SYSTEM_PRESETS), help=PRESET_HELP)  # fmt: skip
 
 
 def add_opacity_arguments(p: argparse.ArgumentParser, *, sources=OPACITY_SOURCES) -> None:

@@ -5,9 +5,13 @@ from __future__ import annotations
 import argparse
 import sys
 
-from simulator.commands._opacity import add_opacity_arguments, rule_from_args
+from simulator.commands._opacity import (
+    add_opacity_arguments,
+    add_preset_argument,
+    rule_from_args,
+)
 from simulator.commands._types import add_fov_arguments, frustum_from_args, positive_int
-from simulator.core.choices import EPOF_METHODS, SYSTEM_PRESETS
+from simulator.core.choices import EPOF_METHODS
 
 __all__ = ["register", "run"]
 
@@ -60,15 +64,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "sphere-mode grid with the per-frame camera rotation",
     )
     add_opacity_arguments(p)
-    p.add_argument(
-        "--preset",
-        choices=SYSTEM_PRESETS,
-        default="vimsim",
-        help="vimsim (default): the options as given; paper: the paper's text (--method paper "
-        "--opacity-rule paper); cao2021-code: the authors' Unity code (the nearest window's "
-        "flow with their CSV list indexing, row k-2 at frame k, opacity on the fixed 0.18..53.73 "
-        "px/frame scale; adds a flow_px column; docs/parity.md)",
-    )
+    add_preset_argument(p)
     p.add_argument(
         "--artefacts",
         action="store_true",
@@ -189,11 +185,8 @@ def _run_nearest(args: argparse.Namespace, grid, hp) -> int:
     """``--preset cao2021-code``: the authors' runtime, with the ``flow_px`` column."""
     from simulator.epof import plot_epof, write_epof_csv
     from simulator.epof.nearest import FLOW_PX_COLUMN, nearest_epof
-    from simulator.mitigation.cao2021 import FixedPxRule
 
-    pct = (grid.meta.get("cao") or {}).get("percentiles_px")  # an imported percentile file
-    rule = FixedPxRule(*pct) if pct else FixedPxRule()
-    res = nearest_epof(grid, hp, rule=rule, hold=args.hold_last)
+    res = nearest_epof(grid, hp, hold=args.hold_last)  # the grid's imported scale, if any
     write_epof_csv(args.output, res, extra={FLOW_PX_COLUMN: res.meta["flow_px"]})
     if args.plot:
         plot_epof(args.plot, res, title=f"{args.headpath} on {args.grid} (cao2021-code)")

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.commands._opacity import add_opacity_arguments, rule_from_args
+from simulator.commands._opacity import add_opacity_arguments, add_preset_argument, rule_from_args
 from simulator.commands._types import (
     add_fov_arguments,
     fov_from_args,
@@ -13,7 +13,6 @@ from simulator.commands._types import (
     nonneg_int,
     positive_float,
 )
-from simulator.core.choices import SYSTEM_PRESETS
 
 __all__ = ["register", "run"]
 
@@ -55,13 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "cao2021-code's fixed 0.18/53.73 px/frame or the grid's --low-pct/--high-pct "
         "percentiles of pof_px; docs/parity.md)",
     )
-    p.add_argument(
-        "--preset",
-        choices=SYSTEM_PRESETS,
-        default="vimsim",
-        help="cao-csv: cao2021-code writes the authors' fixed scale 0.18 and 53.73 px/frame to "
-        "percentileData.csv; vimsim (default) and paper the grid's percentiles (docs/parity.md)",
-    )
+    add_preset_argument(p)  # cao-csv: cao2021-code = their fixed scale in percentileData.csv;
+    # unity / web: the header records it; cao2021-code adds their rule (DIR/cao2021/)
     p.add_argument(
         "--method",
         choices=_METHODS,
@@ -138,12 +132,21 @@ def run(args: argparse.Namespace) -> int:
     from simulator.export.unity import export_unity
 
     hfov, vfov = fov_from_args(args, (None, None))  # default: the grid's window FOV
+    if args.preset == "paper" and args.format != "cao-csv":
+        args.method = "paper" if args.method == "auto" else args.method
+        args.opacity_rule = "paper" if args.opacity_rule == "comfort" else args.opacity_rule
     rule = rule_from_args(args)
     if args.format == "cao-csv":
         return _run_cao_csv(args, rule)
     grf, mitigation = _overlay_from_args(args)  # the same overlay options for both formats
+    preset = _engine_preset(args)
+    if args.preset == "cao2021-code":  # their grains: 0.5 deg, Fibonacci layout, no cutout
+        from simulator.mitigation.cao2021 import cao_grf_config
+
+        grf = cao_grf_config(seed=args.seed)
     if args.format == "web":
-        return _run_web(args, hfov, vfov, rule, grf, mitigation)
+        rc = _run_web(args, hfov, vfov, rule, grf, mitigation, preset)
+        return rc if preset["name"] != "cao2021-code" else _write_cao_rule(args)
     res = export_unity(
         args.grid,
         args.output,
@@ -154,6 +157,7 @@ def run(args: argparse.Namespace) -> int:
         rule=rule,
         grf=grf,
         mitigation=mitigation,
+        preset=preset,
     )
     h = res.header
     shape = "x".join(str(s) for s in res.shape)
@@ -168,15 +172,69 @@ def run(args: argparse.Namespace) -> int:
         f"{h['opacity']['ease_in_s']:g} s, ease-out {h['opacity']['ease_out_s']:g} s, smoothing "
         f"{h['opacity']['smoothing_s']:g} s)"
     )
+    return 0 if preset["name"] != "cao2021-code" else _write_cao_rule(args)
+
+
+#: Where a unity / web export with ``--preset cao2021-code`` puts the authors' rule.
+CAO_SUBDIR = "cao2021"
+
+
+def _engine_preset(args: argparse.Namespace) -> dict:
+    """The header's ``preset`` section of a unity / web export; for ``cao2021-code`` the
+    options it fixes are refused and a sphere-mode grid too (InputError before writing)."""
+    from simulator.core.errors import InputError
+    from simulator.media.gridfile import load_grid
+
+    if args.preset != "cao2021-code":
+        return {"name": args.preset}
+    given = [o for o, on in (("--grain-size", args.grain_size != 1.5),
+                             ("--density", args.density != 0.5),
+                             ("--cutout", tuple(args.cutout) != (18.0, 40.0)),
+                             ("--mitigation", args.mitigation != "grf")) if on]  # fmt: skip
+    if given:
+        raise InputError(f"--preset cao2021-code fixes {', '.join(given)}; drop them")
+    g = load_grid(args.grid)
+    if g.field_dps is not None or g.meta.get("method") == "sphere":
+        raise InputError(
+            f"{args.grid}: a sphere-mode grid; --preset cao2021-code's nearest-window rule "
+            "needs a paper-mode grid (vimsim preprocess --method paper --grid cao2021, or "
+            "vimsim grid import)"
+        )
+    from simulator.epof.nearest import grid_px_rule
+
+    r = grid_px_rule(g)
+    return {"name": "cao2021-code", "rule": "nearest window, CSV list indexing (row k-2 at "
+            "frame k), fixed px/frame scale (docs/parity.md)", "folder": CAO_SUBDIR,
+            "runtime": {"unity": "VimsimCao2021.cs", "web": "vimsim_cao2021.js"},
+            "low_px": r.low_px, "high_px": r.high_px}  # fmt: skip
+
+
+def _write_cao_rule(args: argparse.Namespace) -> int:
+    """``DIR/cao2021/``: the grid's windows in the authors' layout (with their frame-0 row
+    when measured) and the runtimes of their rule, VimsimCao2021.cs and vimsim_cao2021.js."""
+    import dataclasses
+    from pathlib import Path
+
+    from simulator.epof.nearest import grid_px_rule, preset_pof_px
+    from simulator.export.caocsv import export_cao_csv
+    from simulator.media.gridfile import load_grid
+
+    g = load_grid(args.grid)
+    r = grid_px_rule(g)
+    g = dataclasses.replace(g, pof_px=preset_pof_px(g))
+    files = export_cao_csv(g, Path(args.output) / CAO_SUBDIR, percentiles_px=(r.low_px, r.high_px))
+    print(f"wrote {Path(args.output) / CAO_SUBDIR}: the authors' rule (--preset cao2021-code): "
+          f"{len(files) - 3} window CSVs, percentileData.csv ({r.low_px:g}, {r.high_px:g} "
+          "px/frame), VimsimCao2021.cs, vimsim_cao2021.js")  # fmt: skip
     return 0
 
 
-def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation) -> int:
+def _run_web(args: argparse.Namespace, hfov, vfov, rule, grf, mitigation, preset=None) -> int:
     from simulator.export.web import export_web
 
     res = export_web(args.grid, args.output, method=args.method, dtype=args.dtype,
                      hfov_deg=hfov, vfov_deg=vfov, rule=rule, grf=grf,
-                     mitigation=mitigation)  # fmt: skip
+                     mitigation=mitigation, preset=preset)  # fmt: skip
     h = res.header
     print(
         f"wrote {res.out_dir}: {', '.join(f.name for f in res.files)} ({res.mode} mode; viewport "

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 
-from simulator.commands._opacity import add_opacity_arguments
+from simulator.commands._opacity import add_opacity_arguments, add_preset_argument
 from simulator.commands._types import (
     add_fov_arguments,
     nonneg_deg,
@@ -108,6 +108,7 @@ def add_view_options(p: argparse.ArgumentParser) -> None:
         help="EPOF method, as vimsim epof (auto: sphere when the grid has a field)",
     )
     add_opacity_arguments(p)
+    add_preset_argument(p)
     p.add_argument(
         "--layout",
         choices=LAYOUTS,
@@ -237,7 +238,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         help="render only frames before S seconds of video time (default: the video's end)",
     )
     p.add_argument(
-        "--preset", choices=X264_PRESETS, default="veryfast", help="x264 preset (default veryfast)"
+        "--x264-preset",
+        choices=X264_PRESETS,
+        default="veryfast",
+        help="x264 speed preset of the eye videos (default veryfast; --preset is the system's)",
     )
     p.add_argument(
         "--crf",
@@ -299,7 +303,7 @@ def run(args: argparse.Namespace) -> int:
             args.output,
             grid=grid,
             view=view,
-            preset=args.preset,
+            x264_preset=args.x264_preset,
             crf=args.crf,
             progress=bar,
             note=note,

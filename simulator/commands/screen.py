@@ -32,6 +32,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("-o", "--output", required=True, metavar="OUTDIR", help="output folder")
     p.add_argument("--viewers", type=int, default=30, metavar="N",
                    help="scripted viewers per video (default 30)")  # fmt: skip
+    p.add_argument("--force", action="store_true",
+                   help="run a screening whose --viewers make it estimated to take over half "
+                   "an hour of CPU (refused otherwise)")  # fmt: skip
     p.add_argument("--viewer-kind", default="look-around", metavar="KIND",
                    help="scripted head path of each viewer: look-around (default), sine, "
                    "sweep or static (vimsim headpath synth)")  # fmt: skip
@@ -85,7 +88,7 @@ def run(args: argparse.Namespace) -> int:
                           seed=args.seed, epof=epof, artefacts=not args.no_artefacts,
                           grids=args.grid, layout=args.layout, projection=args.projection,
                           lens_fov_deg=args.lens_fov, executor=args.executor, workers=args.workers,
-                          cache_dir=args.cache_dir, model=model,
+                          cache_dir=args.cache_dir, model=model, force=args.force,
                           progress=None if bar is None else (lambda d, f, t: bar(d, t, f)))  # fmt: skip
     for f in s["failures"]:
         print(f"vimsim screen: failed {f['viewing']}: {f['status']}", file=sys.stderr)

@@ -17,6 +17,7 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from simulator.core.errors import InputError
+from simulator.core.lifeline import exit_if_orphaned
 
 __all__ = [
     "OutputFolder",
@@ -44,7 +45,10 @@ __all__ = [
 #: opens one per command; resolved paths): an output that is the same file as one of
 #: them is refused (never destroy an input). Empty and unused outside a scope.
 _INPUTS: set[Path] = set()
-_SCOPES: list[set[Path]] = []
+#: The same inputs by ``(st_dev, st_ino)`` (those that existed when read): one lookup per
+#: output, not one ``samefile`` per input (a study reads thousands of files).
+_INPUT_IDS: dict[tuple[int, int], Path] = {}
+_SCOPES: list[tuple[set[Path], dict]] = []
 
 #: The temporary-name pattern of :func:`atomic_output`: ``.<stem>.tmp-<pid><suffix>``.
 _TMP_RE = re.compile(r"^\.(?P<stem>.*)\.tmp-(?P<pid>\d+)(?P<suffix>(\.[^.]*)?)$")
@@ -60,16 +64,19 @@ MANIFEST_NAME = ".vimsim-manifest.json"
 def input_scope(inputs: Iterable[str | os.PathLike] = ()) -> Iterator[None]:
     """Within it, every file read through :func:`check_input_file` (and ``inputs``) is an
     input of one run, and :func:`atomic_output` refuses to write over any of them."""
-    saved = set(_INPUTS)
-    _SCOPES.append(saved)
+    _SCOPES.append((set(_INPUTS), dict(_INPUT_IDS)))
     _INPUTS.clear()
+    _INPUT_IDS.clear()
     try:
         for x in inputs:
             register_input(x)
         yield
     finally:
+        paths, ids = _SCOPES.pop()
         _INPUTS.clear()
-        _INPUTS.update(_SCOPES.pop())
+        _INPUTS.update(paths)
+        _INPUT_IDS.clear()
+        _INPUT_IDS.update(ids)
 
 
 @contextlib.contextmanager
@@ -94,7 +101,10 @@ def register_input(path: str | os.PathLike) -> None:
     """Record ``path`` as an input of this run (inside :func:`input_scope` only)."""
     if _SCOPES:
         with contextlib.suppress(OSError):
-            _INPUTS.add(Path(path).resolve())
+            r = Path(path).resolve()
+            _INPUTS.add(r)
+            st = os.stat(r)
+            _INPUT_IDS[(st.st_dev, st.st_ino)] = r
 
 
 def known_inputs() -> list[Path]:
@@ -117,12 +127,31 @@ def check_not_input(target: str | os.PathLike, inputs: Iterable[str | os.PathLik
     symlinks, hard links and ``./`` spellings count; by resolved path where it does not
     exist yet). ``inputs`` adds to those recorded by :func:`register_input`."""
     t = Path(target)
-    for inp in [*_INPUTS, *(Path(x) for x in inputs if x is not None and str(x).strip())]:
-        if _same_file(t, inp):
-            raise InputError(
-                f"{target}: output is the same file as the input {inp}; "
-                "refusing to overwrite an input (choose another output name)"
-            )
+    extra = (Path(x) for x in inputs if x is not None and str(x).strip())
+    inp = _registered_input(t) or next((x for x in extra if _same_file(t, x)), None)
+    if inp is not None:
+        raise InputError(
+            f"{target}: output is the same file as the input {inp}; "
+            "refusing to overwrite an input (choose another output name)"
+        )
+
+
+def _registered_input(t: Path) -> Path | None:
+    """The recorded input that ``t`` is (same inode, or same resolved path), or None."""
+    if not _INPUTS:
+        return None
+    with contextlib.suppress(OSError):
+        st = os.stat(t)
+        hit = _INPUT_IDS.get((st.st_dev, st.st_ino))
+        # confirmed on the input itself: an inode is reused once its file is deleted (a
+        # temporary input gone, a new output given its number)
+        if hit is not None and _same_file(t, hit):
+            return hit
+    try:
+        r = t.resolve()
+    except OSError:
+        return None
+    return r if r in _INPUTS else None
 
 
 def _pid_alive(pid: int) -> bool:
@@ -146,16 +175,18 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
     t = Path(target)
     parent = t.parent if str(t.parent) else Path(".")
     removed = []
-    try:
-        entries = list(parent.iterdir())
+    prefix = f".{t.stem}.tmp-"
+    try:  # names only, a cheap prefix test first: a folder of thousands of outputs
+        names = [n for n in os.listdir(parent) if n.startswith(prefix)]
     except OSError:
         return removed
-    for e in entries:
-        m = _TMP_RE.match(e.name)
+    for name in names:
+        m = _TMP_RE.match(name)
         if not m or m["stem"] != t.stem or m["suffix"] != t.suffix:
             continue
         if _pid_alive(int(m["pid"])):
             continue
+        e = parent / name
         with contextlib.suppress(OSError):
             e.unlink()
             removed.append(e)
@@ -192,6 +223,7 @@ class PendingOutput:
     """
 
     def __init__(self, path: str | os.PathLike):
+        exit_if_orphaned()  # a worker whose command is gone writes nothing
         self.target = check_output_file(path)
         _run_before_output()
         parent = self.target.parent if str(self.target.parent) else Path(".")
@@ -202,6 +234,7 @@ class PendingOutput:
         """Rename the finished temporary file into place (refused if the target became an
         input meanwhile); returns the target."""
         check_not_input(self.target)  # an input registered while writing
+        exit_if_orphaned(cleanup=self.discard)
         os.replace(self.tmp, self.target)
         return self.target
 

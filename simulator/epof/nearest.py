@@ -21,7 +21,7 @@ from simulator.media.spherical import view_angles_deg
 from simulator.mitigation.cao2021 import FixedPxRule, nearest_flow
 from simulator.traces.path import HeadPath
 
-__all__ = ["FLOW_PX_COLUMN", "nearest_epof", "preset_pof_px"]
+__all__ = ["FLOW_PX_COLUMN", "grid_px_rule", "nearest_epof", "preset_pof_px"]
 
 #: The extra EPOF CSV column of the preset: the nearest window's flow, window px/frame.
 FLOW_PX_COLUMN = "flow_px"
@@ -46,6 +46,14 @@ def preset_pof_px(grid: GridFile):
     return out
 
 
+def grid_px_rule(grid: GridFile) -> FixedPxRule:
+    """The preset's fixed px/frame scale for ``grid``: an imported percentile file's two
+    numbers (``meta["cao"]["percentiles_px"]``, ``vimsim grid import``), else the authors'
+    0.18..53.73."""
+    pct = (grid.meta.get("cao") or {}).get("percentiles_px")
+    return FixedPxRule(*pct) if pct else FixedPxRule()
+
+
 def nearest_epof(
     grid: GridFile,
     hp: HeadPath,
@@ -53,24 +61,29 @@ def nearest_epof(
     rule: FixedPxRule | None = None,
     hold: bool = False,
     frames: tuple[int, int] | None = None,
+    orientation_deg="grid",
 ) -> EpofResult:
     """The authors' runtime over one viewing: per video frame ``k``, the nearest window
     (:func:`simulator.mitigation.cao2021.nearest_window`, steps = the grid's) and its row
-    ``k - 2`` (0 before frame 2 and past the grid); opacity by ``rule`` (default the authors' scale) from ``pof_px``
+    ``k - 2`` (0 before frame 2 and past the grid); opacity by ``rule`` (default
+    :func:`grid_px_rule`: the authors' scale or the grid's imported one) from ``pof_px``
     (:func:`preset_pof_px`: with their frame-0 defect in row 0, which flashes at frame 2).
 
     ``result.meta["flow_px"]`` holds the px/frame flow of each row (the CSV's
-    :data:`FLOW_PX_COLUMN`). The source's initial orientation (``meta["source"]``) turns
-    each head pose, as in vimsim's EPOF; the head's roll is not used (their rule has none).
+    :data:`FLOW_PX_COLUMN`). The source's initial orientation turns each head pose, as in
+    vimsim's EPOF (``orientation_deg``: yaw, pitch, roll in degrees, None: none, ``"grid"``:
+    the grid's ``meta["source"]``); the head's roll is not used (their rule has none).
     """
-    rule = FixedPxRule() if rule is None else rule
+    rule = grid_px_rule(grid) if rule is None else rule
     g = grid.grid
     frame, t, _rows = _select_frames(grid, frames)
     hp.check_covers(float(t[-1]), hold=hold,
                     video=grid.meta.get("video", {}).get("path", "") or grid.path,
                     start_s=float(t[0]))  # fmt: skip
     yaw, pitch, roll = hp.sample_angles_deg(t, hold=hold)
-    pose = (grid.meta.get("source") or {}).get("orientation_deg")
+    pose = orientation_deg
+    if isinstance(pose, str):
+        pose = (grid.meta.get("source") or {}).get("orientation_deg")
     vy, vp, _ = view_angles_deg(pose, yaw, pitch, roll)
     steps = {"yaw_step_deg": g.yaw_step_deg, "pitch_step_deg": g.pitch_step_deg}
     try:

@@ -150,12 +150,13 @@ def export_web(
     grf: GrfConfig | None = None,
     mitigation: Mitigation | None = None,
     example: bool = True,
+    preset: dict | None = None,
 ) -> WebExport:
     """Write the web runtime for a grid into ``out_dir`` (see the module docstring).
 
     ``method``, ``dtype``, ``hfov_deg``, ``vfov_deg``, ``rule``, ``grf`` (the grains: default
     ``GrfConfig()``, the paper's), ``mitigation`` (what the overlay draws and the vignette's
-    settings: default ``grf``): as :func:`simulator.export.unity.export_unity`, whose
+    settings: default ``grf``), ``preset``: as :func:`simulator.export.unity.export_unity`, whose
     ``vimsim_epof.bin`` this writes; ``example``: write ``example.html``. Files of these
     names that an earlier web export did not write are refused (InputError, nothing written).
     """
@@ -164,7 +165,7 @@ def export_web(
     inputs = [g.path] if g.path else []
     OutputFolder(out_dir, names, "export --format web").check(inputs)
     kw = {"method": method, "dtype": dtype, "hfov_deg": hfov_deg, "vfov_deg": vfov_deg,
-          "rule": rule, "grf": grf, "mitigation": mitigation}  # fmt: skip
+          "rule": rule, "grf": grf, "mitigation": mitigation, "preset": preset}  # fmt: skip
     with tempfile.TemporaryDirectory(prefix="vimsim-web-") as work:
         data_tmp = Path(work) / DATA_FILE  # bad options fail here, before anything is written
         try:

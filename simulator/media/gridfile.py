@@ -105,14 +105,16 @@ class GridFile:
     ) -> None:
         """Raise InputError unless this grid was made from the video described by ``info``
         (a :class:`simulator.media.video.MediaInfo`): same stored size and frame rate, and a
-        frame count within one frame (container headers and decoders may differ by one).
+        frame count within one frame (container headers and decoders may differ by one); the
+        size is not checked for a grid that does not record it (`vimsim grid import`).
 
         ``frames = (f0, f1)``: only video frames ``f0 <= i < f1`` are needed (a rendered
         time range), so a grid made with ``preprocess --start/--end`` covering them is
         accepted; default: the grid must cover the whole video."""
         v = self.meta["video"]
         src = source or self.path
-        if (int(v["width"]), int(v["height"])) != (info.width, info.height):
+        sized = "width" in v and "height" in v  # an imported grid (grid import) has no size
+        if sized and (int(v["width"]), int(v["height"])) != (info.width, info.height):
             raise InputError(
                 f"{src}: grid was made from a {v['width']}x{v['height']} video, not this "
                 f"{info.width}x{info.height} one ({info.path}); run vimsim preprocess on it"

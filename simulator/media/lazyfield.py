@@ -103,12 +103,15 @@ class _RawFile:
 
 def spool_name(field: LazyField, what: str) -> str | None:
     """A file name for a spool of ``field`` (made ``what``-wise) that changes with the
-    grid file it reads (path, size, time, inode, member); None for a row selection."""
+    grid file it reads (path, size, time, inode, member; a spool's own name); None for a
+    row selection."""
     if field._rows is not None:
         return None
-    st = field.path.stat()
-    member = getattr(field._src, "name", "raw")
-    key = f"{field.path.resolve()}:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}:{member}:{what}"
+    if isinstance(field._src, _RawFile):  # a spool: its name already says what it holds
+        key = f"{field.path.name}:{what}"
+    else:
+        st = field.path.stat()
+        key = f"{field.path.resolve()}:{st.st_size}:{st.st_mtime_ns}:{st.st_ino}:{field._src.name}:{what}"
     return hashlib.sha1(key.encode()).hexdigest()[:24] + f".{what}.f32"
 
 

@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 
 from simulator.core.errors import InputError
 from simulator.mitigation.grf import GrainField, GrfConfig
+from simulator.mitigation.layouts import fibonacci_sphere
 
 __all__ = [
     "CAO_GRAIN_DEG",
@@ -42,6 +43,7 @@ __all__ = [
     "CAO_LOW_PX",
     "FixedPxRule",
     "cao_grain_field",
+    "cao_grf_config",
     "fibonacci_sphere",
     "list_row",
     "nearest_flow",
@@ -166,26 +168,17 @@ def nearest_flow(
     return np.where(r >= 0, out, 0.0)
 
 
-def fibonacci_sphere(n: int) -> NDArray[np.float64]:
-    """``n`` unit vectors on a Fibonacci sphere, world frame (+x right, +y up, +z forward),
-    shape (n, 3): ``y = 1 - 2 (i + 0.5) / n`` and longitude ``i`` times the golden angle."""
-    i = np.arange(int(n), dtype=np.float64)
-    y = 1.0 - 2.0 * (i + 0.5) / n
-    r = np.sqrt(np.maximum(0.0, 1.0 - y * y))
-    lon = i * math.pi * (3.0 - math.sqrt(5.0))
-    return np.stack([r * np.sin(lon), y, r * np.cos(lon)], axis=-1)
+def cao_grf_config(*, grain_deg: float = CAO_GRAIN_DEG, seed: int = 0) -> GrfConfig:
+    """Their grains as a :class:`~simulator.mitigation.grf.GrfConfig`: ``grain_deg`` grains
+    on the ``fibonacci`` layout (:mod:`simulator.mitigation.layouts`), no cutout (0..1e-6
+    deg: alpha is the opacity everywhere but a point); ``density`` is not used."""
+    return GrfConfig(grain_deg=grain_deg, density=0.5, inner_deg=0.0, outer_deg=1e-6,
+                     seed=seed, layout="fibonacci")  # fmt: skip
 
 
 @functools.lru_cache(maxsize=4)
 def cao_grain_field(*, grain_deg: float = CAO_GRAIN_DEG, seed: int = 0) -> GrainField:
-    """Their grain layout: a Fibonacci sphere of ``round(180 * 360 / grain_deg^2)`` points,
-    a random half kept (``seed``; their Unity random draw cannot be reproduced), grains of
-    ``grain_deg`` diameter, no cutout (the config's cutout is 0..1e-6 deg: alpha is the
-    opacity everywhere but a point). Centres read-only."""
-    n = round(180.0 * 360.0 / (grain_deg * grain_deg))
-    pts = fibonacci_sphere(n)
-    keep = np.sort(np.random.default_rng(seed).choice(n, n // 2, replace=False))
-    centers = np.ascontiguousarray(pts[keep])
-    centers.setflags(write=False)
-    cfg = GrfConfig(grain_deg=grain_deg, density=0.5, inner_deg=0.0, outer_deg=1e-6, seed=seed)
-    return GrainField(cfg, centers, math.radians(grain_deg) / 2.0)
+    """Their grain layout (:func:`cao_grf_config`): a Fibonacci sphere of
+    ``round(180 * 360 / grain_deg^2)`` points, a random half kept (``seed``; their Unity
+    random draw cannot be reproduced), grains of ``grain_deg`` diameter. Centres read-only."""
+    return GrainField.from_config(cao_grf_config(grain_deg=grain_deg, seed=seed))

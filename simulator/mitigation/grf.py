@@ -35,6 +35,7 @@ from simulator.core.errors import InputError
 from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import GridFile
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
+from simulator.mitigation.layouts import GRAIN_LAYOUTS, LAYOUTS, layout_centers
 
 __all__ = [
     "COMFORT_EASE_IN_S",
@@ -71,6 +72,8 @@ class GrfConfig:
     distance_m : grain distance in metres for stereo parallax; ``None`` = at infinity
         (identical for both eyes)
     ipd_m : interpupillary distance in metres, used only with ``distance_m``
+    layout : where the grains lie (:mod:`simulator.mitigation.layouts`): ``random``
+        (the paper's) or ``fibonacci`` (the authors' Unity layout; ``density`` unused)
     """
 
     grain_deg: float = 1.5
@@ -80,8 +83,13 @@ class GrfConfig:
     seed: int = 0
     distance_m: float | None = None
     ipd_m: float = 0.063
+    layout: str = "random"
 
     def __post_init__(self) -> None:
+        if self.layout not in GRAIN_LAYOUTS:
+            raise InputError(
+                f"GRF layout must be one of {', '.join(GRAIN_LAYOUTS)}; got {self.layout!r}"
+            )
         if not (0.0 < self.grain_deg <= 30.0):
             raise InputError(
                 f"GRF grain size must be degrees in (0, 30], e.g. 1.5; got {self.grain_deg}"
@@ -118,7 +126,10 @@ def grain_count(config: GrfConfig) -> int:
     Each of ``n`` independent uniform grains misses a given direction with probability
     ``1 - a / 4 pi`` (``a``: grain solid angle), so the expected blocked fraction is
     ``1 - (1 - a / 4 pi)^n`` (``~ 1 - exp(-n a / 4 pi)``); solved for ``n`` and rounded.
+    A layout with its own count (``fibonacci``) gives that instead.
     """
+    if LAYOUTS[config.layout][1] is not None:
+        return int(LAYOUTS[config.layout][1](config))
     p = config.grain_solid_angle_sr / (4.0 * math.pi)
     return max(1, round(math.log1p(-config.density) / math.log1p(-p)))
 
@@ -173,7 +184,7 @@ class GrainField:
 
     @classmethod
     def from_config(cls, config: GrfConfig = GrfConfig()) -> GrainField:
-        """Place :func:`grain_count` grains uniformly on the sphere with ``config.seed``."""
+        """Place :func:`grain_count` grains by ``config.layout`` with ``config.seed``."""
         return _field_cached(config)
 
     def buckets(self, margin_rad: float, *, cell_deg: float | None = None) -> GrainBuckets:
@@ -189,14 +200,7 @@ class GrainField:
 
 @functools.lru_cache(maxsize=8)
 def _field_cached(config: GrfConfig) -> GrainField:
-    n = grain_count(config)
-    rng = np.random.default_rng(config.seed)
-    z = rng.uniform(-1.0, 1.0, n)
-    lon = rng.uniform(-math.pi, math.pi, n)
-    s = np.sqrt(1.0 - z * z)
-    # z uniform in [-1, 1] is uniform on the sphere; the axis it runs along is world +y.
-    centers = np.stack([s * np.sin(lon), z, s * np.cos(lon)], axis=-1)
-    centers.setflags(write=False)
+    centers = layout_centers(config, grain_count(config))
     return GrainField(config, centers, math.radians(config.grain_deg) / 2.0)
 
 

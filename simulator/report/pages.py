@@ -63,7 +63,10 @@ class Site:
     ``videos``: what :mod:`simulator.report.build` made per video)."""
 
     def __init__(self, study: dict, rows: list[dict], videos: dict):
-        self.s, self.rows, self.videos = study, rows, videos
+        # each viewing's system preset (the study's [epof] preset; docs/parity.md)
+        preset = ((study.get("settings") or {}).get("epof") or {}).get("preset") or "vimsim"
+        self.s, self.videos = study, videos
+        self.rows = [{**r, "preset": preset} for r in rows]
 
     def static_pages(self):
         yield "index.html", self.summary_page()

@@ -26,7 +26,7 @@ from simulator.study.manifest import SCRIPTED, VIEWER_KINDS, Manifest, VideoSpec
 from simulator.study.runner import run_study
 from simulator.study.tasks import write_json
 
-__all__ = ["SCREEN_COLUMNS", "VIEWER_KINDS", "check_viewers", "screen_videos"]
+__all__ = ["SCREEN_COLUMNS", "VIEWER_KINDS", "check_viewers", "check_work", "screen_videos"]
 
 
 def check_viewers(n, kind: str) -> None:
@@ -35,6 +35,28 @@ def check_viewers(n, kind: str) -> None:
         raise InputError(f"--viewers must be an integer in 1..100000; got {n!r}")
     if kind not in VIEWER_KINDS:
         raise InputError(f"unknown viewer kind {kind!r}; expected one of {', '.join(VIEWER_KINDS)}")
+
+
+#: Scripted viewers per video by default (``--viewers``).
+DEFAULT_VIEWERS = 30
+#: CPU seconds of one scripted viewing, and of each frame of it (exact EPOF on a small
+#: grid, with room for a slower machine), and the estimate above which more viewers than
+#: the default need ``force=True`` (``--force``): an hours-long screening is asked for.
+VIEWING_CPU_S, FRAME_CPU_S, WORK_LIMIT_CPU_S = 0.02, 0.0003, 1800.0
+
+
+def check_work(viewers: int, frames: list[int], *, force: bool = False) -> float:
+    """The estimated CPU seconds of ``viewers`` scripted viewers of videos of ``frames``
+    frames; InputError (before any work) when more viewers than the default would take
+    longer than :data:`WORK_LIMIT_CPU_S` unless ``force``."""
+    est = viewers * sum(VIEWING_CPU_S + n * FRAME_CPU_S for n in frames)
+    if viewers > DEFAULT_VIEWERS and est > WORK_LIMIT_CPU_S and not force:
+        raise InputError(
+            f"--viewers {viewers}: about {est / 3600:.1f} CPU hours of EPOF ({viewers} viewers x "
+            f"{sum(frames)} frames in {len(frames)} video(s)); pass --force to run it, or "
+            "choose fewer viewers"
+        )
+    return est
 
 
 def _video_id(path: Path, taken: set[str]) -> str:
@@ -82,6 +104,7 @@ def screen_videos(
     cache_dir=None,
     progress=None,
     model=None,
+    force: bool = False,
 ) -> dict:
     """Screen ``videos`` into ``outdir``; returns the study summary with ``screen`` added.
 
@@ -91,7 +114,9 @@ def screen_videos(
     ``lens_fov_deg``: of every video (None: each file's spherical metadata, else equirect).
     ``model``: a discomfort model (:class:`simulator.discomfort.model.Model`, or the path of
     its JSON, checked before any work) whose predictions join the comparison table.
-    InputError (nothing written) for no video, a still image, a missing file, bad viewers.
+    InputError (nothing written) for no video, a still image, a missing file, bad viewers,
+    more viewers than the default whose work estimate exceeds the limit unless ``force``
+    (:func:`check_work`).
     """
     check_viewers(viewers, kind)
     if model is not None and not isinstance(model, Model):
@@ -102,14 +127,16 @@ def screen_videos(
     if not paths:
         raise InputError("screen needs at least one video")
     grid_files = [check_input_file(g, "grid") for g in grids]
-    sources = {}
+    sources, frames = {}, []
     for p in paths:
         info = probe(p)
         if not info.is_video or info.n_frames < 2:
             raise InputError(f"{p}: is a still image; screen needs a video")
+        frames.append(int(info.n_frames))
         # the layout and projection must fit the frame (InputError naming the file)
         sources[p] = Source.open(p, layout=layout, projection=projection,
                                  lens_fov_deg=lens_fov_deg)  # fmt: skip
+    check_work(viewers, frames, force=force)
     out = Path(outdir)
     taken: set[str] = set()
     specs, views, reused = [], [], {}

@@ -98,6 +98,9 @@ def head_rotation(yaw_deg, pitch_deg, roll_deg=0.0) -> Rotation:
         np.asarray(yaw_deg, float), np.asarray(pitch_deg, float), np.asarray(roll_deg, float)
     )
     angles = np.stack([yaw, -pitch, -roll], axis=-1)
+    if angles.ndim == 2 and len(angles) > 1 << 16:  # a long path: scipy's temporaries per chunk
+        return Rotation.concatenate([Rotation.from_euler("YXZ", angles[i : i + (1 << 16)], degrees=True)
+                                     for i in range(0, len(angles), 1 << 16)])  # fmt: skip
     return Rotation.from_euler("YXZ", angles, degrees=True)
 
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from simulator.core.errors import InputError
 from simulator.sphere.headsets import resolve_fov
 
-__all__ = ["Entry", "stem_fields", "user_numbers"]
+__all__ = ["Entry", "short_spec", "stem_fields", "user_numbers", "user_spans"]
 
 
 class Entry:
@@ -80,9 +80,10 @@ _USER_PART = re.compile(r"^\s*(\d+)\s*(?:-\s*(\d+)\s*)?$")
 _USER_HELP = 'expected a number >= 1, a list, a range such as "1-12" (or "1-3,7") or "all"'
 
 
-def user_numbers(e: Entry, key: str, value) -> list[int]:
-    """The users a spec names, in order, without repeats (not checked against a file)."""
-    out: list[int] = []
+def user_spans(e: Entry, key: str, value) -> list[tuple[int, int]]:
+    """The ranges ``(first, last)`` a user spec names, in order, checked but never expanded
+    (``"1-99999999999999999999"`` is one pair: bounds are checked before any list is made)."""
+    spans: list[tuple[int, int]] = []
     for item in value if isinstance(value, list) else [value]:
         if isinstance(item, bool) or not isinstance(item, (int, str)):
             e.fail(f"{key} = {value!r}: {_USER_HELP}")
@@ -100,10 +101,31 @@ def user_numbers(e: Entry, key: str, value) -> list[int]:
                     e.fail(f"{key} = {value!r}: range {part.strip()!r} is empty")
             if lo < 1:
                 e.fail(f"{key} = {value!r}: {_USER_HELP}")
-            out += [u for u in range(lo, hi + 1) if u not in out]
-    if not out:
+            spans.append((lo, hi))
+    if not spans:
         e.fail(f"{key} = {value!r}: names no user; {_USER_HELP}")
-    return out
+    return spans
+
+
+def user_numbers(e: Entry, key: str, value, *, n_users: int, where: str = "") -> list[int]:
+    """The users a spec names, in order, without repeats, each checked against the
+    ``n_users`` a file holds before the spec is expanded (a user beyond them: the entry's
+    error, naming ``where`` and the file's range, in time independent of the spec's size)."""
+    spans = user_spans(e, key, value)
+    beyond = [max(lo, n_users + 1) for lo, hi in spans if hi > n_users]
+    if beyond:
+        held = f"users 1-{n_users}" if n_users > 1 else "one user (1)"
+        e.fail(f"{where}no user {min(beyond)} ({key} = {short_spec(value)}); the file holds {held}")
+    out: dict[int, None] = {}  # ordered, repeats dropped in linear time
+    for lo, hi in spans:
+        out.update(dict.fromkeys(range(lo, hi + 1)))
+    return list(out)
+
+
+def short_spec(value) -> str:
+    """A spec as the manifest wrote it, cut to one readable line."""
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def stem_fields(trace: Path, user: int | None, n_users: int) -> dict:

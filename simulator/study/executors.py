@@ -29,10 +29,12 @@ import signal
 import socket
 import sys
 import threading
+import time
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 from simulator.core.errors import InputError
+from simulator.core.lifeline import exit_if_orphaned, watch_parent
 
 __all__ = ["LocalExecutor", "RayExecutor", "make_executor", "parse_executor"]
 
@@ -111,7 +113,9 @@ def safe_import_path(path: list[str], cwd: str | None = None) -> list[str]:
     return keep
 
 
-def _worker_init() -> None:
+def _worker_init(command_pid: int | None = None) -> None:
+    # Die with the command (even a kill -9 of it): no orphan keeps writing into OUTDIR.
+    watch_parent(command_pid)
     # The pool hands each worker the driver's sys.path (with the working folder first
     # when the driver was started as ``python -m`` / ``-c``): drop it before any task.
     sys.path[:] = safe_import_path(sys.path)
@@ -142,11 +146,33 @@ def _start_fork_server() -> None:
 
 
 def _run_task(fn, args):
+    exit_if_orphaned()  # a task still queued when the command died is never started
     _IN_TASK[0] = True
     try:
         return fn(*args)
     finally:
         _IN_TASK[0] = False
+
+
+#: Seconds a cancelled pool's workers get to end on SIGTERM before SIGKILL.
+STOP_GRACE_S = 1.0
+
+
+def _stop_workers(pool: cf.ProcessPoolExecutor, grace_s: float = STOP_GRACE_S) -> None:
+    """End a pool now: its queue cancelled, its workers terminated (killed if still there
+    after ``grace_s``), never joined without a bound."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError, AttributeError):
+            p.terminate()
+    pool.shutdown(wait=False, cancel_futures=True)
+    end = time.monotonic() + grace_s
+    for p in procs:
+        with contextlib.suppress(OSError, ValueError, AssertionError, AttributeError):
+            p.join(max(0.0, end - time.monotonic()))
+            if p.is_alive():
+                p.kill()
+                p.join(0.5)
 
 
 class LocalExecutor:
@@ -187,7 +213,8 @@ class LocalExecutor:
 
     def _new_pool(self) -> cf.ProcessPoolExecutor:
         return cf.ProcessPoolExecutor(
-            max_workers=self.workers, mp_context=self._ctx, initializer=_worker_init
+            max_workers=self.workers, mp_context=self._ctx, initializer=_worker_init,
+            initargs=(os.getpid(),),
         )
 
     def submit(self, fn, *args, num_cpus: int = 1, alone: bool = False) -> cf.Future:
@@ -260,10 +287,16 @@ class LocalExecutor:
         return {"executor": "local", "workers": self.workers}
 
     def close(self, cancel: bool = False, wait: bool = True) -> None:
+        """Shut the pool down; ``cancel``: drop queued tasks and end the running ones now
+        (their workers terminated, killed after ``STOP_GRACE_S``; a task writes each output
+        to a temporary name, so none is left half-written), as after a signal: joining
+        workers that finish their chunks could take hours."""
         if cancel:
             for h, *_ in self._queue:
                 h.cancel()
             self._queue.clear()
+            _stop_workers(self._pool)
+            return
         self._pool.shutdown(wait=wait, cancel_futures=cancel)
 
     def join(self) -> None:

@@ -16,14 +16,15 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS
+from simulator.core.choices import MITIGATIONS, OPACITY_RULES, PROJECTIONS, SYSTEM_PRESETS
+from simulator.core.choices import X264_PRESETS as _PRESETS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.core.traceopts import TraceOptions
 from simulator.discomfort.predict import study_model
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.study.entry import Entry, stem_fields, user_numbers
+from simulator.study.entry import Entry, short_spec, stem_fields, user_numbers, user_spans
 from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import n_users
@@ -42,7 +43,7 @@ _VIDEO_KEYS = (
 )  # fmt: skip
 _GRF_KEYS = ("grain_size", "density", "cutout", "seed", "grain_distance")
 _RENDER_KEYS = ("eye_size", "fov", "hfov", "vfov", "headset", "grf", "opacity", "hold_last",
-                "preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
+                "x264_preset", "crf", "cpus", "mitigation", "aperture_min", "feather",
                 "vignette_color", "start", "end", "review", "eyes", "audio")  # fmt: skip
 #: Render options a viewing may set for itself (over [render] and [grf]); cpus is the
 #: study's; a viewing's hold_last is a trace key (it reaches the EPOF and the render).
@@ -53,9 +54,8 @@ _QUEST_KEYS = ("path", "flow_stat", "exclude_below", "conditions", "k_of")
 _EPOF_KEYS = (
     "fov", "hfov", "vfov", "headset", "method", "top_k", "hold_last", "low_pct", "high_pct",
     "opacity_source", "smooth", "ease_in", "ease_out", "opacity_rule", "low_dps", "high_dps",
-    "artefacts",
+    "artefacts", "preset",
 )  # fmt: skip
-_PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow")
 
 
 @dataclass(frozen=True)
@@ -202,11 +202,7 @@ def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | N
         return [None], n
     if user == "all":
         return (list(range(1, n + 1)) if n > 1 or tfmt == "360vidstr" else [None]), n
-    users = user_numbers(e, "user", user)
-    bad = [u for u in users if u > n]
-    if bad:
-        e.fail(f"{trace}: no user {bad[0]} (user = {user!r}); the file holds {n}")
-    return list(users), n
+    return list(user_numbers(e, "user", user, n_users=n, where=f"{trace}: ")), n
 
 
 def _render_users(e: Entry, render, users: list[int | None]) -> set:
@@ -216,10 +212,13 @@ def _render_users(e: Entry, render, users: list[int | None]) -> set:
         return set(users) if render else set()
     if users == [None]:
         e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
-    chosen = user_numbers(e, "render", render)
-    missing = [u for u in chosen if u not in users]
+    top = max(users)  # checked against the entry's users before the spec is expanded
+    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
+    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
+    taken = set(users)
+    missing = beyond or [u for u in chosen if u not in taken]
     if missing:
-        e.fail(f"render = {render!r}: user {missing[0]} is not among this entry's users")
+        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
     return set(chosen)
 
 
@@ -349,6 +348,10 @@ def _epof(m: Path, t) -> dict:
     high = e.number("high_pct", 90.0, lo=0.0, hi=100.0)
     if not low < high:
         e.fail(f"low_pct ({low}) must be below high_pct ({high})")
+    preset = e.get("preset", (str,), "vimsim", choices=SYSTEM_PRESETS)
+    bad = [k for k in ("top_k", "artefacts", "fov", "hfov", "vfov", "headset") if k in e.t]
+    if preset == "cao2021-code" and bad:  # the nearest window: no FOV, no top-k
+        e.fail(f"preset = 'cao2021-code' cannot be combined with {bad[0]}")
     return {
         "hfov_deg": h,
         "vfov_deg": v,
@@ -369,6 +372,7 @@ def _epof(m: Path, t) -> dict:
         "high_dps": dps[1],
         # Codec keyframes, cuts, fades, overlays: detected, left out of thresholds, held.
         "artefacts": e.get("artefacts", (bool,), False),
+        "preset": preset,  # as --preset (docs/parity.md); the render's too, checked by _view
     }
 
 
@@ -398,7 +402,7 @@ def _render(m: Path, t, where: str = "[render]") -> dict:
         "grf": e.get("grf", (str,), "on", choices=("on", "off")),
         "opacity": opacity if isinstance(opacity, str) else float(opacity),
         "hold_last": e.get("hold_last", (bool,), False),
-        "preset": e.get("preset", (str,), "veryfast", choices=_PRESETS),
+        "x264_preset": e.get("x264_preset", (str,), "veryfast", choices=_PRESETS),
         "crf": e.number("crf", 18, lo=0, hi=51, integer=True),
         "cpus": e.number("cpus", 1, lo=1, hi=256, integer=True),
         # As vimsim render --mitigation (docs/mitigation.md); checked when the task builds it.
@@ -416,21 +420,16 @@ def _render_range(e: Entry) -> dict:
     end = e.number("end", None, lo=0.0, lo_open=True)
     if start is not None and end is not None and not start < end:
         e.fail(f"start = {start:g} is not before end = {end:g}")
-    return {
-        "start_s": start,
-        "end_s": end,
-        "review": e.get("review", (bool,), False),
-        "eyes": e.get("eyes", (str,), None, choices=("left", "right", "both")),
-        "audio": e.get("audio", (bool,), True),
-    }
+    return {"start_s": start, "end_s": end, "review": e.get("review", (bool,), False),
+            "eyes": e.get("eyes", (str,), None, choices=("left", "right", "both")),
+            "audio": e.get("audio", (bool,), True)}  # fmt: skip
 
 
 def _grf(m: Path, t) -> dict:
     e = Entry(m, "[grf]", t or {}, _GRF_KEYS)
     cut = e.get("cutout", (list,), [18.0, 40.0])
-    if len(cut) != 2 or not all(
-        isinstance(c, (int, float)) and not isinstance(c, bool) for c in cut
-    ):
+    if len(cut) != 2 or not all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                for c in cut):  # fmt: skip
         e.fail(f"cutout = {cut!r}: expected [INNER, OUTER] degrees, e.g. [18, 40]")
     return {
         "grain_deg": e.number("grain_size", 1.5, lo=0.0, lo_open=True),
@@ -451,7 +450,7 @@ _VIEW_KEYS = {
                "mitigation", "aperture_min", "feather", "vignette_color"),
     "grf": _GRF_KEYS,
     "epof": ("method", "low_pct", "high_pct", "opacity_source", "smooth", "ease_in",
-             "ease_out", "opacity_rule", "low_dps", "high_dps"),
+             "ease_out", "opacity_rule", "low_dps", "high_dps", "preset"),
 }  # fmt: skip
 
 

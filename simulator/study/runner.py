@@ -148,6 +148,7 @@ def _run(manifest, out, cache, ex, resume, progress, start, video_outputs=True) 
 
     t0 = time.perf_counter()
     sched = _Scheduler(manifest, out, ex, plan, rows, progress)
+    sched.spool_dir = str(cache / "fields")  # long videos' fields, decompressed once
     sched.run()
     timings["tasks"] = time.perf_counter() - t0
     ex_info = ex.info()
@@ -266,7 +267,8 @@ class _Scheduler:
         mine = [w for w in self.plan.todo if w.video == v.id]
         for chunk in _chunks([_item(w) for w in mine], self.ex.workers):
             self.submit(("epof", v.id, chunk),
-                        (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof")), 1)  # fmt: skip
+                        (tasks.epof_task, grid, chunk, self.m.epof, str(self.out / "epof"),
+                         self.spool_dir), 1)  # fmt: skip
         for w in mine:
             if w.render:
                 self.submit(("render", v.id, w.id),

@@ -13,6 +13,7 @@ render).
 from __future__ import annotations
 
 import dataclasses
+import math
 import os
 import time
 import warnings
@@ -24,9 +25,12 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import atomic_output, json_text
 from simulator.core.traceopts import TraceOptions, translate
 from simulator.epof.exact import shared_query
+from simulator.epof.nearest import FLOW_PX_COLUMN, nearest_epof
 from simulator.epof.overlaps import viewport_fov
+from simulator.epof.parts import keep_parts_in
 from simulator.epof.viewing import compute_epof, plot_epof, write_epof_csv
 from simulator.media.gridfile import GridFile, cells_from_meta, check_field_values, load_grid
+from simulator.media.lazyfield import LazyField, spool, spool_name
 from simulator.media.source import Source
 from simulator.mitigation.grf import OpacityRule, rule_from_options
 from simulator.preprocess.artefacts import Artefacts, artefacts_for_grid
@@ -50,8 +54,18 @@ _TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
 _ARTEFACTS: dict[tuple, Artefacts] = {}
 
-#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video).
-WEIGHT_CACHE_BYTES = 192 << 20
+#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video). Bounded
+#: small: a longer video visits more orientation bins, so a large cache filled with length
+#: (192 MiB made a worker 2x larger for 10x the frames) and hardly saved time.
+WEIGHT_CACHE_BYTES = 16 << 20
+#: A grid's sphere fields (float32, with the translational part) held whole by a worker
+#: up to this size; beyond it they are read lazily per viewing.
+FIELD_IN_MEMORY_BYTES = 16 << 20
+
+
+def _field_bytes(g: GridFile) -> int:
+    """Bytes of the grid's fields as float32 arrays."""
+    return sum(4 * math.prod(f.shape) for f in (g.field_dps, g.field_trans_dps) if f is not None)
 
 
 def _source(video: dict) -> Source:
@@ -79,21 +93,43 @@ def _file_key(path: str) -> tuple:
     return (str(Path(path).resolve()), st.st_size, st.st_mtime_ns)
 
 
-def _grid(path: str) -> GridFile:
+def _spooled(g: GridFile, folder: Path) -> GridFile:
+    """A long video's fields as raw float32 spools in ``folder`` (the study's cache:
+    decompressed once per grid file, not at each viewing; still read chunk by chunk) and
+    their rotational part kept beside them (:func:`simulator.epof.parts.keep_parts_in`);
+    the grid as it is when the folder cannot be written."""
+    try:
+        new = {}
+        for name in ("field_dps", "field_trans_dps"):
+            f = getattr(g, name)
+            n = spool_name(f, name) if isinstance(f, LazyField) else None
+            if n is not None:
+                new[name] = spool(f, folder / n)
+        keep_parts_in(folder)
+        return dataclasses.replace(g, **new)
+    except OSError:
+        keep_parts_in(None)
+        return g
+
+
+def _grid(path: str, spool_dir: str | None = None) -> GridFile:
     key = _file_key(path)
     if key not in _GRIDS:
         _GRIDS.clear()  # one video's grid at a time per worker: bounded memory
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            g = load_grid(path, scan=False)  # the values checked once in memory, below
-        if g.field_dps is not None:
-            # Read once per worker as float32, not once per viewing: a worker holds one
-            # video's field at a time (one grid cached), the price of not decompressing it
-            # again for every viewing of the video (the single commands stay lazy).
-            g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
-        if g.field_trans_dps is not None:  # the same for the field without the rotation
-            g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
-        check_field_values(g)
+            g = load_grid(path, scan=False)  # the values checked once, below
+        if _field_bytes(g) <= FIELD_IN_MEMORY_BYTES:
+            # A short video's fields read once per worker as float32, not once per viewing;
+            # a longer one's stay lazy (read chunk by chunk per viewing, as the single
+            # commands do): a worker's memory does not grow with the video's length.
+            if g.field_dps is not None:
+                g = dataclasses.replace(g, field_dps=np.asarray(g.field_dps, dtype=np.float32))
+            if g.field_trans_dps is not None:
+                g = dataclasses.replace(g, field_trans_dps=np.asarray(g.field_trans_dps, np.float32))
+        elif spool_dir is not None:
+            g = _spooled(g, Path(spool_dir))
+        check_field_values(g)  # in memory, or chunk by chunk
         _GRIDS[key] = g
     return _GRIDS[key]
 
@@ -217,22 +253,48 @@ def _rule(opts: dict) -> OpacityRule:
     names = {"smooth": "smooth_s", "ease_in": "ease_in_s", "ease_out": "ease_out_s"}
 
     def get(k):
+        if k == "opacity_rule" and opts.get("preset") == "paper":
+            return "paper"  # --preset paper: the paper's rule
         v = opts.get(names.get(k, k))
         return None if k == "smooth" and not v else v  # the table's default 0: not given
 
     return rule_from_options(get, lambda k: f"[epof] {k}")
 
 
-def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> list[dict]:
+def _viewing_epof(grid, hp, opts: dict, frustum, rule, art, topts):
+    """One viewing's EPOF as ``vimsim epof`` computes it with the ``[epof]`` options (the
+    authors' nearest-window rule with ``preset = "cao2021-code"``)."""
+    hold = opts["hold_last"] or topts.hold_last
+    if opts.get("preset") == "cao2021-code":
+        return nearest_epof(grid, hp, hold=hold)  # the grid's imported scale, if any
+    method = "paper" if opts.get("preset") == "paper" else opts["method"]
+    return compute_epof(
+        grid,
+        hp,
+        hfov_deg=None if frustum else opts["hfov_deg"],
+        vfov_deg=None if frustum else opts["vfov_deg"],
+        frustum=frustum,
+        top_k=opts["top_k"],
+        rule=rule,
+        hold=hold,
+        method=method,
+        artefacts=art,
+    )
+
+
+def epof_task(
+    grid_path: str, items: list[dict], opts: dict, epof_dir: str, spool_dir: str | None = None
+) -> list[dict]:
     """EPOF and opacity of each viewing in ``items`` (``id``, ``trace``, ``format``,
     ``user``) on the grid ``grid_path``; writes ``epof_dir/<id>.csv``. Returns one dict per
     item: ``id``, ``status`` (``"ok"`` or the one-line error), the stats of
     :func:`viewing_stats`, ``warnings`` (lines), ``seconds`` and ``cpu_s`` (this process's
-    CPU time; the first item's includes loading the grid)."""
+    CPU time; the first item's includes loading the grid). ``spool_dir``: where a long
+    video's fields are kept decompressed (:func:`_spooled`; None: read lazily each time)."""
     out = []
     c_setup = time.process_time()
     try:
-        grid = _grid(grid_path)
+        grid = _grid(grid_path, spool_dir)
         rule = _rule(opts)
         # As vimsim epof: a headset's exact per-eye frustum, else the FOVs (the grid's)
         frustum = Frustum.from_headset(opts["headset"]) if opts.get("headset") else None
@@ -259,21 +321,12 @@ def epof_task(grid_path: str, items: list[dict], opts: dict, epof_dir: str) -> l
                 try:
                     hp, topts = _trace(it, grid), _trace_opts(it)
                     _check_span(it, hp, grid)
-                    res = compute_epof(
-                        grid,
-                        hp,
-                        hfov_deg=None if frustum else opts["hfov_deg"],
-                        vfov_deg=None if frustum else opts["vfov_deg"],
-                        frustum=frustum,
-                        top_k=opts["top_k"],
-                        rule=rule,
-                        hold=opts["hold_last"] or topts.hold_last,
-                        method=opts["method"],
-                        artefacts=art,
-                    )
+                    res = _viewing_epof(grid, hp, opts, frustum, rule, art, topts)
                 finally:  # a failed viewing keeps the warnings of its input too
                     rec["warnings"] = sorted({" ".join(str(w.message).split()) for w in caught})
-            write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res)
+            px = res.meta.get("flow_px")  # --preset cao2021-code: the px/frame of its opacity
+            extra = None if px is None else {FLOW_PX_COLUMN: px}
+            write_epof_csv(Path(epof_dir) / f"{it['id']}.csv", res, extra=extra)
             if it.get("plot"):
                 plot_epof(Path(epof_dir) / f"{it['id']}.png", res, title=it["id"])
             parts = (res.epof_rot_dps, res.epof_trans_dps)
@@ -318,7 +371,7 @@ def render_task(video: dict, grid_path: str, item: dict, opts: dict, outdir: str
             outdir,
             grid=grid,
             view=view,
-            preset=opts["preset"],
+            x264_preset=opts["x264_preset"],
             crf=opts["crf"],
             threads=int(opts.get("cpus", 1)),  # the CPUs the task declares
             progress=False,

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from simulator.core.errors import InputError
 from simulator.core.traceopts import TRACE_OPTIONS, TraceOptions
-from simulator.study.entry import Entry, user_numbers
+from simulator.study.entry import Entry, user_spans
 
 __all__ = ["TRACE_KEYS", "VIEWING_TRACE_KEYS", "trace_defaults", "viewing_trace_options"]
 
@@ -44,7 +44,7 @@ def _values(e: Entry, rename: dict[str, str]) -> dict:
         elif o.kind == "user":
             v = e.get(key, (int, str, list))
             if v != "all":
-                user_numbers(e, key, v)  # a bad spec is named before any file is read
+                user_spans(e, key, v)  # a bad spec is named (never expanded) before any file is read
             out[o.key] = v
         else:
             out[o.key] = e.number(key, lo=o.lo, lo_open=o.lo_open, integer=o.kind == "int")

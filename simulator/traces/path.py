@@ -20,12 +20,10 @@ Recorded paths are read by :mod:`simulator.traces.readers` (one module per datas
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import warnings
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
@@ -227,20 +225,19 @@ class HeadPath:
         """Angle between consecutive poses over their time step, deg/s, shape (N-1,)."""
         if self.n < 2:
             return np.zeros(0)
-        r = self.rotations
-        delta = r[:-1].inv() * r[1:]
-        return np.degrees(delta.magnitude()) / np.diff(self.times_s)
+        r, out = self.rotations, np.empty(self.n - 1)
+        for i in range(0, self.n - 1, 1 << 16):  # in chunks: no three copies of a long path
+            j = min(i + (1 << 16), self.n - 1)
+            out[i:j] = (r[i:j].inv() * r[i + 1 : j + 1]).magnitude()
+        return np.degrees(out) / np.diff(self.times_s)
 
 
 def save_headpath_csv(path: str | os.PathLike, hp: HeadPath) -> None:
     """Write the canonical CSV ``time_s,yaw_deg,pitch_deg,roll_deg`` atomically."""
     y, p, r = (np.round(a, 9) + 0.0 for a in hp.angles_deg())  # no 1e-16 noise, no -0
-    buf = io.StringIO()
-    buf.write(",".join(CANONICAL_COLUMNS) + "\n")
-    for row in zip(hp.times_s, y, p, r):
-        buf.write(",".join(f"{v:.10g}" for v in row) + "\n")
-    with atomic_output(path) as tmp:
-        Path(tmp).write_text(buf.getvalue())
+    with atomic_output(path) as tmp, open(tmp, "w") as fh:  # row by row: no copy of the text
+        fh.write(",".join(CANONICAL_COLUMNS) + "\n")
+        fh.writelines(",".join(f"{v:.10g}" for v in row) + "\n" for row in zip(hp.times_s, y, p, r))
 
 
 def _smoothstep5(x: NDArray) -> NDArray:

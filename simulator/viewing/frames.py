@@ -299,8 +299,10 @@ def _index(source, plan, view: ViewSpec, headpath, rows: list[dict], ctx) -> dic
             "mitigation": config.mitigation.kind,
             "opacity": "off" if config.grf is None else view.opacity,
             "opacity_thresholds_dps": list(plan.thresholds_dps),
-            "opacity_rule": view.rule.describe() if plan.grid is not None else None,
+            "opacity_rule": None if plan.grid is None else (
+                view.rule if plan.px_rule is None else plan.px_rule).describe(),
             "epof_method": plan.epof_method,
+            "preset": view.preset,
         },
         "versions": _versions(ctx),
         "frames": rows,

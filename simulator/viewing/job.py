@@ -17,6 +17,7 @@ import numpy as np
 from simulator.core.errors import InputError
 from simulator.core.fileio import OutputFolder, atomic_output, json_text
 from simulator.core.progress import Progress
+from simulator.epof.nearest import FLOW_PX_COLUMN
 from simulator.epof.viewing import EpofResult, write_epof_csv
 from simulator.media.audio import audio_source
 from simulator.media.gridfile import require_field
@@ -142,7 +143,7 @@ def _what_reaches_the_eye(view: ViewSpec, plan: ViewingPlan):
     return vis, field_dps is not None, cell_op  # the field itself is not kept
 
 
-def draw(job: ViewingJob, ctx, out: Path, *, preset="veryfast", crf=18, threads=None,
+def draw(job: ViewingJob, ctx, out: Path, *, x264_preset="veryfast", crf=18, threads=None,
          progress: Progress | None = None) -> VideoRenderResult:  # fmt: skip
     """Render and encode the job's eye videos into ``out`` (and the review video and sheet
     with ``job.review``): :func:`simulator.render.video.render_video`."""
@@ -182,7 +183,7 @@ def draw(job: ViewingJob, ctx, out: Path, *, preset="veryfast", crf=18, threads=
             config=job.view.config,
             fps=plan.info.fps,
             n_frames=len(plan.frames),
-            preset=preset,
+            preset=x264_preset,
             crf=crf,
             threads=threads,
             progress=progress,
@@ -207,7 +208,7 @@ def render_viewing(
     *,
     grid=None,
     view: ViewSpec | None = None,
-    preset: str = "veryfast",
+    x264_preset: str = "veryfast",
     crf: int = 18,
     progress: Progress | None = None,
     note: str | None = None,
@@ -248,7 +249,7 @@ def render_viewing(
     review : also write :data:`REVIEW_FILES` (:class:`simulator.viewing.review.ReviewWriter`):
         ``review.mp4`` (equirect with the viewport outline, the left eye view, EPOF and
         opacity strip) and ``sheet.png`` (contact sheet)
-    preset, crf : x264 speed preset and quality
+    x264_preset, crf : x264 speed preset and quality (the system preset is ``view.preset``)
     threads : the render's CPU budget (:func:`simulator.render.render_video`; None: no
         bound; a study passes its task's declared CPUs, 1: one core, no pipeline threads)
     note : one line for the user, printed on stderr once the inputs are checked and kept
@@ -276,7 +277,8 @@ def render_viewing(
     if note:
         warnings.warn(note, stacklevel=2)
     t_setup = time.perf_counter() - t0
-    result = draw(job, ctx, out, preset=preset, crf=crf, threads=threads, progress=progress)
+    result = draw(job, ctx, out, x264_preset=x264_preset, crf=crf, threads=threads,
+                  progress=progress)  # fmt: skip
     # epof.csv: one row per video frame, the settings as '#' lines above the header, the
     # visible flow after the EPOF columns.
     plan, vis = job.plan, job.visible
@@ -285,14 +287,12 @@ def render_viewing(
     res = EpofResult(plan.frames, plan.times_s, *head.T, plan.epof_dps,
                      plan.opacity, plan.thresholds_dps, coverage=plan.coverage,
                      artefact=plan.artefact)  # fmt: skip
-    write_epof_csv(
-        out / "epof.csv",
-        res,
-        extra=dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked))),
-        settings=settings,
-    )
+    extra = dict(zip(VISIBLE_COLUMNS, (vis.visible_dps, vis.ratio, vis.blocked)))
+    if plan.flow_px is not None:  # --preset cao2021-code: the px/frame its opacity came from
+        extra[FLOW_PX_COLUMN] = plan.flow_px
+    write_epof_csv(out / "epof.csv", res, extra=extra, settings=settings)
     timings = dict(result.timings_s, setup=t_setup, total_with_setup=time.perf_counter() - t0)
-    run = {"x264": {"preset": preset, "crf": crf}, "timings_s": timings, "note": note,
+    run = {"x264": {"preset": x264_preset, "crf": crf}, "timings_s": timings, "note": note,
            "renderer": ctx.info.get("GL_RENDERER"), "outdir": str(out)}  # fmt: skip
     summary = viewing_summary(job, result, settings=settings, run=run)
     # Last: the manifest saying which files are ours, then the completion marker.

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from simulator.core.errors import InputError
+from simulator.epof.nearest import nearest_epof
 from simulator.epof.viewing import compute_epof, read_epof_csv
 from simulator.media.gridfile import MAKE_FIELD_HINT, GridFile, load_grid, require_field
 from simulator.media.source import Source, as_source
@@ -74,6 +75,10 @@ class ViewingPlan:
     artefact: tuple[str, ...] | None = None
     #: (N, 3) the head path's own (yaw, pitch, roll) at each frame (None: ``angles_deg``)
     head_angles_deg: np.ndarray | None = None
+    #: ``--preset cao2021-code``: the nearest window's flow (N,), window px/frame, and the
+    #: :class:`simulator.mitigation.cao2021.FixedPxRule` its opacity came from (else None)
+    flow_px: np.ndarray | None = None
+    px_rule: object = None
 
     @property
     def right(self) -> str | None:
@@ -98,6 +103,7 @@ def grf_settings(grf) -> dict | None:
         "seed": grf.seed,
         "distance_m": grf.distance_m,
         "n_grains": grain_count(grf),
+        "layout": grf.layout,
     }
 
 
@@ -152,6 +158,28 @@ def _epof_rows(grid, hp: HeadPath, view: ViewSpec, frustum: Frustum, frames, fps
         None if res.coverage is None else res.coverage[rows].astype(float),
         None if res.artefact is None else tuple(res.artefact[int(r)] for r in rows),
     )
+
+
+def _rows(grid, hp, view: ViewSpec, frustum, frames, fps, ranged, pose):
+    """:func:`_epof_rows` then the flow px/frame and rule of ``--preset cao2021-code``
+    (None, None otherwise): :func:`_nearest_rows` with that preset."""
+    if grid is not None and view.preset == "cao2021-code":
+        return _nearest_rows(grid, hp, view, frames, ranged, pose)
+    return (*_epof_rows(grid, hp, view, frustum, frames, fps, ranged, pose), None, None)
+
+
+def _nearest_rows(grid, hp: HeadPath, view: ViewSpec, frames, ranged, pose):
+    """:func:`_epof_rows` of ``--preset cao2021-code`` (the authors' runtime,
+    :func:`simulator.epof.nearest.nearest_epof`: no state, no warm-up), and after them the
+    nearest window's flow (px/frame) and the fixed-scale rule of its opacity."""
+    f0, f1 = int(frames[0]), int(frames[-1]) + 1
+    res = nearest_epof(grid, hp, hold=True if ranged else view.hold,
+                       frames=(f0, f1) if ranged else None, orientation_deg=pose)  # fmt: skip
+    rows = np.clip(frames - int(res.frame[0]), 0, len(res.frame) - 1)
+    px = np.asarray(res.meta["flow_px"], float)[rows]
+    nan2 = (float("nan"), float("nan"))
+    dps, op = res.epof_dps[rows].astype(float), res.opacity[rows].astype(float)
+    return dps, op, nan2, res.meta["method"], None, None, px, res.meta["rule"]
 
 
 def plan_viewing(
@@ -218,9 +246,8 @@ def plan_viewing(
     epof_eye = str(grid.meta.get("eye", "left")) if grid is not None and stereo else "left"
     # the grid holds the flow of its eye (a stereo grid's meta): that eye's view
     epof_frustum = config.frustum.for_eye(epof_eye)
-    epof_dps, op_auto, thresholds, epof_method, coverage, artefact = _epof_rows(
-        grid, hp, view, epof_frustum, frames, info.fps, ranged, source.orientation_deg
-    )
+    rows = _rows(grid, hp, view, epof_frustum, frames, info.fps, ranged, source.orientation_deg)
+    epof_dps, op_auto, thresholds, epof_method, coverage, artefact, flow_px, px_rule = rows
     if not drawn:
         op = np.zeros(nf)
     elif op_csv is not None:
@@ -249,4 +276,6 @@ def plan_viewing(
         coverage,
         artefact,
         head,
+        flow_px,
+        px_rule,
     )

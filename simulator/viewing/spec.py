@@ -18,10 +18,17 @@ import os
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
-from simulator.core.choices import EPOF_METHODS, MITIGATIONS
+from simulator.core.choices import EPOF_METHODS, MITIGATIONS, SYSTEM_PRESETS
 from simulator.core.errors import InputError
 from simulator.core.resources import check_fits
-from simulator.mitigation.grf import GrfConfig, OpacityRule, grain_count, rule_from_options
+from simulator.mitigation.cao2021 import cao_grf_config
+from simulator.mitigation.grf import (
+    RULE_OPTIONS,
+    GrfConfig,
+    OpacityRule,
+    grain_count,
+    rule_from_options,
+)
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG, Mitigation, parse_color
 from simulator.render.eye import RenderConfig
 from simulator.sphere.cells import Frustum
@@ -69,6 +76,7 @@ VIEW_OPTIONS: dict[str, object] = {
     "cutout": (18.0, 40.0),
     "grain_distance": None,
     "hold_last": False,
+    "preset": "vimsim",
 }
 
 
@@ -85,6 +93,11 @@ class ViewSpec:
         EPOF CSV's path (its opacity column)
     method : EPOF method (``auto``, ``paper``, ``sphere``)
     hold : hold the head path's first/last pose where it does not cover the video
+    preset : the system whose rules run (:data:`simulator.core.choices.SYSTEM_PRESETS`):
+        ``vimsim``; ``paper`` (``method`` paper, the paper's rule); ``cao2021-code``: the
+        opacity of ``"auto"`` is the authors' nearest-window rule on the fixed px/frame
+        scale (:func:`simulator.epof.nearest.nearest_epof`), the grains theirs
+        (:func:`simulator.mitigation.cao2021.cao_grf_config`); ``rule`` and ``method`` unused
     """
 
     config: RenderConfig = field(default_factory=RenderConfig)
@@ -92,8 +105,13 @@ class ViewSpec:
     opacity: float | str = "auto"
     method: str = "auto"
     hold: bool = False
+    preset: str = "vimsim"
 
     def __post_init__(self) -> None:
+        if self.preset not in SYSTEM_PRESETS:
+            raise InputError(
+                f"preset must be one of {', '.join(SYSTEM_PRESETS)}; got {self.preset!r}"
+            )
         if not isinstance(self.config, RenderConfig):
             raise InputError(
                 f"view config must be a RenderConfig; got {type(self.config).__name__}"
@@ -136,7 +154,8 @@ class ViewSpec:
 
     @classmethod
     def given(cls, view: ViewSpec | None = None, **fields) -> ViewSpec:
-        """``view`` with ``fields`` (``config``, ``rule``, ``opacity``, ``method``, ``hold``)
+        """``view`` with ``fields`` (``config``, ``rule``, ``opacity``, ``method``, ``hold``,
+        ``preset``)
         replaced; the default view when None: how the library functions take a view
         (``view=ViewSpec(...)`` or its fields as keywords, e.g. ``opacity=0.8``)."""
         if view is None:
@@ -167,12 +186,16 @@ class ViewSpec:
         GRF on/off as ``vimsim render`` documents it: on with a grid or a numeric opacity
         unless ``grf = "off"``; an explicit mitigation draws what it names. A headset
         gives its exact per-eye frustum; FOV options a symmetric one (default 107 x 107).
-        InputError naming the option for any bad value.
+        ``preset`` (docs/parity.md): ``paper`` sets ``method`` paper and the paper's
+        opacity rule; ``cao2021-code`` draws the authors' grains (0.5 deg, Fibonacci
+        layout, no cutout) at their rule's opacity; options a preset fixes otherwise are
+        refused. InputError naming the option for any bad value.
         """
         mapping = isinstance(options, Mapping)
         if label is None:
             label = _mapping_label if mapping else _cli_label
         opt = _Options(options, mapping, label)
+        preset = opt.preset()
         frustum = opt.frustum()
         mitigation = opt.mitigation(frustum)
         size = opt.eye_size(video)
@@ -187,6 +210,8 @@ class ViewSpec:
         if kind_given:  # an explicit mitigation draws what it names
             grf_on = grf_opt != "off" and mitigation.grains
         grf = opt.grf()  # checked whether drawn or not
+        if preset == "cao2021-code":  # their grains, at the given seed and distance
+            grf = dataclasses.replace(cao_grf_config(seed=grf.seed), distance_m=grf.distance_m)
         config = RenderConfig(
             eye_size=size,
             frustum=frustum,
@@ -199,7 +224,8 @@ class ViewSpec:
         hold = opt.get("hold_last")
         if not isinstance(hold, bool):
             opt.fail("hold_last", f"expected true or false; got {hold!r}")
-        return cls(config, opt.rule(), opacity, method, hold)
+        method = "paper" if preset == "paper" else method
+        return cls(config, opt.rule(preset), opacity, method, hold, preset)
 
 
 def _cli_label(key: str) -> str:
@@ -361,8 +387,35 @@ class _Options:
         check_fits(n * BYTES_PER_GRAIN, f"{self.label('grain_size')} {size:g}")
         return grf
 
-    def rule(self) -> OpacityRule:
-        """The opacity rule (:func:`simulator.mitigation.grf.rule_from_options`)."""
-        return rule_from_options(
-            lambda k: self.o.get(k) if self.mapping else getattr(self.o, k, None), self.label
-        )
+    def rule(self, preset: str = "vimsim") -> OpacityRule:
+        """The opacity rule (:func:`simulator.mitigation.grf.rule_from_options`; the
+        paper's with ``preset`` paper)."""
+
+        def get(k):
+            if preset == "paper" and k == "opacity_rule":
+                return "paper"
+            return self.o.get(k) if self.mapping else getattr(self.o, k, None)
+
+        return rule_from_options(get, self.label)
+
+    def preset(self) -> str:
+        """The system preset, once the options it fixes are checked: with either preset
+        ``method`` sphere and the absolute rule are refused; with ``cao2021-code`` also any
+        grain, cutout, method, mitigation or opacity-rule option other than its default."""
+        preset = self.choice("preset", SYSTEM_PRESETS)
+        if preset == "vimsim":
+            return preset
+        given = [k for k, v in (("method", "sphere"), ("opacity_rule", "absolute"))
+                 if self.get(k) == v]  # fmt: skip
+        if preset == "cao2021-code":
+            keys = ("grain_size", "density", "method", *RULE_OPTIONS)
+            given += [k for k in keys if self.get(k) != VIEW_OPTIONS.get(k) and k not in given]
+            if self.get("mitigation") not in (None, "grf"):
+                given.append("mitigation")
+            cut = self.get("cutout")
+            if not isinstance(cut, (list, tuple)) or tuple(cut) != VIEW_OPTIONS["cutout"]:
+                given.append("cutout")
+        if given:
+            names = ", ".join(self.label(k) for k in given)
+            self.fail("preset", f"{preset} fixes {names}; drop {names}")
+        return preset

@@ -46,7 +46,8 @@ def _frustum_deg(fr) -> dict | None:
 def _rule(job) -> dict | None:
     """The opacity rule's settings when the opacity follows the EPOF, else None."""
     if job.plan.grid is not None and job.plan.opacity_label == "auto":
-        return job.view.rule.describe()
+        px = job.plan.px_rule  # --preset cao2021-code: the fixed px/frame scale
+        return job.view.rule.describe() if px is None else px.describe()
     return None
 
 
@@ -54,6 +55,7 @@ def epof_settings(job) -> dict:
     """The settings written as ``# key: JSON`` lines above ``epof.csv``'s header."""
     plan, config = job.plan, job.view.config
     return {
+        "preset": job.view.preset,
         "epof_method": plan.epof_method,
         "epof_eye": plan.epof_eye,
         "frustum_deg": _frustum_deg(plan.epof_frustum),
@@ -145,6 +147,7 @@ def viewing_summary(job, result, *, settings: dict, run: dict) -> dict:
         "frustum_deg": {"eye": "left (the right eye mirrors left and right)", **_frustum_deg(fr)},
         "grf": grf_settings(config.grains),
         "mitigation": _mitigation(job),
+        "preset": view.preset,
         "opacity": "off" if not view.drawn else plan.opacity_label,
         "opacity_rule": _rule(job),
         "opacity_thresholds_dps": list(plan.thresholds_dps),

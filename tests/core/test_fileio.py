@@ -168,3 +168,55 @@ def test_output_folder_refuses_foreign_and_replaces_own(tmp_path):
     assert (d / "mine.txt").read_text() == "a user's file"  # never touched
     with pytest.raises(InputError, match="not written by vimsim other"):
         OutputFolder(d, ["mine.txt"], "other").check()
+
+
+def test_input_check_is_a_lookup_not_a_scan(tmp_path, monkeypatch):
+    """An output is checked against thousands of recorded inputs by one lookup (a study
+    reads each viewing's EPOF CSV: a samefile per input per output made the driver
+    quadratic), and still refuses an input by another spelling, a symlink or a hard link."""
+    from simulator.core import fileio
+
+    files = []
+    for k in range(3000):
+        f = tmp_path / f"in{k}.csv"
+        f.write_text("x")
+        files.append(f)
+    (tmp_path / "link.csv").symlink_to(files[7])
+    os.link(files[9], tmp_path / "hard.csv")
+    calls = []
+    real = os.path.samefile
+    monkeypatch.setattr(os.path, "samefile", lambda a, b: calls.append(a) or real(a, b))
+    with input_scope(files):
+        for name in ("out1.csv", "out2.csv"):
+            with atomic_output(tmp_path / name) as tmp:
+                Path(tmp).write_text("y")
+        assert calls == []
+        for bad in (tmp_path / "sub" / ".." / "in5.csv", tmp_path / "link.csv",
+                    tmp_path / "hard.csv"):  # fmt: skip
+            (tmp_path / "sub").mkdir(exist_ok=True)
+            with pytest.raises(InputError, match="same file as the input"):
+                fileio.check_not_input(bad)
+    assert not fileio.known_inputs()  # the scope's inputs are gone after it
+
+
+def test_a_deleted_inputs_inode_reused_by_an_output_is_not_that_input(tmp_path):
+    """An input read then deleted (a temporary) frees its inode; a new output given the
+    same number is not that input (it was refused as 'the same file as the input')."""
+    import os
+
+    from simulator.core.fileio import check_not_input, input_scope, register_input
+
+    gone = tmp_path / "tmp_input.bin"
+    gone.write_bytes(b"x")
+    with input_scope():
+        register_input(gone)
+        ino = os.stat(gone).st_ino
+        gone.unlink()
+        for k in range(200):  # new files until one gets the freed inode number
+            new = tmp_path / f"out{k}.json"
+            new.write_text("{}")
+            if os.stat(new).st_ino == ino:
+                break
+        else:
+            raise AssertionError("no new file reused the freed inode; cannot check")
+        check_not_input(new)  # not refused

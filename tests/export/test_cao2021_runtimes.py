@@ -1,6 +1,7 @@
 """The cao2021-code rule in the exported C# (Mono) and JS (node) runtimes equals the Python rule
 to 1e-7 (frames 0, 1, 2, past the end; the +-165..180 yaw wraps; the poles), read from the
-folder ``vimsim export --format cao-csv`` writes."""
+folder ``vimsim export --format cao-csv`` writes, and from ``DIR/cao2021/`` of ``vimsim export
+--format unity|web --preset cao2021-code`` (whose header records the preset)."""
 
 from __future__ import annotations
 
@@ -20,9 +21,10 @@ from simulator.mitigation.cao2021 import FixedPxRule, nearest_flow
 REPO = Path(__file__).resolve().parents[2]
 
 
-@pytest.fixture(scope="module")
-def exported(tmp_path_factory):
-    """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again."""
+@pytest.fixture(scope="module", params=["cao-csv", "unity", "web"])
+def exported(tmp_path_factory, request):
+    """A 24 x 13 folder of 12 frames (random float32 values), imported and exported again
+    (cao-csv: the folder itself; unity / web: the package's cao2021/ folder)."""
     d = tmp_path_factory.mktemp("cao")
     src = d / "src"
     src.mkdir()
@@ -33,9 +35,17 @@ def exported(tmp_path_factory):
             rows = "".join(f"{t},{float(x)!r}\n" for t, x in enumerate(v))
             (src / window_file_name(y, p)).write_text(",0\n" + rows)
     assert main(["grid", "import", str(src), "-o", str(d / "g.npz"), "--fps", "30"]) == 0
-    assert main(["export", str(d / "g.npz"), "--format", "cao-csv", "--preset", "cao2021-code",
-                 "-o", str(d / "out")]) == 0  # fmt: skip
-    return load_grid(d / "g.npz"), d / "out"
+    assert main(["export", str(d / "g.npz"), "--format", request.param, "--preset",
+                 "cao2021-code", "-o", str(d / "out")]) == 0  # fmt: skip
+    if request.param == "cao-csv":
+        return load_grid(d / "g.npz"), d / "out"
+    from simulator.export.unity import read_export
+
+    h, _ = read_export(d / "out" / "vimsim_epof.bin")
+    assert h["preset"]["name"] == "cao2021-code" and h["preset"]["folder"] == "cao2021"
+    assert (h["preset"]["low_px"], h["preset"]["high_px"]) == (0.18, 53.73)
+    assert h["grf"]["n_grains"] == 129_600  # their grains, in the file
+    return load_grid(d / "g.npz"), d / "out" / "cao2021"
 
 
 def _queries(n=2000, seed=3):
@@ -103,6 +113,31 @@ def test_js_runtime_equals_python(exported, tmp_path):
                        capture_output=True, text=True, check=False)  # fmt: skip
     assert r.returncode == 0, r.stdout + r.stderr
     got = np.asarray(json.loads(r.stdout))
+    flow, op = _python(grid, k, yaw, pitch)
+    np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
+    np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)
+
+
+_BROWSER = """
+const [names, q] = args;
+const mod = await import(new URL("cao2021/vimsim_cao2021.js", location.href).href);
+const files = {};
+for (const n of names) files[n] = await (await fetch("cao2021/" + n)).text();
+const rt = new mod.Cao2021Runtime(files);
+return q.map(([k, y, p]) => [rt.flow(k, y, p), rt.opacity(k, y, p)]);
+"""
+
+
+@pytest.mark.browser
+def test_web_export_rule_in_chromium_equals_python(browser, exported, tmp_path):
+    """The web export's cao2021/ rule in Chromium, served beside example.html."""
+    grid, folder = exported
+    if folder.name != "cao2021" or not (folder.parent / "example.html").is_file():
+        pytest.skip("the web export's folder only")
+    k, yaw, pitch = _queries(n=500, seed=5)
+    names = sorted(n.name for n in folder.glob("*.csv"))
+    q = [[int(a), float(b), float(c)] for a, b, c in zip(k, yaw, pitch)]
+    got = np.asarray(browser.run_served(folder.parent, "example.html", _BROWSER, names, q))
     flow, op = _python(grid, k, yaw, pitch)
     np.testing.assert_allclose(got[:, 0], flow, rtol=0, atol=1e-7)
     np.testing.assert_allclose(got[:, 1], op, rtol=0, atol=1e-7)

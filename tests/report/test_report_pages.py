@@ -142,3 +142,13 @@ def test_browser_width_wider_than_the_source(tmp_path):
     with pytest.raises(InputError, match=r"a.mp4: --browser-width 256 is wider than the video"):
         browser_copy(src, tmp_path / "w.mp4", width=256, explicit=True)
     assert not (tmp_path / "w.mp4").exists()
+
+
+def test_each_viewing_shows_its_preset():
+    rows = [{"viewing": "a", "video": "v", "status": "ok"}]
+    study = {"settings": {"epof": {"preset": "cao2021-code"}}}
+    site = Site(study, rows, {})
+    html = site.viewings_page()
+    assert "<th>preset</th>" in html and "cao2021-code" in html
+    assert "cao2021-code" in site.viewing_page(site.rows[0], None)
+    assert "<td>vimsim</td>" in Site({}, rows, {}).viewings_page()  # a study before presets

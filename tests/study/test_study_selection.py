@@ -199,3 +199,41 @@ def test_per_viewing_view_options_go_through_the_one_builder(base):
     bad = MULTI.format(users="1", render="true") + "density = 7\n"
     with pytest.raises(InputError, match=r"\[\[viewings\]\] #1 .*density"):
         load_manifest(_manifest(base, bad))
+
+
+@pytest.mark.parametrize("spec, first", [
+    ('"1-99999999999999999999"', "no user 6"),
+    ('"1-100000,1-100000"', "no user 6"),
+    ('[2, "7-99999999999999999999999"]', "no user 7"),
+])  # fmt: skip
+def test_huge_user_ranges_refused_without_expanding(base, spec, first, tmp_path):
+    """A range is checked against the file's users before it is expanded: refused at
+    once (exit 2, naming the entry and the file's users), not after building a list of
+    1e20 users (it ran out of memory ignoring SIGTERM). The subprocess's generous limit
+    only stops a regression from hanging the suite."""
+    import os
+    import subprocess
+    import sys
+
+    m = _manifest(base, MULTI.replace('"{users}"', spec).format(render="false"))
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[2])}
+    r = subprocess.run([sys.executable, "-m", "simulator", "study", str(m), "-o",
+                        str(tmp_path / "never"), "--dry-run"], capture_output=True, text=True,
+                       timeout=120, env=env, check=False)  # fmt: skip
+    assert r.returncode == 2
+    assert r.stderr.count("\n") == 1
+    assert "[[viewings]] #1" in r.stderr and first in r.stderr and "users 1-5" in r.stderr
+    assert "multi.txt" in r.stderr
+    assert not (tmp_path / "never").exists()
+
+
+def test_user_spec_checked_as_ranges():
+    """The spec is kept as ranges until checked; repeats are dropped in linear time."""
+    from simulator.study.entry import Entry, user_numbers, user_spans
+
+    e = Entry(Path("s.toml"), "[[viewings]] #1", {}, ())
+    assert user_spans(e, "user", "1-99999999999999999999") == [(1, 99999999999999999999)]
+    with pytest.raises(InputError, match="no user 51 .*the file holds users 1-50"):
+        user_numbers(e, "user", "1-99999999999999999999", n_users=50)
+    assert user_numbers(e, "user", "1-100000,1-100000", n_users=100_000) == list(range(1, 100_001))
+    assert user_numbers(e, "user", ["3-4", 1, "2-3"], n_users=5) == [3, 4, 1, 2]

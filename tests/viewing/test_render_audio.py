@@ -89,7 +89,7 @@ def _render(tmp_path, vid, out, *extra):
     from simulator.cli import main
 
     argv = ["render", str(vid), str(_path_csv(tmp_path / "p.csv")), "-o", str(out),
-            "--eye-size", "32x32", "--preset", "ultrafast", "--no-progress", *extra]  # fmt: skip
+            "--eye-size", "32x32", "--x264-preset", "ultrafast", "--no-progress", *extra]  # fmt: skip
     return main(argv)
 
 

@@ -187,7 +187,8 @@ def _targets(g: GridFile, out_dir, rot: bool = False) -> tuple[Path, list[Path]]
     return out, targets
 
 
-def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation) -> _Plan:
+def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation,
+          preset=None) -> _Plan:  # fmt: skip
     """Everything to write, checked; nothing written yet."""
     n_grains = _check_options(g, method, dtype, rule, cache_bins, grf)
     sphere = method == "sphere" or (method == "auto" and g.field_dps is not None)
@@ -198,6 +199,8 @@ def _plan(g, out_dir, *, method, dtype, fov, rule, cache_bins, grf, mitigation) 
         thresholds=rule.fit(g, None), grf=grf, mitigation=mitigation, n_grains=n_grains,
         cache_bins=cache_bins, cells=cells,
     )  # fmt: skip
+    if preset:  # the system preset the package carries (docs/parity.md)
+        header["preset"] = dict(preset)
     grains = GrainField.from_config(grf).centers.astype(np.float32)
     blob = pack(header, data, grains)
     rot = sphere and has_parts(g)
@@ -231,6 +234,7 @@ def export_unity(
     cache_bins: int = 1024,
     grf: GrfConfig | None = None,
     mitigation: Mitigation | None = None,
+    preset: dict | None = None,
 ) -> ExportResult:
     """Write ``out_dir/vimsim_epof.bin`` and the Unity package (:data:`ASSET_FILES`) for a grid.
 
@@ -252,6 +256,8 @@ def export_unity(
     grf : the grains (default ``GrfConfig()``, the paper's): layout and settings go into the
         file, so that the overlay draws the grains ``vimsim render`` draws (at infinity)
     mitigation : what the overlay draws and the vignette's settings (default ``grf``)
+    preset : the header's ``preset`` section (``name`` and, for ``cao2021-code``, where the
+        package's nearest-window rule and its data are), or None: none
 
     Returns
     -------
@@ -262,7 +268,7 @@ def export_unity(
         g, out_dir, method=method, dtype=dtype, fov=(hfov_deg, vfov_deg),
         rule=OpacityRule() if rule is None else rule, cache_bins=cache_bins,
         grf=GrfConfig() if grf is None else grf,
-        mitigation=Mitigation() if mitigation is None else mitigation,
+        mitigation=Mitigation() if mitigation is None else mitigation, preset=preset,
     )  # fmt: skip
     _write(plan)
     return ExportResult(

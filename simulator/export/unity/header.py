@@ -95,6 +95,7 @@ def _mitigation_sections(grf: GrfConfig, mitigation: Mitigation, n_grains: int) 
             "outer_deg": float(grf.outer_deg),
             "seed": int(grf.seed),
             "n_grains": int(n_grains),
+            "layout": grf.layout,  # random (GENERATOR's draw) or fibonacci (docs/parity.md)
             "generator": GENERATOR,
             "cutout": "alpha = clamp((ecc - inner_deg) / (outer_deg - inner_deg), 0, 1) * opacity, "
             "ecc = angle from the view centre; grains at infinity (no parallax)",

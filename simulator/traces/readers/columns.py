@@ -31,6 +31,7 @@ import json
 import math
 import os
 import warnings
+from array import array
 from datetime import UTC, datetime
 
 import numpy as np
@@ -39,6 +40,7 @@ from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
 from simulator.traces.path import HeadPath
 from simulator.traces.readers.common import _check_increasing, _dedupe_times, _value
+from simulator.traces.readers.jsonlog import json_entries, starts_as_json
 
 __all__ = ["COLUMN_KEYS", "ClockTimeWarning", "columns_example", "load_columns", "parse_column_map"]
 
@@ -233,29 +235,101 @@ def _clock_seconds(p, label: str, value, fmt: str) -> float:
     return (d if d.tzinfo else d.replace(tzinfo=UTC)).timestamp()
 
 
-def _numbers(p, cmap: dict, keys: list[str], rows, time_format: str | None):
-    """The mapped values of every row as floats, (N, len(keys)); errors name row and column."""
-    data = np.empty((len(rows), len(keys)))
-    for r, (label, row) in enumerate(rows):
-        for j, key in enumerate(keys):
-            col = cmap[key][0]
-            if col not in row:
-                raise InputError(f"{p}: {label} has no column {col!r}")
-            v = row[col]
-            if key == "time" and time_format:
-                data[r, j] = _clock_seconds(p, label, v, time_format)
-                continue
-            try:
-                if isinstance(v, bool):
-                    raise TypeError(col)
-                data[r, j] = float(v)
-            except (TypeError, ValueError):
-                raise InputError(
-                    f"{p}: {label}, column {col!r} ({key}): non-numeric value {_value(str(v))}"
-                ) from None
-            if not math.isfinite(data[r, j]):
-                raise InputError(f"{p}: {label}, column {col!r}: value is not finite")
-    return data
+def _row_numbers(p, cmap: dict, keys: list[str], label: str, row: dict, time_format):
+    """The mapped values of one row as floats; errors name the row and the column."""
+    out = []
+    for key in keys:
+        col = cmap[key][0]
+        if col not in row:
+            raise InputError(f"{p}: {label} has no column {col!r}")
+        v = row[col]
+        if key == "time" and time_format:
+            out.append(_clock_seconds(p, label, v, time_format))
+            continue
+        try:
+            if isinstance(v, bool):
+                raise TypeError(col)
+            x = float(v)
+        except (TypeError, ValueError):
+            raise InputError(
+                f"{p}: {label}, column {col!r} ({key}): non-numeric value {_value(str(v))}"
+            ) from None
+        if not math.isfinite(x):
+            raise InputError(f"{p}: {label}, column {col!r}: value is not finite")
+        out.append(x)
+    return out
+
+
+class _Table:
+    """A log's columns (every name seen, in order), its first row (for messages) and the
+    mapped numbers of its kept rows (``data``, (N, len(keys)); row labels ``kind`` +
+    ``numbers``), filled row by row: no row is kept as a dict. ``problem``: the first
+    row's error, raised once the map's columns are known to exist."""
+
+    def __init__(self, p, cmap: dict, keys: list[str], time_format: str | None, skip_rows: int):
+        self.p, self.cmap, self.keys, self.time_format = p, cmap, keys, time_format
+        self.skip, self.seen, self.kind = skip_rows, 0, "line"
+        self.cols: dict[str, None] = {}
+        self.first: list[tuple[str, dict]] = []
+        self.values, self.numbers = array("d"), array("q")
+        self.problem: InputError | None = None
+
+    def add(self, number: int, row: dict) -> None:
+        self.seen += 1
+        self.cols.update(dict.fromkeys(row))
+        if not self.first:
+            self.first.append((f"{self.kind} {number}", row))
+        if self.seen <= self.skip or self.problem is not None:
+            return
+        try:
+            self.values.extend(_row_numbers(self.p, self.cmap, self.keys, f"{self.kind} {number}",
+                                            row, self.time_format))  # fmt: skip
+        except InputError as e:
+            self.problem = e
+            return
+        self.numbers.append(number)
+
+    @property
+    def data(self):
+        return np.frombuffer(self.values, dtype=np.float64).reshape(-1, len(self.keys))
+
+
+def _sample_row(key, v) -> dict:
+    row = {} if key is None else {"key": key}
+    if isinstance(v, (dict, list)):
+        return _flatten(v, "", row)
+    row["value"] = v
+    return row
+
+
+def _stream_json(t: _Table) -> None:
+    """The rows of a JSON log, entry by entry (:mod:`jsonlog`: the document is never held
+    whole). A top-level object of one key holding samples is a wrapper (:func:`_descend`):
+    its samples are the rows (that one value decoded whole)."""
+    t.kind = "entry"
+    held = None  # the first entry, until a second shows the top level is no wrapper
+    for i, (key, v) in enumerate(json_entries(t.p)):
+        if i == 0 and key is not None and _is_samples(v):
+            held = (key, v)
+            continue
+        if held is not None:
+            t.add(1, _sample_row(*held))
+            held = None
+        t.add(i + 1, _sample_row(key, v))
+    if held is not None:
+        obj, _ = _descend({held[0]: held[1]})
+        items = obj.items() if isinstance(obj, dict) else ((None, x) for x in obj)
+        for i, (key, v) in enumerate(items):
+            t.add(i + 1, _sample_row(key, v))
+
+
+def _stream_text(t: _Table) -> None:
+    """The rows of a delimited log (as :func:`_text_table` reads them)."""
+    with open(t.p, encoding="utf-8-sig", errors="replace") as fh:
+        cols, rows = _text_table(t.p, fh.read())
+    t.cols.update(dict.fromkeys(cols))
+    for label, row in rows:
+        t.add(int(label.split(" ", 1)[1]), row)
 
 
 def load_columns(
@@ -281,26 +355,27 @@ def load_columns(
         raise InputError(f"--time-scale must be a finite non-zero factor; got {time_scale}")
     if skip_rows < 0:
         raise InputError(f"--skip-rows must be >= 0; got {skip_rows}")
-    cols, rows = _read_table(p)
-    unknown = [c for c, _ in cmap.values() if c not in cols]
+    keys = [k for k in COLUMN_KEYS if k in cmap]
+    table = _Table(p, cmap, keys, time_format, skip_rows)
+    (_stream_json if starts_as_json(p) else _stream_text)(table)  # arrays, not row dicts
+    unknown = [c for c, _ in cmap.values() if c not in table.cols]
     if unknown:
-        raise InputError(_unknown_message(p, unknown, rows))
-    rows = rows[skip_rows:]
-    if not rows:
+        raise InputError(_unknown_message(p, unknown, table.first))
+    if table.problem is not None:
+        raise table.problem
+    if table.seen <= skip_rows:
         raise InputError(f"{p}: head path file has no data rows" + (
             f" after --skip-rows {skip_rows}" if skip_rows else ""))  # fmt: skip
-    keys = [k for k in COLUMN_KEYS if k in cmap]
-    data = _numbers(p, cmap, keys, rows, time_format)
-    labels = [label for label, _ in rows]
+    data, labels = table.data, np.frombuffer(table.numbers, dtype=np.int64)
     if drop_zero_rows:
         nonzero = np.any(data[:, 1:] != 0.0, axis=1)
-        data, labels = data[nonzero], [x for x, k in zip(labels, nonzero) if k]
+        data, labels = data[nonzero], labels[nonzero]
         if not len(data):
             raise InputError(f"{p}: every row's angles are 0 (--drop-zero-rows left nothing)")
     t = data[:, 0] * (1.0 if time_format else float(time_scale))
     keep = _dedupe_times(t)
     t, data = t[keep], data[keep]
-    labels = [x for x, k in zip(labels, keep) if k]
+    labels = labels[keep]
     if time_from_first or time_format:
         t = t - t[0]
     elif abs(float(t[0])) > CLOCK_TIME_S:
@@ -310,7 +385,7 @@ def load_columns(
             ClockTimeWarning,
             stacklevel=2,
         )
-    _check_increasing(p, t, [x.split(" ", 1)[1] for x in labels], labels[0].split(" ")[0])
+    _check_increasing(p, t, labels, table.kind)
     ang = {}
     for key in ("yaw", "pitch", "roll"):
         if key not in cmap:
