@@ -39,7 +39,7 @@ from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, dete
 from simulator.preprocess.fixedcontent import keyframe_flags
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
-from simulator.preprocess.slowflow import SlowRefine, slow_refine_desc
+from simulator.preprocess.slowflow import SlowFine, slow_flow_desc
 from simulator.preprocess.tiles import downscale, tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof
 from simulator.sphere.geometry import (
@@ -220,7 +220,7 @@ def _backend(flow, tile_size: int) -> tuple[FlowFn, int, dict]:
         if isinstance(be, FlowBackend)
         else {"method": getattr(be, "__name__", "custom")}
     )
-    return be, stride, slow_refine_desc(be, desc)
+    return be, stride, slow_flow_desc(be, desc)
 
 
 class FieldEstimator:
@@ -263,7 +263,7 @@ class FieldEstimator:
         self.fps = float(fps)
         self.equirect_size = (W, H)
         be, stride, self.flow_desc = _backend(flow, config.tile_size)
-        self._flow = SlowRefine(be)  # the default DIS: slow tiles refined
+        self._flow = SlowFine(be)  # the default DIS: slow pairs read finer
         self.stride = int(config.stride or stride)
         self._geo = _tile_geometry(config, (W, H), self.stride)
 

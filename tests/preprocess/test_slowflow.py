@@ -1,4 +1,4 @@
-"""Sphere mode's flow at low and high speed: slow frame pairs refined, the tile blend at the flow's target, the residual speed without its noise bias."""
+"""Sphere mode's flow at low and high speed: slow frame pairs read at twice DIS's resolution, the tile blend at the flow's target, the residual speed without its noise bias."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from simulator.flow.dis import DISFlow
 from simulator.preprocess import FieldEstimator, SphereConfig
 from simulator.preprocess.ego import residual_speed
-from simulator.preprocess.slowflow import SLOW_PX, SlowRefine
+from simulator.preprocess.slowflow import SLOW_PX, SlowFine, _FineDIS
 from simulator.sphere.cells import CellGrid
 from simulator.sphere.geometry import lonlat_to_dir
 from simulator.synth import SynthConfig, make_scene
@@ -23,31 +23,34 @@ def _tiles(omega_dps, n=3, fps=30.0):
     return est, [est.tiles(f) for f in frames]
 
 
-def test_slow_tiles_are_refined_from_the_second_pair_on():
+def test_slow_pairs_are_read_finer_from_the_second_pair_on():
     """10 deg/s (under a pixel per frame): the first pair is plain DIS ultrafast, the
-    next one DIS with 5 refinement iterations (all six tiles); 150 deg/s and a still
-    camera: never refined."""
+    next one DIS ultrafast down to finest scale 1 (all six tiles), with no variational
+    refinement; 150 deg/s and a still camera: always plain."""
     est, t = _tiles(10.0)
-    sr = SlowRefine(DISFlow())
-    plain, refined = DISFlow(), DISFlow("ultrafast", 5)
+    sr = SlowFine(DISFlow())
+    plain, fine = DISFlow(), _FineDIS("ultrafast")
     assert np.array_equal(sr(t[0], t[1]), plain(t[0], t[1]))
     assert np.all(sr._last < SLOW_PX)
-    assert np.array_equal(sr(t[1], t[2]), refined(t[1], t[2]))
+    second = sr(t[1], t[2])
+    assert np.array_equal(second, fine(t[1], t[2]))
+    assert not np.array_equal(second, plain(t[1], t[2]))
+    assert not np.array_equal(second, DISFlow("ultrafast", 5)(t[1], t[2]))
     _, f = _tiles(150.0)
-    fast = SlowRefine(DISFlow())
+    fast = SlowFine(DISFlow())
     fast(f[0], f[1])
     assert np.all(fast._last > SLOW_PX)
     assert np.array_equal(fast(f[1], f[2]), plain(f[1], f[2]))
     # only the default flow adapts, and the grid says so
-    assert est.flow_desc["refine_slow"] == {"below_px": SLOW_PX, "from_px": 0.1, "iterations": 5}
-    # a still camera: nothing moves, nothing refined
-    still = SlowRefine(DISFlow())
+    assert est.flow_desc["fine_slow"] == {"below_px": SLOW_PX, "from_px": 0.1, "finest_scale": 1}
+    # a still camera: nothing moves, nothing read finer
+    still = SlowFine(DISFlow())
     still(t[0], t[0])
     assert np.all(still._last < 0.1)
     assert np.array_equal(still(t[0], t[0]), plain(t[0], t[0]))
     given = FieldEstimator((512, 256), 30.0, SphereConfig(), flow="dis:ultrafast+refine5")
-    assert "refine_slow" not in given.flow_desc
-    assert SlowRefine(DISFlow("fast"))._refined is None
+    assert "fine_slow" not in given.flow_desc
+    assert SlowFine(DISFlow("fast"))._fine is None
 
 
 def test_tile_blend_at_the_flow_target():
