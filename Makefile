@@ -55,8 +55,9 @@ setup: sysdeps $(STAMP)
 demo: setup
 	$(VENV)/bin/vimsim demo -o outputs/demo
 
+# Both cores: one test file per worker at a time (module fixtures stay per file).
 test: setup
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q -n 2 --dist loadfile tests
 
 lint: setup
 	$(VENV)/bin/ruff check simulator tests bench
