@@ -33,7 +33,7 @@ from _pano import USERS48, loop_study  # bench/_pano.py: the looped clip and its
 def _epof_rows(path) -> np.ndarray:
     """The data rows of an EPOF CSV (its '#' settings lines and header skipped)."""
     lines = [ln for ln in Path(path).read_text().splitlines() if ln and not ln.startswith("#")]
-    return np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+    return np.loadtxt(lines[1:], delimiter=",", ndmin=2, usecols=range(7))  # the EPOF columns
 
 
 REPO = Path(__file__).resolve().parents[1]

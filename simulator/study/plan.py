@@ -278,6 +278,10 @@ def _cache_mismatch(g, v: VideoSpec) -> str | None:
         cell = cells_from_meta(meta).cell_deg
         if abs(float(cell) - float(v.cell_deg)) > 1e-9:
             return f"made with cell_deg = {cell:g}, not {v.cell_deg:g}"
+    if v.artefacts and v.method == "sphere" and not isinstance(meta.get("artefacts"), dict):
+        # made before artefacts were detected by default: made again once with them, not
+        # detected by every worker of every run (a decoding pass of the whole video each)
+        return "made without artefact detection"
     return None
 
 

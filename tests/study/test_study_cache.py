@@ -135,3 +135,27 @@ def test_field_values_checked_once_per_cache_entry(study, tmp_path):
     mine = tmp_path / "mine.npz"
     mine.write_bytes(good)
     assert cache_problem(mine, v) is None and not (tmp_path / "mine.npz.checked").exists()
+
+
+def test_a_grid_made_without_artefacts_is_made_again_when_they_are_on(study, tmp_path):
+    """Artefacts are on by default: a cached grid from before (no stored artefacts) is made
+    again once with them instead of every worker decoding the video in every run."""
+    import dataclasses
+    import json as _json
+
+    import numpy as np
+
+    from simulator.study.plan import cache_problem
+
+    v = load_manifest(study / "s.toml").videos[0]
+    assert v.artefacts  # the default
+    g = tmp_path / "old.npz"
+    with np.load(_grid(study), allow_pickle=False) as z:
+        arrs = {k: z[k] for k in z.files}
+    meta = _json.loads(str(arrs["meta"]))
+    assert isinstance(meta.pop("artefacts"), dict)
+    arrs["meta"] = np.array(_json.dumps(meta))
+    np.savez_compressed(g, **arrs)
+    assert cache_problem(g, v) == "made without artefact detection"
+    assert cache_problem(g, dataclasses.replace(v, artefacts=False)) is None
+    assert cache_problem(_grid(study), v) is None
