@@ -240,8 +240,8 @@ class ViewportQuery:
 
     def many_stacked(self, fields, yaw_deg, pitch_deg, roll_deg) -> NDArray[np.float64]:
         """Exact EPOF ``(K, T)`` of ``K`` fields ``(T, n_lat, n_lon)`` seen through the same
-        viewports (one orientation per frame): one weight lookup and one gather per frame
-        for all ``K`` (the fields are interleaved per cell), e.g. an EPOF and its parts."""
+        viewports (one orientation per frame): one weight lookup and one index per frame
+        for all ``K`` (e.g. an EPOF and its parts)."""
         yaw, pitch, roll = (np.asarray(a, float).ravel() for a in (yaw_deg, pitch_deg, roll_deg))
         T, n_lon = len(yaw), self._n_lon
         if not all(np.shape(f) == (T, *self.cells.shape) for f in fields):
@@ -249,11 +249,12 @@ class ViewportQuery:
             raise InputError(f"fields {shapes} for {T} orientations of {self.cells.shape} cells")
         if not (np.isfinite(yaw).all() and np.isfinite(pitch).all() and np.isfinite(roll).all()):
             raise InputError("head orientation has non-finite values")
-        # (T, cells, K): a gather of one cell fetches its K values from adjacent memory
-        st = np.stack([np.asarray(f).reshape(T, -1) for f in fields], axis=-1)
-        out = np.empty((T, len(fields)))
+        flats = [np.asarray(f).reshape(T, -1) for f in fields]
+        out = np.empty((len(fields), T))
         for t in range(T):
             key, shift = self._key(yaw[t], pitch[t], roll[t])
             _, w, wsum, rowbase, cols = self._bin(key)
-            out[t] = (w @ st[t][rowbase + (cols + shift) % n_lon]) / wsum
-        return out.T
+            idx = rowbase + (cols + shift) % n_lon
+            for k, fl in enumerate(flats):  # a 1-D gather and dot each: faster than (m, K)
+                out[k, t] = float(fl[t][idx] @ w) / wsum
+        return out
