@@ -54,10 +54,12 @@ _TRACES: dict[tuple, TraceFile] = {}
 _GL: list = []
 _ARTEFACTS: dict[tuple, Artefacts] = {}
 
-#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video). Bounded
-#: small: a longer video visits more orientation bins, so a large cache filled with length
-#: (192 MiB made a worker 2x larger for 10x the frames) and hardly saved time.
-WEIGHT_CACHE_BYTES = 16 << 20
+#: Exact-EPOF weight cache of a study worker (it serves every viewing of a video). Bounded:
+#: a longer video visits more orientation bins, so a large cache fills with length (192 MiB
+#: made a worker 2x larger for 10x the frames); 64 MiB keeps screen's worker within 1.15x
+#: (bench/screen_memory.py) and the viewers' shared bins (16 MiB: 1.6x the EPOF time of 48
+#: viewers of one video, 64 and 192 MiB the same).
+WEIGHT_CACHE_BYTES = 64 << 20
 #: A grid's sphere fields (float32, with the translational part) held whole by a worker
 #: up to this size; beyond it they are read lazily per viewing.
 FIELD_IN_MEMORY_BYTES = 16 << 20
