@@ -151,7 +151,8 @@ def plan_study(m: Manifest, out: Path, cache: Path, resume: bool) -> Plan:
 def _grid_path(v: VideoSpec, cache: Path) -> Path:
     """The grid of video ``v``: the user's own (``grid_file``) when it can serve it
     (:func:`cache_problem`), else the cache's entry (the user's file is never removed)."""
-    if v.grid_file is not None and cache_problem(v.grid_file, v) is None:
+    # a user's own grid without stored artefacts still serves (its video is read for them)
+    if v.grid_file is not None and cache_problem(v.grid_file, v, own=True) is None:
         return v.grid_file
     return cache / "grids" / f"{_grid_key(v)[:32]}.npz"
 
@@ -234,12 +235,15 @@ def check_videos(manifest: Manifest) -> None:
             ) from None
 
 
-def cache_problem(path: Path, v: VideoSpec, *, remember: bool = False) -> str | None:
+def cache_problem(
+    path: Path, v: VideoSpec, *, remember: bool = False, own: bool = False
+) -> str | None:
     """Why the cached grid ``path`` cannot serve video ``v`` (None: it can). Checked before
     use: the grid file's format (every array and its meta, as :func:`load_grid` checks),
     the content hash of the video it was made from, and its options (method, layout,
     eye, window matrix shape, cell size).
 
+    ``own``: the user's grid (``grid_file``), which serves without stored artefacts.
     ``remember`` (the study's own cache entries, never a user's file): the fields' values
     (a decompression of each) are checked once per entry, a ``.checked`` mark beside it
     holding the file's size, time and inode when they passed."""
@@ -253,7 +257,7 @@ def cache_problem(path: Path, v: VideoSpec, *, remember: bool = False) -> str | 
             g = load_grid(path, scan=not known)
     except (InputError, OSError, ValueError, KeyError, EOFError, UnicodeDecodeError) as e:
         return f"not a valid grid file ({' '.join(str(e).split())[:120]})"
-    problem = _cache_mismatch(g, v)
+    problem = _cache_mismatch(g, v, own)
     if problem is None and remember and not known:
         # a read-only cache: checked again next time
         with contextlib.suppress(OSError), atomic_output(mark) as tmp:
@@ -261,7 +265,7 @@ def cache_problem(path: Path, v: VideoSpec, *, remember: bool = False) -> str | 
     return problem
 
 
-def _cache_mismatch(g, v: VideoSpec) -> str | None:
+def _cache_mismatch(g, v: VideoSpec, own: bool = False) -> str | None:
     """Why a loaded cached grid was made of another video or with other options."""
     meta = g.meta if isinstance(g.meta, dict) else {}
     video = meta.get("video") if isinstance(meta.get("video"), dict) else {}
@@ -278,7 +282,8 @@ def _cache_mismatch(g, v: VideoSpec) -> str | None:
         cell = cells_from_meta(meta).cell_deg
         if abs(float(cell) - float(v.cell_deg)) > 1e-9:
             return f"made with cell_deg = {cell:g}, not {v.cell_deg:g}"
-    if v.artefacts and v.method == "sphere" and not isinstance(meta.get("artefacts"), dict):
+    stored = isinstance(meta.get("artefacts"), dict)
+    if v.artefacts and v.method == "sphere" and not stored and not own:
         # made before artefacts were detected by default: made again once with them, not
         # detected by every worker of every run (a decoding pass of the whole video each)
         return "made without artefact detection"
