@@ -208,6 +208,13 @@ def case_class(cid: str) -> str:
 
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_corpus_r3(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
+    check_case(case, base, tmp_path, capsys, monkeypatch)
+
+
+def check_case(case, base, tmp_path, capsys, monkeypatch) -> None:  # noqa: F811
+    """Run one table case (rounds 3 and 4) and check what it must do: its exit status, its
+    message fragment (``!`` = must not appear), one bounded error line for bad input, no
+    input changed, nothing left but its outputs, no temporary."""
     status, fragment, outputs = case[3:]
     rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
     err = cap.err

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 from test_reliability import HPC, _both, _copy, _mkdir, _text, base, run_case  # noqa: F401
-from test_reliability_r3 import _frames_pair, _multi, _snapshot, _study
+from test_reliability_r3 import _frames_pair, _multi, _study, check_case
 
 from simulator.cli import main
 
@@ -225,24 +225,7 @@ CASES += [
 # ----------------------------------------------------------------- the table, run
 @pytest.mark.parametrize("case", CASES, ids=[c[0] for c in CASES])
 def test_corpus_r4a(case, base, tmp_path, capsys, monkeypatch):  # noqa: F811
-    status, fragment, outputs = case[3:]
-    rc, cap, before, d = run_case(case, base, tmp_path, capsys, monkeypatch, _snapshot)
-    err = cap.err
-    assert rc == status, err[:2000]
-    if fragment.startswith("!"):
-        assert fragment[1:] not in err + cap.out, err[:2000]
-    else:
-        assert fragment in err + cap.out, err[:2000] + cap.out[:2000]
-    assert "Traceback" not in err and "internal error" not in err, err[:2000]
-    if status == 2:
-        assert len([ln for ln in err.splitlines() if "error" in ln]) == 1, err[:2000]
-    after = _snapshot(d)
-    for name, h in before.items():  # no input changed (nor any other file that was there)
-        if name not in outputs:
-            assert after.get(name) == h, f"{name} changed or vanished"
-    new = set(after) - set(before)
-    assert new <= set(outputs), f"left behind: {sorted(new - set(outputs))[:5]}"
-    assert not [n for n in after if ".tmp-" in n]
+    check_case(case, base, tmp_path, capsys, monkeypatch)
 
 
 # ----------------------------------------------------------------- CSV cells
