@@ -32,6 +32,8 @@ sys.path.insert(0, str(REPO))
 OUT = REPO / "bench" / "_out" / "report_4k"
 PETRA = REPO.parent / "shared" / "data" / "real" / "equirect" / "vrview" / "petra.jpg"
 VIMSIM = str(Path(sys.executable).with_name("vimsim"))
+from report_speed import plots_seconds
+
 GOAL_S = 20.0
 
 
@@ -64,22 +66,6 @@ def _study(clip: Path, seconds: float) -> Path:
         subprocess.run([VIMSIM, "study", str(m), "-o", str(out), "--cache-dir",
                         str(OUT / "cache"), "--no-progress", "--no-report"], check=True)  # fmt: skip
     return out
-
-
-def _plots_seconds(out: Path) -> float:
-    """The study's plots and tables (``write_study_outputs``) made again here, timed."""
-    import csv
-
-    from simulator.study import load_manifest
-    from simulator.study.outputs import write_study_outputs
-
-    s = json.loads((out / "study.json").read_text())
-    with open(out / "viewings.csv", newline="") as f:
-        table = list(csv.DictReader(f))
-    grids = {v: Path(d["grid"]) for v, d in s["videos"].items()}
-    t0 = time.perf_counter()
-    write_study_outputs(load_manifest(OUT / "study.toml"), out, grids, table)
-    return time.perf_counter() - t0
 
 
 def _timed(argv: list[str]) -> float:
@@ -146,7 +132,7 @@ def main() -> int:
 
     shutil.rmtree(out / "report", ignore_errors=True)
     report = _timed([VIMSIM, "report", str(out), "--no-progress"])
-    plots = _plots_seconds(out)
+    plots = plots_seconds(out, OUT / "study.toml")
     decode = _decode_s(clip)
     copy = json.loads((out / "report" / ".vimsim-report.json").read_text())["copies"]
     how = next(iter(copy.values()))["copy"]["how"]

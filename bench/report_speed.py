@@ -40,12 +40,13 @@ def _study() -> Path:
     return out
 
 
-def _plots_seconds(out: Path) -> float:
+def plots_seconds(out: Path, manifest: Path | None = None) -> float:
+    """The study's plots and tables (``write_study_outputs``) made again, timed (seconds)."""
     from simulator.study import load_manifest
     from simulator.study.outputs import write_study_outputs
 
     s = json.loads((out / "study.json").read_text())
-    m = load_manifest(OUT / "study.toml")
+    m = load_manifest(manifest or OUT / "study.toml")
     with open(out / "viewings.csv", newline="") as f:
         table = list(csv.DictReader(f))
     grids = {v: Path(d["grid"]) for v, d in s["videos"].items()}
@@ -193,10 +194,10 @@ def main() -> int:
     from simulator.report.build import build_report
 
     out = _study()
-    plots = _plots_seconds(out)
+    plots = plots_seconds(out)
     first = build_report(out)  # makes the browser copy (or reuses one from a former run)
     again = build_report(out)
-    plots2 = _plots_seconds(out)
+    plots2 = plots_seconds(out)
     ref = min(plots, plots2)
     import os
 

@@ -153,7 +153,7 @@ def fixed_content(block_diff, block_std, fps: float, *, onset=None, shape=(16, 3
     ``[lon0, lon1, lat0, lat1]``)."""
     d = np.asarray(block_diff, np.float64)
     s = np.asarray(block_std, np.float64)
-    T, B = d.shape
+    T = d.shape[0]
     rows, cols = shape
     fixed, now = _fixed(d, s, fps)
     n = max(3, round(fps))

@@ -36,9 +36,9 @@ from simulator.media.gridfile import FieldSpool, save_grid
 from simulator.media.source import as_source
 from simulator.media.video import prefetch
 from simulator.preprocess.artefacts import SignalCollector, artefacts_meta, detect_artefacts
-from simulator.preprocess.fixedcontent import keyframe_flags
 from simulator.preprocess.common import check_output_dir, flow_rate_scale, frame_range, sphere_meta
 from simulator.preprocess.ego import EGO_META, EgoRows, FrameParts, MidpointSplat, adjust_parts
+from simulator.preprocess.fixedcontent import keyframe_flags
 from simulator.preprocess.slowflow import SlowFine, slow_flow_desc
 from simulator.preprocess.tiles import downscale, tile_frames
 from simulator.sphere.cells import CellGrid, _cell_geometry, window_pof

@@ -28,8 +28,8 @@ from simulator.media.coverage import coverage_masks
 from simulator.media.gridfile import load_grid
 from simulator.media.lazyfield import field_chunks
 from simulator.media.source import Source
-from simulator.preprocess.artefacts import KEPT_KINDS
 from simulator.mitigation.bands import BANDS, band_of, draw_bands, rule_text, share_above
+from simulator.preprocess.artefacts import KEPT_KINDS
 from simulator.screen.page import write_screen_page
 from simulator.sphere.geometry import extract_view
 

@@ -13,7 +13,7 @@ from pathlib import Path
 from simulator.core.errors import InputError
 from simulator.sphere.headsets import resolve_fov
 
-__all__ = ["Entry", "short_spec", "stem_fields", "user_numbers", "user_spans"]
+__all__ = ["Entry", "render_users", "short_spec", "stem_fields", "user_numbers", "user_spans"]
 
 
 class Entry:
@@ -133,3 +133,20 @@ def stem_fields(trace: Path, user: int | None, n_users: int) -> dict:
     the user's number, zero-padded to the width of the file's user count."""
     width = len(str(n_users)) if n_users > 1 else 1
     return {"stem": trace.stem, "user": "" if user is None else f"{user:0{width}d}"}
+
+
+def render_users(e: Entry, render, users: list[int | None]) -> set:
+    """Which of a viewing entry's users are rendered: ``render = true | false`` (all or
+    none) or a user spec naming some of them."""
+    if isinstance(render, bool):
+        return set(users) if render else set()
+    if users == [None]:
+        e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
+    top = max(users)  # checked against the entry's users before the spec is expanded
+    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
+    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
+    taken = set(users)
+    missing = beyond or [u for u in chosen if u not in taken]
+    if missing:
+        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
+    return set(chosen)

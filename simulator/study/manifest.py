@@ -16,8 +16,13 @@ import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
-from simulator.core.choices import MITIGATIONS, OPACITY_RULE_DEFAULT, OPACITY_RULES, PROJECTIONS
-from simulator.core.choices import SYSTEM_PRESETS
+from simulator.core.choices import (
+    MITIGATIONS,
+    OPACITY_RULE_DEFAULT,
+    OPACITY_RULES,
+    PROJECTIONS,
+    SYSTEM_PRESETS,
+)
 from simulator.core.choices import X264_PRESETS as _PRESETS
 from simulator.core.errors import InputError
 from simulator.core.fileio import check_input_file
@@ -25,7 +30,7 @@ from simulator.core.traceopts import TraceOptions
 from simulator.discomfort.predict import study_model
 from simulator.mitigation.bands import ABSOLUTE_HIGH_DPS, ABSOLUTE_LOW_DPS
 from simulator.mitigation.kinds import APERTURE_MIN_DEG, FEATHER_DEG
-from simulator.study.entry import Entry, short_spec, stem_fields, user_numbers, user_spans
+from simulator.study.entry import Entry, render_users, stem_fields, user_numbers
 from simulator.study.traces import VIEWING_TRACE_KEYS, trace_defaults, viewing_trace_options
 from simulator.study.viewers import SCRIPTED, VIEWER_KINDS, expand_traces, scripted_viewers
 from simulator.traces.readers import n_users
@@ -206,23 +211,6 @@ def _users_of(e: Entry, trace: Path, fmt: str, user, opts) -> tuple[list[int | N
     return list(user_numbers(e, "user", user, n_users=n, where=f"{trace}: ")), n
 
 
-def _render_users(e: Entry, render, users: list[int | None]) -> set:
-    """Which of a viewing entry's users are rendered: ``render = true | false`` (all or
-    none) or a user spec naming some of them."""
-    if isinstance(render, bool):
-        return set(users) if render else set()
-    if users == [None]:
-        e.fail(f"render = {render!r}: names users, but the trace holds one; use true or false")
-    top = max(users)  # checked against the entry's users before the spec is expanded
-    beyond = [max(lo, top + 1) for lo, hi in user_spans(e, "render", render) if hi > top]
-    chosen = [] if beyond else user_numbers(e, "render", render, n_users=top)
-    taken = set(users)
-    missing = beyond or [u for u in chosen if u not in taken]
-    if missing:
-        e.fail(f"render = {short_spec(render)}: user {missing[0]} is not among this entry's users")
-    return set(chosen)
-
-
 def _viewing_render_opts(e: Entry, m: Path, where: str, data: dict, render: dict, hold=False) -> dict:
     """The study's render options with the viewing's own keys over them, checked as
     ``[render]`` is (its view by the one builder, :meth:`ViewSpec.from_options`);
@@ -295,7 +283,7 @@ def _viewings(
         ropts = _viewing_render_opts(e, m, where, data, render, topts.hold_last)
         for trace in expand_traces(e, pattern, base):
             users, n = ([None], 1) if topts.columns else _users_of(e, trace, fmt, user, topts)
-            rendered = _render_users(e, render_spec, users)
+            rendered = render_users(e, render_spec, users)
             for u in users:
                 vw_id, participant = _viewing_ids(e, trace, u, n, vid, condition)
                 if vw_id in seen:

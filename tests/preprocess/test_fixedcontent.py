@@ -83,9 +83,9 @@ def test_keyframe_needs_the_decoders_flag():
     rng = np.random.default_rng(3)
     bd = rng.uniform(1.0, 1.2, (T, ROWS * COLS)).astype(np.float32)
     bd[100] = 8.0  # a reset
-    sig = dict(mean=np.full(T, 100.0), std=np.full(T, 30.0), corr=np.full(T, 0.99), block_diff=bd,
-               coarse=np.tile(np.linspace(50, 150, 128, dtype=np.float32), (T, 1)), fps=FPS,
-               hist=np.full(T, 0.01))  # fmt: skip
+    sig = {"mean": np.full(T, 100.0), "std": np.full(T, 30.0), "corr": np.full(T, 0.99),
+           "block_diff": bd, "coarse": np.tile(np.linspace(50, 150, 128, dtype=np.float32), (T, 1)),
+           "fps": FPS, "hist": np.full(T, 0.01)}  # fmt: skip
     assert detect_artefacts(FrameSignals(**sig)).kind[100] == "keyframe"
     key = np.zeros(T, bool)
     key[0] = True

@@ -66,7 +66,8 @@ def test_study_moments_leave_out_artefacts(cut_clip, tmp_path):
                  "--workers", "1", "--no-progress", "--no-report", "--no-artefacts"]) == 0  # fmt: skip
     s = json.loads((off / "study.json").read_text())
     assert s["outputs"]["videos"]["cut"]["artefact_frames_left_out"] == 0
-    header = [ln for ln in next((off / "epof").glob("*.csv")).read_text().splitlines() if ln[:1] != "#"][0]
+    lines = next((off / "epof").glob("*.csv")).read_text().splitlines()
+    header = next(ln for ln in lines if ln[:1] != "#")
     assert "artefact" not in header
     rows = (off / "videos" / "cut" / "moments.csv").read_text().splitlines()
     assert 10 in [int(r.split(",")[2]) for r in rows[1:]]
