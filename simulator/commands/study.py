@@ -149,6 +149,8 @@ def run(args: argparse.Namespace) -> int:
 
         manifest = replace(manifest, epof={**manifest.epof, "artefacts": False},
                            videos=tuple(replace(v, artefacts=False) for v in manifest.videos))  # fmt: skip
+    if args.browser_width is not None and not args.no_report:  # before any work, dry run too
+        _check_browser_width(args.browser_width, manifest)
     if args.dry_run:
         return _dry_run(args, manifest)
     if not args.no_report:  # a report folder holding others' files: refused before any work
@@ -157,8 +159,6 @@ def run(args: argparse.Namespace) -> int:
         from simulator.report.build import check_report_folder
 
         check_report_folder(Path(args.output) / "report")
-        if args.browser_width is not None:  # a bad width: refused before any work
-            _check_browser_width(args.browser_width, manifest)
     with progress_bar("study", unit="task", enabled=not args.no_progress) as bar:
         s = run_study(
             manifest,

@@ -159,3 +159,15 @@ def test_a_grid_made_without_artefacts_is_made_again_when_they_are_on(study, tmp
     assert cache_problem(g, v) == "made without artefact detection"
     assert cache_problem(g, dataclasses.replace(v, artefacts=False)) is None
     assert cache_problem(_grid(study), v) is None
+
+
+@pytest.mark.parametrize("width, says", [("8000", "<= 4096"), ("128", "wider than the video (64 px)")])
+def test_browser_width_refused_before_any_work_dry_run_too(study, tmp_path, capsys, width, says):
+    for extra in (["--dry-run"], []):
+        out = tmp_path / f"o{len(extra)}"
+        argv = ["study", str(study / "s.toml"), "-o", str(out), "--cache-dir",
+                str(study / "cache"), "--browser-width", width, "--no-progress", *extra]  # fmt: skip
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert "--browser-width" in err and says in err and err.count("\n") == 1, err
+        assert not out.exists()
